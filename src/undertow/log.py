@@ -1,0 +1,375 @@
+"""The measurement log: typed, time-ordered streams of numpy arrays.
+
+Conventions (used by every stage):
+
+- Time ``t`` is float64 seconds (any epoch; readers keep the log's own, the simulator starts at 0),
+  non-decreasing within a stream.
+- World frame: x along the tank / north, y to the right / east, z DOWN (depth positive), origin at
+  the still water surface. Body frame: forward-right-down (FRD). Angles in radians,
+  roll-pitch-yaw (phi, theta, psi) with R = Rz(psi) Ry(theta) Rx(phi) mapping body to world.
+- DVL frame: x forward, y right, z down, origin where the four beam axes meet (Water Linked A50).
+- Missing optional values are NaN (never 0 or -1); validity flags say what the sensor reported.
+
+Every stream is a frozen dataclass whose arrays are made read-only, so a Log can be shared by
+stages without copies or surprises.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from .errors import DataError, MissingStreamError
+
+G0 = 9.80665  # standard gravity, m/s^2
+P_ATM = 101_325.0  # standard atmosphere, Pa
+
+
+def _as_array(value, dtype, name: str, stream: str) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=dtype, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{stream}.{name}: cannot convert to {np.dtype(dtype).name}: {exc}") from exc
+    arr.setflags(write=False)
+    return arr
+
+
+class _Stream:
+    """Shared validation: every array field has the length of ``t`` along axis 0."""
+
+    kind: ClassVar[str] = "stream"
+    _shapes: ClassVar[dict[str, tuple]] = {}
+    _dtypes: ClassVar[dict[str, type]] = {}
+
+    def __post_init__(self) -> None:
+        t = _as_array(self.t, np.float64, "t", self.kind).reshape(-1)
+        object.__setattr__(self, "t", t)
+        if not np.all(np.isfinite(t)):
+            raise DataError(f"{self.kind}.t: non-finite timestamps")
+        if t.size > 1 and np.any(np.diff(t) < 0):
+            i = int(np.argmax(np.diff(t) < 0))
+            raise DataError(
+                f"{self.kind}.t: time goes backwards at sample {i + 1} ({t[i]:.6f} -> {t[i + 1]:.6f})"
+            )
+        n = t.size
+        for name, tail in self._shapes.items():
+            value = getattr(self, name)
+            if value is None:
+                continue
+            arr = _as_array(value, self._dtypes.get(name, np.float64), name, self.kind)
+            if arr.shape != (n, *tail):
+                raise DataError(
+                    f"{self.kind}.{name}: shape {arr.shape}, expected {(n, *tail)} (one row per time)"
+                )
+            object.__setattr__(self, name, arr)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def rate_hz(self) -> float:
+        """Median sample rate (NaN with fewer than two samples)."""
+        if self.t.size < 2:
+            return float("nan")
+        dt = np.median(np.diff(self.t))
+        return float(1.0 / dt) if dt > 0 else float("nan")
+
+    def select(self, mask: np.ndarray):
+        """A stream of the same type holding only the rows where ``mask`` is true."""
+        mask = np.asarray(mask)
+        changes = {"t": self.t[mask]}
+        for name in self._shapes:
+            value = getattr(self, name)
+            if value is not None:
+                changes[name] = value[mask]
+        return dataclasses.replace(self, **changes)
+
+    def invalid_count(self) -> int:
+        """Rows with a non-finite value in the main measurement (see each stream)."""
+        return 0
+
+
+@dataclass(frozen=True, eq=False)
+class Imu(_Stream):
+    """IMU: angular rate (rad/s, body), optional linear acceleration (m/s^2) and orientation
+    (quaternion x, y, z, w, world from body)."""
+
+    kind: ClassVar[str] = "imu"
+    _shapes: ClassVar[dict[str, tuple]] = {
+        "angular_velocity": (3,),
+        "linear_acceleration": (3,),
+        "orientation": (4,),
+    }
+    t: np.ndarray
+    angular_velocity: np.ndarray
+    linear_acceleration: np.ndarray | None = None
+    orientation: np.ndarray | None = None
+
+    def invalid_count(self) -> int:
+        return int(np.sum(~np.all(np.isfinite(self.angular_velocity), axis=1)))
+
+
+@dataclass(frozen=True, eq=False)
+class Dvl(_Stream):
+    """DVL bottom-track velocity report, with its four beams.
+
+    ``velocity`` is the body velocity in the DVL frame (m/s); ``valid`` the sensor's velocity
+    validity flag; ``fom`` the figure of merit (m/s, NaN if absent); ``covariance`` 3x3 (m/s)^2
+    (NaN if unknown); ``altitude`` (m, NaN when the sensor reported it invalid, e.g. -1).
+    Per beam (shape (N, 4)): ``beam_id``, ``beam_unit`` (N, 4, 3) unit vector in the DVL frame,
+    ``beam_range`` (m, slant range along the beam), ``beam_valid``, ``beam_velocity`` (m/s, radial).
+    """
+
+    kind: ClassVar[str] = "dvl"
+    _shapes: ClassVar[dict[str, tuple]] = {
+        "velocity": (3,),
+        "valid": (),
+        "fom": (),
+        "covariance": (3, 3),
+        "altitude": (),
+        "beam_id": (4,),
+        "beam_unit": (4, 3),
+        "beam_range": (4,),
+        "beam_valid": (4,),
+        "beam_velocity": (4,),
+    }
+    _dtypes: ClassVar[dict[str, type]] = {"valid": np.bool_, "beam_valid": np.bool_, "beam_id": np.int64}
+    t: np.ndarray
+    velocity: np.ndarray
+    valid: np.ndarray
+    fom: np.ndarray
+    covariance: np.ndarray
+    altitude: np.ndarray
+    beam_id: np.ndarray
+    beam_unit: np.ndarray
+    beam_range: np.ndarray
+    beam_valid: np.ndarray
+    beam_velocity: np.ndarray
+
+    def invalid_count(self) -> int:
+        finite = np.all(np.isfinite(self.velocity), axis=1)
+        return int(np.sum(~(self.valid & finite)))
+
+    @classmethod
+    def from_velocity(
+        cls,
+        t,
+        velocity,
+        valid=None,
+        fom=None,
+        covariance=None,
+        altitude=None,
+        beam_range=None,
+        beam_valid=None,
+        beam_velocity=None,
+    ) -> Dvl:
+        """Build a Dvl stream with A50 beam geometry and NaN/False for what is not given."""
+        t = np.asarray(t, dtype=np.float64).reshape(-1)
+        n = t.size
+        nan = np.full(n, np.nan)
+        return cls(
+            t=t,
+            velocity=velocity,
+            valid=np.ones(n, bool) if valid is None else valid,
+            fom=nan if fom is None else fom,
+            covariance=np.full((n, 3, 3), np.nan) if covariance is None else covariance,
+            altitude=nan if altitude is None else altitude,
+            beam_id=np.tile(np.arange(4), (n, 1)),
+            beam_unit=np.tile(a50_beam_units(), (n, 1, 1)),
+            beam_range=np.full((n, 4), np.nan) if beam_range is None else beam_range,
+            beam_valid=np.zeros((n, 4), bool) if beam_valid is None else beam_valid,
+            beam_velocity=np.full((n, 4), np.nan) if beam_velocity is None else beam_velocity,
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class DeadReckoning(_Stream):
+    """The DVL's own dead-reckoning report (Water Linked ``position_local``).
+
+    ``position`` (m, x y z with z down, in the DVL's reset frame), ``orientation`` roll, pitch,
+    yaw (rad), ``std`` (m, the sensor's position standard deviation, NaN if absent).
+    """
+
+    kind: ClassVar[str] = "dead_reckoning"
+    _shapes: ClassVar[dict[str, tuple]] = {"position": (3,), "orientation": (3,), "std": ()}
+    t: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    std: np.ndarray | None = None
+
+    def invalid_count(self) -> int:
+        return int(np.sum(~np.all(np.isfinite(self.orientation), axis=1)))
+
+
+@dataclass(frozen=True, eq=False)
+class Pressure(_Stream):
+    """Absolute pressure (Pa) from the barometer."""
+
+    kind: ClassVar[str] = "pressure"
+    _shapes: ClassVar[dict[str, tuple]] = {"pressure": ()}
+    t: np.ndarray
+    pressure: np.ndarray
+
+    def depth(
+        self, water_density: float = 997.0, surface_pressure: float = P_ATM, g: float = G0
+    ) -> np.ndarray:
+        """Depth below the surface (m, positive down): d = (p - p_atm) / (rho g)."""
+        return (self.pressure - surface_pressure) / (water_density * g)
+
+    def invalid_count(self) -> int:
+        return int(np.sum(~np.isfinite(self.pressure)))
+
+
+@dataclass(frozen=True, eq=False)
+class SonarRange(_Stream):
+    """Single-beam echo sounder (Ping sonar): ``range`` (m), ``confidence`` (0-1, NaN if absent).
+
+    ``field_of_view`` is the full cone angle (rad); ``min_range``/``max_range`` the sensor limits.
+    """
+
+    kind: ClassVar[str] = "sonar"
+    _shapes: ClassVar[dict[str, tuple]] = {"range": (), "confidence": ()}
+    t: np.ndarray
+    range: np.ndarray
+    confidence: np.ndarray | None = None
+    field_of_view: float = float(np.deg2rad(25.0))
+    min_range: float = 0.3
+    max_range: float = 100.0
+
+    def invalid_count(self) -> int:
+        r = self.range
+        return int(np.sum(~(np.isfinite(r) & (r >= self.min_range) & (r <= self.max_range))))
+
+
+@dataclass(frozen=True, eq=False)
+class WaveProbe(_Stream):
+    """Free-surface elevation (m, positive UP, as wave probes report) at fixed ``x`` (m)."""
+
+    kind: ClassVar[str] = "wave_probe"
+    _shapes: ClassVar[dict[str, tuple]] = {"elevation": ()}
+    t: np.ndarray
+    elevation: np.ndarray
+    x: float = 0.0
+
+    def invalid_count(self) -> int:
+        return int(np.sum(~np.isfinite(self.elevation)))
+
+
+@dataclass(frozen=True, eq=False)
+class GroundTruth(_Stream):
+    """Ground-truth pose of the body frame: ``position`` (m, world), ``orientation`` roll, pitch,
+    yaw (rad); ``velocity`` (m/s, world frame) where known."""
+
+    kind: ClassVar[str] = "ground_truth"
+    _shapes: ClassVar[dict[str, tuple]] = {"position": (3,), "orientation": (3,), "velocity": (3,)}
+    t: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    velocity: np.ndarray | None = None
+
+
+def a50_beam_units(tilt_deg: float = 22.5) -> np.ndarray:
+    """Unit vectors of the A50's four beams in the DVL frame, rows for protocol ids 0..3.
+
+    b_i = (sin(tilt) cos(az_i), sin(tilt) sin(az_i), cos(tilt)), az = +135, -135, -45, +45 deg
+    (NOTES.md section 1): horizontal part 0.383, vertical 0.924 for the 22.5 deg tilt.
+    """
+    tilt = np.deg2rad(tilt_deg)
+    az = np.deg2rad([135.0, -135.0, -45.0, 45.0])
+    return np.stack(
+        [np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.full(4, np.cos(tilt))], axis=1
+    )
+
+
+@dataclass(frozen=True)
+class SensorMount:
+    """Where a sensor sits on the body: lever arm (m, body FRD) and rotation roll, pitch, yaw
+    (rad) of the sensor frame relative to the body frame."""
+
+    translation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def rotation_matrix(self) -> np.ndarray:
+        """R_sensor^body = Rz(yaw) Ry(pitch) Rx(roll)."""
+        from .rotations import rpy_to_matrix
+
+        return rpy_to_matrix(np.asarray(self.rotation, dtype=float))
+
+
+def _bluerov2_dvl() -> SensorMount:
+    return SensorMount((0.164, 0.004, 0.284), (0.0, 0.0, 0.05))
+
+
+def _bluerov2_sonar() -> SensorMount:
+    return SensorMount((0.164, 0.106, 0.306), (0.0, 0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class Mounting:
+    """Sensor mounting on the body (defaults: the BlueROV2 URDF values of NOTES.md section 1).
+
+    The sonar frame's +z is its acoustic axis (looking down when the rotation is zero).
+    """
+
+    imu: SensorMount = field(default_factory=SensorMount)
+    dvl: SensorMount = field(default_factory=_bluerov2_dvl)
+    sonar: SensorMount = field(default_factory=_bluerov2_sonar)
+    barometer: SensorMount = field(default_factory=SensorMount)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Mounting:
+        return cls(**{k: SensorMount(**{kk: tuple(vv) for kk, vv in v.items()}) for k, v in data.items()})
+
+
+STREAM_NAMES = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe", "ground_truth")
+
+
+@dataclass(frozen=True, eq=False)
+class Log:
+    """A robot's measurement log: optional streams plus mounting and free-form metadata.
+
+    Any stream may be missing (a DVL-only log is legal); a stage calls :meth:`require` with the
+    streams it needs and gets a clear :class:`MissingStreamError` otherwise.
+    """
+
+    imu: Imu | None = None
+    dvl: Dvl | None = None
+    dead_reckoning: DeadReckoning | None = None
+    pressure: Pressure | None = None
+    sonar: SonarRange | None = None
+    wave_probe: WaveProbe | None = None
+    ground_truth: GroundTruth | None = None
+    mounting: Mounting = field(default_factory=Mounting)
+    source: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def streams(self) -> dict[str, _Stream]:
+        """The streams present, by name, in :data:`STREAM_NAMES` order."""
+        return {n: getattr(self, n) for n in STREAM_NAMES if getattr(self, n) is not None}
+
+    def require(self, *names: str, stage: str = "this stage") -> None:
+        """Raise :class:`MissingStreamError` naming every stream in ``names`` that is absent."""
+        missing = [n for n in names if getattr(self, n, None) is None or len(getattr(self, n)) == 0]
+        if missing:
+            have = ", ".join(self.streams()) or "none"
+            src = f" in {self.source}" if self.source else ""
+            raise MissingStreamError(
+                f"{stage} needs stream(s) {', '.join(missing)}{src}; the log has: {have}"
+            )
+
+    @property
+    def time_span(self) -> tuple[float, float]:
+        """(first, last) time over all streams; (nan, nan) for an empty log."""
+        ts = [s.t for s in self.streams().values() if len(s)]
+        if not ts:
+            return (float("nan"), float("nan"))
+        return (min(float(t[0]) for t in ts), max(float(t[-1]) for t in ts))
+
+    def replace(self, **changes) -> Log:
+        return dataclasses.replace(self, **changes)

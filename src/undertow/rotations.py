@@ -1,0 +1,70 @@
+"""Rotations in the robotics (ZYX, roll-pitch-yaw) convention, vectorized over leading axes.
+
+R(phi, theta, psi) = Rz(psi) Ry(theta) Rx(phi) maps body vectors to the world frame.
+Quaternions are stored (x, y, z, w) as in ROS and TUM files.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def wrap_angle(a):
+    """Wrap angles to [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def rpy_to_matrix(rpy) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) from roll, pitch, yaw (..., 3): Rz(psi) Ry(theta) Rx(phi)."""
+    rpy = np.asarray(rpy, dtype=float)
+    cr, sr = np.cos(rpy[..., 0]), np.sin(rpy[..., 0])
+    cp, sp = np.cos(rpy[..., 1]), np.sin(rpy[..., 1])
+    cy, sy = np.cos(rpy[..., 2]), np.sin(rpy[..., 2])
+    R = np.empty(rpy.shape[:-1] + (3, 3))
+    R[..., 0, 0] = cy * cp
+    R[..., 0, 1] = cy * sp * sr - sy * cr
+    R[..., 0, 2] = cy * sp * cr + sy * sr
+    R[..., 1, 0] = sy * cp
+    R[..., 1, 1] = sy * sp * sr + cy * cr
+    R[..., 1, 2] = sy * sp * cr - cy * sr
+    R[..., 2, 0] = -sp
+    R[..., 2, 1] = cp * sr
+    R[..., 2, 2] = cp * cr
+    return R
+
+
+def matrix_to_rpy(R) -> np.ndarray:
+    """Roll, pitch, yaw (..., 3) of rotation matrices (..., 3, 3) (inverse of rpy_to_matrix)."""
+    R = np.asarray(R, dtype=float)
+    roll = np.arctan2(R[..., 2, 1], R[..., 2, 2])
+    pitch = np.arcsin(np.clip(-R[..., 2, 0], -1.0, 1.0))
+    yaw = np.arctan2(R[..., 1, 0], R[..., 0, 0])
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def rpy_to_quaternion(rpy) -> np.ndarray:
+    """Quaternions (..., 4) as (x, y, z, w) from roll, pitch, yaw (..., 3), w >= 0."""
+    rpy = np.asarray(rpy, dtype=float)
+    hr, hp, hy = rpy[..., 0] / 2, rpy[..., 1] / 2, rpy[..., 2] / 2
+    cr, sr, cp, sp, cy, sy = np.cos(hr), np.sin(hr), np.cos(hp), np.sin(hp), np.cos(hy), np.sin(hy)
+    q = np.stack(
+        [
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy,
+        ],
+        axis=-1,
+    )
+    return np.where(q[..., 3:4] < 0, -q, q)
+
+
+def quaternion_to_rpy(q) -> np.ndarray:
+    """Roll, pitch, yaw (..., 3) of quaternions (..., 4) stored (x, y, z, w); normalizes first."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
+    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
+    yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    return np.stack([roll, pitch, yaw], axis=-1)

@@ -1,0 +1,115 @@
+"""A Trajectory: filter (or smoother) output, the hand-off from localization to mapping.
+
+State layout (the paper's ``eq:state`` to ``eq:gyro_bias``), 18 entries:
+
+    x = [eta (x, y, z, phi, theta, psi; world), nu (u, v, w, p, q, r; body),
+         b^g (dead-reckoning orientation bias, 3), b-bar^g (IMU gyro bias, 3)]
+
+Positions in m (world, z down), angles in rad, velocities in m/s and rad/s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ReaderError
+
+STATE_NAMES = (
+    "x", "y", "z", "roll", "pitch", "yaw",
+    "u", "v", "w", "p", "q", "r",
+    "b_dr_roll", "b_dr_pitch", "b_dr_yaw",
+    "b_imu_p", "b_imu_q", "b_imu_r",
+)  # fmt: skip
+POSITION = slice(0, 3)
+ORIENTATION = slice(3, 6)
+LINEAR_VELOCITY = slice(6, 9)
+ANGULAR_VELOCITY = slice(9, 12)
+DR_BIAS = slice(12, 15)
+GYRO_BIAS = slice(15, 18)
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Estimated states ``x`` (N, 18) with covariances ``P`` (N, 18, 18) at times ``t`` (N,)."""
+
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    variant: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=np.float64).reshape(-1)
+        x = np.asarray(self.x, dtype=np.float64)
+        P = np.asarray(self.P, dtype=np.float64)
+        n = t.size
+        if x.shape != (n, len(STATE_NAMES)) or P.shape != (n, len(STATE_NAMES), len(STATE_NAMES)):
+            raise ValueError(f"Trajectory: x {x.shape} / P {P.shape} do not match {n} times")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "x", x)
+        object.__setattr__(self, "P", P)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.x[:, POSITION]
+
+    @property
+    def orientation(self) -> np.ndarray:
+        return self.x[:, ORIENTATION]
+
+    @property
+    def velocity_body(self) -> np.ndarray:
+        return self.x[:, LINEAR_VELOCITY]
+
+    @property
+    def position_variance(self) -> np.ndarray:
+        """Per-axis position variance (N, 3), m^2: the diagonal of P's position block."""
+        return np.einsum("nii->ni", self.P[:, POSITION, POSITION])
+
+    def save_npz(self, path: str | Path) -> Path:
+        """Write times, full state and full covariance (atomic: temp file then rename)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
+        os.close(fd)
+        try:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(
+                    fh,
+                    t=self.t,
+                    x=self.x,
+                    P=self.P,
+                    state_names=np.array(STATE_NAMES),
+                    variant=np.array(self.variant),
+                )
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+        return path
+
+    @classmethod
+    def load_npz(cls, path: str | Path) -> Trajectory:
+        """Read a trajectory written by :meth:`save_npz` (a directory means DIR/trajectory.npz)."""
+        path = Path(path)
+        if path.is_dir():
+            path = path / "trajectory.npz"
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                return cls(t=data["t"], x=data["x"], P=data["P"], variant=str(data["variant"]))
+        except FileNotFoundError as exc:
+            raise ReaderError(f"{path}: no such trajectory file") from exc
+        except (KeyError, ValueError, OSError) as exc:
+            raise ReaderError(f"{path}: not an undertow trajectory ({exc})") from exc
+
+    def replace(self, **changes) -> Trajectory:
+        return dataclasses.replace(self, **changes)
