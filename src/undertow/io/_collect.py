@@ -1,0 +1,144 @@
+"""Helpers shared by the readers: counted warnings and row accumulators that turn per-message
+values into time-ordered :mod:`undertow.log` streams.
+
+Every recoverable problem (NaN values, time going backwards, duplicates, invalid beams that
+carried a distance) is counted in :class:`Notes`; :meth:`Notes.finish` emits one
+``warnings.warn`` per kind and returns the lines stored in ``Log.metadata['warnings']``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections import Counter
+
+import numpy as np
+
+from ..log import Dvl, a50_beam_units
+
+
+class Notes:
+    """Counted notes about recoverable problems met while reading ``source``."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.counts: Counter[str] = Counter()
+        self.details: dict[str, str] = {}
+
+    def add(self, kind: str, n: int = 1, detail: str = "") -> None:
+        if n <= 0:
+            return
+        self.counts[kind] += n
+        if detail and kind not in self.details:
+            self.details[kind] = detail
+
+    def finish(self) -> list[str]:
+        """Warn once per kind of note; return the messages (for ``Log.metadata['warnings']``)."""
+        lines = []
+        for kind, n in self.counts.items():
+            extra = f" (first: {self.details[kind]})" if kind in self.details else ""
+            lines.append(f"{self.source}: {kind}: {n}{extra}")
+        for line in lines:
+            warnings.warn(line, stacklevel=3)
+        return lines
+
+
+def time_order(t: np.ndarray, stream: str, notes: Notes) -> np.ndarray:
+    """Indices that keep finite times and sort them (stable), noting what was changed."""
+    t = np.asarray(t, dtype=np.float64)
+    keep = np.flatnonzero(np.isfinite(t))
+    notes.add(f"{stream}: messages with a non-finite time dropped", t.size - keep.size)
+    tk = t[keep]
+    if tk.size > 1 and np.any(np.diff(tk) < 0):
+        notes.add(
+            f"{stream}: messages with time going backwards (sorted by time)",
+            int(np.sum(np.diff(tk) < 0)),
+        )
+        keep = keep[np.argsort(tk, kind="stable")]
+    return keep
+
+
+def count_nan_rows(notes: Notes, stream: str, *arrays) -> None:
+    """Note the rows holding a NaN in any of ``arrays`` (values kept as NaN)."""
+    bad = None
+    for arr in arrays:
+        arr = np.asarray(arr, dtype=np.float64)
+        rows = np.isnan(arr.reshape(arr.shape[0], -1)).any(axis=1) if arr.size else np.zeros(0, bool)
+        bad = rows if bad is None else bad | rows
+    if bad is not None:
+        notes.add(f"{stream}: messages with NaN values (kept as NaN)", int(bad.sum()))
+
+
+class DvlRows:
+    """Accumulates DVL reports (one :meth:`append` per message) and builds a :class:`Dvl`.
+
+    Quirks applied here for every source: altitude < 0 (the A50 sends -1) -> NaN; a beam
+    reported invalid -> its range NaN and ``beam_valid`` False (the row is kept); the velocity
+    is kept as reported whatever its validity flag.
+    """
+
+    def __init__(self) -> None:
+        self.t: list[float] = []
+        self.velocity: list[tuple] = []
+        self.valid: list[bool] = []
+        self.fom: list[float] = []
+        self.covariance: list = []
+        self.altitude: list[float] = []
+        self.beam_id: list = []
+        self.beam_unit: list = []
+        self.beam_range: list = []
+        self.beam_valid: list = []
+        self.beam_velocity: list = []
+        self.extra: dict[str, list] = {}
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def append(self, t, velocity, valid, fom=np.nan, covariance=None, altitude=np.nan,
+               beams=(), beam_units=None, **extra) -> None:
+        """Add one report. ``beams``: (id, radial velocity, distance, valid) per beam; A50 beam
+        ids 0..3 place the beam in that column with the A50 geometry unless ``beam_units``
+        (4, 3) is given (then beams fill columns in order)."""
+        a50 = a50_beam_units()
+        ids, units = np.arange(4), a50.copy() if beam_units is None else np.asarray(beam_units)
+        rng, ok, vel = np.full(4, np.nan), np.zeros(4, bool), np.full(4, np.nan)
+        for k, (bid, bvel, dist, bvalid) in enumerate(beams):
+            col = int(bid) if beam_units is None else k
+            if not 0 <= col < 4:
+                continue
+            ok[col] = bool(bvalid)
+            vel[col] = bvel
+            rng[col] = dist if bvalid else np.nan
+        self.t.append(float(t))
+        self.velocity.append(tuple(velocity))
+        self.valid.append(bool(valid))
+        self.fom.append(float(fom))
+        self.covariance.append(np.full((3, 3), np.nan) if covariance is None else covariance)
+        self.altitude.append(float(altitude) if altitude is not None and altitude >= 0 else np.nan)
+        self.beam_id.append(ids)
+        self.beam_unit.append(units)
+        self.beam_range.append(rng)
+        self.beam_valid.append(ok)
+        self.beam_velocity.append(vel)
+        for key, value in extra.items():
+            self.extra.setdefault(key, []).append(value)
+
+    def build(self, notes: Notes, stream: str = "dvl") -> tuple[Dvl, np.ndarray]:
+        """The Dvl stream (time-ordered) and the row order used (to align ``extra``)."""
+        order = time_order(np.array(self.t), stream, notes)
+        velocity = np.array(self.velocity, dtype=np.float64).reshape(-1, 3)
+        count_nan_rows(notes, stream, velocity)
+        cov = np.array(self.covariance, dtype=np.float64).reshape(-1, 3, 3)
+        dvl = Dvl(
+            t=np.array(self.t)[order],
+            velocity=velocity[order],
+            valid=np.array(self.valid, bool)[order],
+            fom=np.array(self.fom)[order],
+            covariance=cov[order],
+            altitude=np.array(self.altitude)[order],
+            beam_id=np.array(self.beam_id, np.int64).reshape(-1, 4)[order],
+            beam_unit=np.array(self.beam_unit, np.float64).reshape(-1, 4, 3)[order],
+            beam_range=np.array(self.beam_range).reshape(-1, 4)[order],
+            beam_valid=np.array(self.beam_valid, bool).reshape(-1, 4)[order],
+            beam_velocity=np.array(self.beam_velocity).reshape(-1, 4)[order],
+        )
+        return dvl, order

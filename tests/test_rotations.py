@@ -1,0 +1,44 @@
+"""Rotations: the ZYX convention against closed forms and scipy."""
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from undertow.rotations import (
+    matrix_to_rpy,
+    quaternion_to_rpy,
+    rpy_to_matrix,
+    rpy_to_quaternion,
+    wrap_angle,
+)
+
+RNG = np.random.default_rng(1)
+RPY = np.column_stack(
+    [RNG.uniform(-3, 3, 200), RNG.uniform(-1.5, 1.5, 200), RNG.uniform(-3.1, 3.1, 200)]
+)
+
+
+def test_matrix_agrees_with_scipy_extrinsic_xyz():
+    expected = Rotation.from_euler("ZYX", RPY[:, ::-1]).as_matrix()
+    np.testing.assert_allclose(rpy_to_matrix(RPY), expected, atol=1e-12)
+
+
+def test_quaternion_agrees_with_scipy_xyzw():
+    q = rpy_to_quaternion(RPY)
+    ref = Rotation.from_euler("ZYX", RPY[:, ::-1]).as_quat()
+    ref = np.where(ref[:, 3:4] < 0, -ref, ref)
+    np.testing.assert_allclose(q, ref, atol=1e-12)
+
+
+def test_round_trips():
+    np.testing.assert_allclose(matrix_to_rpy(rpy_to_matrix(RPY)), RPY, atol=1e-9)
+    np.testing.assert_allclose(quaternion_to_rpy(rpy_to_quaternion(RPY)), RPY, atol=1e-9)
+
+
+def test_yaw_rotates_forward_into_right():
+    np.testing.assert_allclose(rpy_to_matrix([0, 0, np.pi / 2]) @ [1, 0, 0], [0, 1, 0], atol=1e-15)
+
+
+def test_wrap_angle_range():
+    a = wrap_angle(np.linspace(-20, 20, 1001))
+    assert np.all(a >= -np.pi) and np.all(a < np.pi)
+    np.testing.assert_allclose(np.sin(a), np.sin(np.linspace(-20, 20, 1001)), atol=1e-12)
