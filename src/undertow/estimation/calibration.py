@@ -1,0 +1,148 @@
+"""Calibration from a run with ground truth: the parameters the filter needs for later runs.
+
+- Dead-reckoning orientation drift mu_b (the mean of the bias random walk in
+  ``eq:dynamics_model``, rad/s per axis): slope of a least-squares line through the DR
+  orientation error e(t) = wrap(DR(t) - truth(t)), e(t) ~ e_0 + mu_b t.
+- IMU gyro bias (rad/s): mean of z_IMU - omega_true, omega_true from the ground-truth attitude
+  (Euler-rate kinematics omega = T(phi, theta)^{-1} d(eta_2)/dt).
+- DVL velocity scale factor s (beyond the paper): v_meas = s v_true, as a sound-speed error
+  gives s = c_set / c_true (NOTES.md section 1), estimated by least squares over valid DVL
+  samples while moving: s = sum(v_meas . v_true) / sum(|v_true|^2), with v_true the ground
+  truth body velocity expressed in the DVL frame, v_true^DVL = R_DVL^T (v^B + omega x r_DVL).
+  This is the persistent along-track offset the paper reports but does not model.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import ConfigError, DataError
+from ..evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
+from ..log import Log
+from ..rotations import rpy_to_matrix, wrap_angle
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Calibration parameters (units in the names) and how well each was determined."""
+
+    dead_reckoning_drift_rad_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    imu_gyro_bias_rad_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dvl_scale_factor: float = 1.0
+    dvl_scale_factor_std: float = float("nan")
+    samples: dict | None = None
+    source: str = ""
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["dead_reckoning_drift_rad_per_s"] = [float(v) for v in self.dead_reckoning_drift_rad_per_s]
+        d["imu_gyro_bias_rad_per_s"] = [float(v) for v in self.imu_gyro_bias_rad_per_s]
+        return d
+
+    def save_yaml(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".yaml.tmp")
+        with os.fdopen(fd, "w") as fh:
+            yaml.safe_dump(self.to_dict(), fh, sort_keys=False)
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> Calibration:
+        try:
+            data = yaml.safe_load(Path(path).read_text()) or {}
+            return cls(
+                dead_reckoning_drift_rad_per_s=tuple(data.get("dead_reckoning_drift_rad_per_s", (0, 0, 0))),
+                imu_gyro_bias_rad_per_s=tuple(data.get("imu_gyro_bias_rad_per_s", (0, 0, 0))),
+                dvl_scale_factor=float(data.get("dvl_scale_factor", 1.0)),
+                dvl_scale_factor_std=float(data.get("dvl_scale_factor_std", float("nan"))),
+                samples=data.get("samples"),
+                source=str(data.get("source", "")),
+            )
+        except (OSError, yaml.YAMLError, TypeError, ValueError) as exc:
+            raise ConfigError(f"{path}: not a calibration file ({exc})") from exc
+
+
+def _euler_rates_to_body(rpy: np.ndarray, rpy_dot: np.ndarray) -> np.ndarray:
+    """omega = T^{-1}(phi, theta) eta_2_dot: p = phi' - sin(theta) psi', q = cos(phi) theta' +
+    sin(phi) cos(theta) psi', r = -sin(phi) theta' + cos(phi) cos(theta) psi'."""
+    phi, theta = rpy[:, 0], rpy[:, 1]
+    d_phi, d_theta, d_psi = rpy_dot.T
+    return np.column_stack(
+        [
+            d_phi - np.sin(theta) * d_psi,
+            np.cos(phi) * d_theta + np.sin(phi) * np.cos(theta) * d_psi,
+            -np.sin(phi) * d_theta + np.cos(phi) * np.cos(theta) * d_psi,
+        ]
+    )
+
+
+def _line_slope(t: np.ndarray, y: np.ndarray) -> float:
+    tc = t - t.mean()
+    return float(np.dot(tc, y - y.mean()) / np.dot(tc, tc))
+
+
+def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) -> Calibration:
+    """Estimate mu_b, the IMU gyro bias and the DVL scale factor from ``log`` and its ground truth.
+
+    Needs the ground_truth stream; each other parameter is estimated when its stream exists.
+    """
+    log.require("ground_truth", stage="calibrate")
+    gt = log.ground_truth
+    v_world = ground_truth_velocity(gt, smoothing_s)
+    rpy_dot_full = np.gradient(np.unwrap(gt.orientation, axis=0), gt.t, axis=0)
+    omega_full = _euler_rates_to_body(gt.orientation, rpy_dot_full)
+    counts: dict[str, int] = {}
+    result = {}
+
+    def inside(t):
+        return (t >= gt.t[0]) & (t <= gt.t[-1])
+
+    dr = log.dead_reckoning
+    if dr is not None and len(dr):
+        keep = inside(dr.t) & np.all(np.isfinite(dr.orientation), axis=1)
+        if keep.sum() >= 3:
+            _, rpy, _ = interpolate_ground_truth(gt, dr.t[keep])
+            e = np.unwrap(wrap_angle(dr.orientation[keep] - rpy), axis=0)
+            result["dead_reckoning_drift_rad_per_s"] = tuple(
+                _line_slope(dr.t[keep], e[:, i]) for i in range(3)
+            )
+            counts["dead_reckoning"] = int(keep.sum())
+    imu = log.imu
+    if imu is not None and len(imu):
+        keep = inside(imu.t) & np.all(np.isfinite(imu.angular_velocity), axis=1)
+        if keep.any():
+            omega = np.column_stack([np.interp(imu.t[keep], gt.t, omega_full[:, i]) for i in range(3)])
+            result["imu_gyro_bias_rad_per_s"] = tuple(
+                float(v) for v in np.mean(imu.angular_velocity[keep] - omega, axis=0)
+            )
+            counts["imu"] = int(keep.sum())
+    dvl = log.dvl
+    if dvl is not None and len(dvl):
+        keep = inside(dvl.t) & dvl.valid & np.all(np.isfinite(dvl.velocity), axis=1)
+        _, rpy, vel = interpolate_ground_truth(gt, dvl.t[keep], v_world)
+        omega = np.column_stack([np.interp(dvl.t[keep], gt.t, omega_full[:, i]) for i in range(3)])
+        v_body = np.einsum("nji,nj->ni", rpy_to_matrix(rpy), vel)
+        mount = log.mounting.dvl
+        v_true = (v_body + np.cross(omega, np.asarray(mount.translation))) @ mount.rotation_matrix()
+        moving = np.linalg.norm(v_true, axis=1) > min_speed_mps
+        if moving.sum() >= 3:
+            vt, vm = v_true[moving], dvl.velocity[keep][moving]
+            s = float(np.sum(vm * vt) / np.sum(vt * vt))
+            resid = vm - s * vt
+            s_std = float(np.sqrt(np.sum(resid**2) / (resid.size - 1) / np.sum(vt * vt)))
+            result["dvl_scale_factor"] = s
+            result["dvl_scale_factor_std"] = s_std
+            counts["dvl_moving"] = int(moving.sum())
+    if not counts:
+        raise DataError(
+            "calibrate: no dead_reckoning, imu or dvl samples overlap the ground truth"
+        )
+    return Calibration(**result, samples=counts, source=log.source)

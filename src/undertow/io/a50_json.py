@@ -1,0 +1,207 @@
+"""Reader of the Water Linked DVL A50 TCP JSON protocol (one JSON object per line).
+
+Supported reports (NOTES.md section 1):
+
+- velocity reports: json_v1 (no ``type`` field) and json_v2/v3 (``type: "velocity"``, with a
+  3x3 ``covariance`` in (m/s)^2 and ``time_of_validity``/``time_of_transmission`` in Unix
+  microseconds); become a :class:`~undertow.log.Dvl` stream;
+- ``position_local`` dead-reckoning reports (``ts`` Unix s, ``x y z`` m, ``std`` m,
+  ``roll pitch yaw`` in DEGREES, converted to radians); become a
+  :class:`~undertow.log.DeadReckoning` stream.
+
+Time: ``time_of_validity`` when every velocity report has it; otherwise (json_v1 has no
+absolute time) the cumulative sum of the ``time`` field (ms since the previous report) in
+seconds, starting at 0 -- ``Log.metadata['time_base']`` says which. Exact duplicate lines (the
+real v1 log repeats lines) are dropped and malformed lines skipped, each with a counted warning.
+The module also formats velocity reports (json_v3) for the bag writer.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ReaderError
+from ..log import DeadReckoning, Dvl, Log
+from ._collect import DvlRows, Notes, count_nan_rows, time_order
+
+JSON_SUFFIXES = (".txt", ".json", ".jsonl", ".log")
+
+
+def is_velocity_report(obj: dict) -> bool:
+    return obj.get("type", "velocity") == "velocity" and "vx" in obj
+
+
+def is_position_report(obj: dict) -> bool:
+    return obj.get("type") == "position_local"
+
+
+def _covariance(obj: dict):
+    cov = obj.get("covariance")
+    if cov is None:
+        return None
+    arr = np.asarray(cov, dtype=np.float64)
+    return arr if arr.shape == (3, 3) else None
+
+
+def add_velocity_report(rows: DvlRows, obj: dict, t: float) -> None:
+    """Append one velocity report (raises KeyError/TypeError/ValueError when malformed)."""
+    beams = [
+        (b["id"], float(b["velocity"]), float(b["distance"]), bool(b.get("beam_valid", True)))
+        for b in obj.get("transducers", [])
+    ]
+    tov = obj.get("time_of_validity")
+    rows.append(
+        t,
+        (float(obj["vx"]), float(obj["vy"]), float(obj["vz"])),
+        bool(obj.get("velocity_valid", True)),
+        fom=float(obj.get("fom", math.nan)),
+        covariance=_covariance(obj),
+        altitude=float(obj.get("altitude", math.nan)),
+        beams=beams,
+        raw_altitude=float(obj.get("altitude", math.nan)),
+        time_of_validity=math.nan if tov is None else float(tov) * 1e-6,
+        time_ms=float(obj.get("time", math.nan)),
+    )
+
+
+def position_row(obj: dict) -> tuple:
+    """(ts, x, y, z, std, roll, pitch, yaw) in s, m, rad from a ``position_local`` report."""
+    deg = [float(obj[k]) for k in ("roll", "pitch", "yaw")]
+    return (
+        float(obj["ts"]),
+        float(obj["x"]),
+        float(obj["y"]),
+        float(obj["z"]),
+        float(obj.get("std", math.nan)),
+        *np.deg2rad(deg),
+    )
+
+
+def dead_reckoning_from_rows(rows: list[tuple], notes: Notes) -> DeadReckoning:
+    """A time-ordered DeadReckoning stream from :func:`position_row` tuples."""
+    arr = np.array(rows, dtype=np.float64).reshape(-1, 8)
+    order = time_order(arr[:, 0], "dead_reckoning", notes)
+    arr = arr[order]
+    count_nan_rows(notes, "dead_reckoning", arr[:, 1:])
+    return DeadReckoning(t=arr[:, 0], position=arr[:, 1:4], orientation=arr[:, 5:8], std=arr[:, 4])
+
+
+def _read_lines(path: Path) -> list[str]:
+    if not path.exists():
+        raise ReaderError(f"{path}: no such file")
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise ReaderError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    if not text.strip():
+        raise ReaderError(f"{path}: empty file (no JSON reports)")
+    return text.splitlines()
+
+
+def read_a50_json(path) -> Log:
+    """Read a Water Linked TCP JSON log (json_v1/v2/v3) into a Log."""
+    path = Path(path)
+    lines = _read_lines(path)
+    notes = Notes(str(path))
+    seen: set[str] = set()
+    velocity: list[tuple[int, dict]] = []
+    positions: list[tuple] = []
+    bad_lines: list[int] = []
+    duplicates = 0
+    for number, line in enumerate(lines, start=1):
+        text = line.strip()
+        if not text:
+            continue
+        if text in seen:
+            duplicates += 1
+            continue
+        seen.add(text)
+        try:
+            obj = json.loads(text)
+            if is_position_report(obj):
+                positions.append(position_row(obj))
+            elif is_velocity_report(obj):
+                add_velocity_report(DvlRows(), obj, 0.0)  # validates the report
+                velocity.append((number, obj))
+            elif not isinstance(obj, dict) or "type" not in obj:
+                raise ValueError("not a DVL report")
+        except (ValueError, KeyError, TypeError, AttributeError):
+            bad_lines.append(number)
+    notes.add("exact duplicate lines dropped", duplicates)
+    if bad_lines:
+        shown = ", ".join(map(str, bad_lines[:5])) + (" ..." if len(bad_lines) > 5 else "")
+        notes.add("malformed lines skipped", len(bad_lines), f"line {shown}")
+    if not velocity and not positions:
+        raise ReaderError(f"{path}: no readable Water Linked JSON report (line {bad_lines[0]})")
+    metadata: dict = {"format": "waterlinked_tcp_json"}
+    dvl = _dvl_from_reports(velocity, notes, metadata) if velocity else None
+    dead_reckoning = dead_reckoning_from_rows(positions, notes) if positions else None
+    metadata["warnings"] = notes.finish()
+    return Log(dvl=dvl, dead_reckoning=dead_reckoning, source=str(path), metadata=metadata)
+
+
+def _dvl_from_reports(reports: list[tuple[int, dict]], notes: Notes, metadata: dict) -> Dvl:
+    formats = sorted({str(obj.get("format", "json_v1")) for _, obj in reports})
+    metadata["json_formats"] = formats
+    tov = [obj.get("time_of_validity") for _, obj in reports]
+    if all(v is not None for v in tov):
+        t = np.array(tov, dtype=np.float64) * 1e-6
+        metadata["time_base"] = "time_of_validity (Unix s)"
+    else:
+        ms = np.array([float(obj.get("time", math.nan)) for _, obj in reports])
+        ms = np.where(np.isfinite(ms), ms, 0.0)
+        t = (np.cumsum(ms) - ms[0]) * 1e-3
+        metadata["time_base"] = (
+            "cumulative sum of the 'time' field (ms since previous report), seconds from 0; "
+            "no absolute time in this log"
+        )
+    rows = DvlRows()
+    for (_, obj), ti in zip(reports, t, strict=True):
+        add_velocity_report(rows, obj, float(ti))
+    count_nan_rows(notes, "dvl altitude", np.array(rows.extra["raw_altitude"]))
+    dvl, _ = rows.build(notes)
+    return dvl
+
+
+def velocity_report_line(dvl: Dvl, i: int, time_ms: float, time_of_validity_s: float) -> str:
+    """Row ``i`` of ``dvl`` as a json_v3 velocity report line (as the A50 sends it).
+
+    NaN altitude is written as -1 and the distance of an invalid beam as -1 (the protocol's
+    invalid markers); other NaN values are written as ``NaN``.
+    """
+    altitude = float(dvl.altitude[i])
+    transducers = []
+    for k in range(4):
+        ok = bool(dvl.beam_valid[i, k])
+        transducers.append(
+            {
+                "id": int(dvl.beam_id[i, k]),
+                "velocity": float(dvl.beam_velocity[i, k]),
+                "distance": float(dvl.beam_range[i, k]) if ok else -1.0,
+                "rssi": math.nan,
+                "nsd": math.nan,
+                "beam_valid": ok,
+            }
+        )
+    tov_us = int(round(time_of_validity_s * 1e6))
+    report = {
+        "time": float(time_ms),
+        "vx": float(dvl.velocity[i, 0]),
+        "vy": float(dvl.velocity[i, 1]),
+        "vz": float(dvl.velocity[i, 2]),
+        "fom": float(dvl.fom[i]),
+        "covariance": dvl.covariance[i].tolist(),
+        "altitude": altitude if math.isfinite(altitude) else -1.0,
+        "transducers": transducers,
+        "velocity_valid": bool(dvl.valid[i]),
+        "status": 0,
+        "format": "json_v3",
+        "type": "velocity",
+        "time_of_validity": tov_us,
+        "time_of_transmission": tov_us,
+    }
+    return json.dumps(report)

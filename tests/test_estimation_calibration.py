@@ -1,0 +1,58 @@
+"""Calibration recovers parameters planted in synthetic data within their sampling error."""
+
+import numpy as np
+import pytest
+
+from undertow.errors import MissingStreamError
+from undertow.estimation.calibration import Calibration, calibrate
+from undertow.log import DeadReckoning, Dvl, GroundTruth, Imu, Log, Mounting
+from undertow.rotations import rpy_to_matrix
+
+
+def _run(drift=(0.0, 0.0, 2e-4), gyro_bias=(0.01, -0.02, 0.005), scale=1.02, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 60.0, 1 / 2000)
+    speed = np.clip(t / 10, 0, 1) * 0.8  # accelerate for 10 s, then 0.8 m/s
+    x = np.cumsum(speed) / 2000
+    gt = GroundTruth(
+        t=t,
+        position=np.column_stack([x, 0 * t, 0 * t + 0.5]),
+        orientation=np.column_stack([0 * t, 0 * t, 0 * t + 0.3]),
+    )
+    mounting = Mounting()
+    td = np.arange(0.5, 59.5, 0.125)
+    v_world = np.column_stack([np.interp(td, t, speed), 0 * td, 0 * td])
+    v_body = v_world @ rpy_to_matrix([0, 0, 0.3])  # R^T v for each row
+    v_dvl = v_body @ mounting.dvl.rotation_matrix()
+    dvl = Dvl.from_velocity(td, scale * v_dvl + rng.normal(scale=0.005, size=v_dvl.shape))
+    tr = np.arange(0.5, 59.5, 0.2)
+    dr = DeadReckoning(
+        t=tr,
+        position=np.zeros((tr.size, 3)),
+        orientation=np.array([0, 0, 0.3]) + np.outer(tr, drift) + rng.normal(scale=1e-3, size=(tr.size, 3)),
+    )
+    ti = np.arange(0.5, 59.5, 0.01)
+    imu = Imu(t=ti, angular_velocity=np.array(gyro_bias) + rng.normal(scale=0.002, size=(ti.size, 3)))
+    return Log(imu=imu, dvl=dvl, dead_reckoning=dr, ground_truth=gt, mounting=mounting)
+
+
+def test_recovers_planted_parameters():
+    cal = calibrate(_run())
+    # slope standard error: sigma / (sqrt(n) std(t)) = 1e-3 / (sqrt(295) * 17) ~ 3.4e-6
+    np.testing.assert_allclose(cal.dead_reckoning_drift_rad_per_s, [0, 0, 2e-4], atol=2e-5)
+    np.testing.assert_allclose(cal.imu_gyro_bias_rad_per_s, [0.01, -0.02, 0.005], atol=3e-4)
+    assert cal.dvl_scale_factor == pytest.approx(1.02, abs=5 * cal.dvl_scale_factor_std)
+    assert cal.dvl_scale_factor_std < 1e-3
+
+
+def test_yaml_round_trip(tmp_path):
+    cal = calibrate(_run())
+    back = Calibration.from_yaml(cal.save_yaml(tmp_path / "cal.yaml"))
+    assert back.dvl_scale_factor == cal.dvl_scale_factor
+    assert back.dead_reckoning_drift_rad_per_s == pytest.approx(cal.dead_reckoning_drift_rad_per_s)
+
+
+def test_needs_ground_truth():
+    log = _run()
+    with pytest.raises(MissingStreamError, match="calibrate needs stream.s. ground_truth"):
+        calibrate(log.replace(ground_truth=None))
