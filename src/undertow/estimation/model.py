@@ -1,0 +1,174 @@
+"""The paper's 18-state underwater model (eq:state .. eq:dr_meas_model) and its filter loop.
+
+State (eq:state, eq:eta, eq:nu, eq:gyro_bias), layout of :mod:`undertow.trajectory`:
+
+    x = [eta^W (x, y, z, phi, theta, psi), nu^B (u, v, w, p, q, r), b^g (3), b-bar^g (3)]
+
+The paper names b^g the dead-reckoning (DVL) bias and b-bar^g the IMU gyro bias (eq:gyro_bias)
+but eq:imu_meas_model / eq:dr_meas_model attach them the other way round. We resolve it by
+sensor: the IMU measurement uses the IMU gyro bias b-bar^g = x[15:18] (rad/s) and the DR
+orientation uses the DR bias b^g = x[12:15] (rad, an orientation offset whose mean drift mu_b is
+the DVL gyro's bias in rad/s).
+
+Motion (eq:dynamics_model), constant velocity by forward Euler, acceleration omega_t as noise:
+
+    eta_t = eta + J(eta) (nu dt + omega_t dt^2 / 2),   nu_t = nu + omega_t dt,
+    b_t = b + mu_b dt + omega^b_t,   b-bar_t = b-bar + mu-bar_b dt + omega-bar^b_t
+
+J(eta) = diag(R_B^W(phi, theta, psi), T(phi, theta)): the paper writes R_B^W for both parts;
+we use the rotation for the linear velocity and the Euler-rate transform T for the angular
+velocity (the standard 6-DOF kinematics, Fossen), so that rpy-rates are correct off level.
+Process noise convention: Gamma = diag(q) / dt with q the continuous-time acceleration
+white-noise density ((m/s^2)^2/Hz, (rad/s^2)^2/Hz), entering through G = [J dt^2/2; I dt], so
+Q = G Gamma G^T gives velocity variance q dt per step (independent of the measurement rate),
+position variance J q J^T dt^3/4 and cross terms J q dt^2/2. Bias walks: Gamma_b dt with
+Gamma_b a density (rad^2/s for b^g, (rad/s)^2/s for b-bar^g).
+
+Measurements (eq:bar_meas_model .. eq:dr_meas_model), additive Gaussian noise:
+
+    IMU  (kind 0):  z = R_imu^T omega + b-bar^g                         (rad/s, IMU frame)
+    DVL  (kind 1):  z = R_dvl^T (v + omega x r_dvl) + gamma_DVL         (m/s, DVL frame)
+    DR   (kind 2):  z = (phi, theta, psi) + b^g + gamma_DR              (rad, wrapped)
+    Baro (kind 3):  z = z + e_3^T R_B^W r_bar                           (m, depth)
+
+The wave noise gamma enters as extra variance in R (eq:dvl_meas_model). The loop
+:func:`_run_filter` walks a merged, time-sorted measurement array: it predicts to each
+measurement's time (no prediction when dt <= 0, dt capped at dt_max), draws sigma points again
+and updates; see :mod:`undertow.estimation.localize` for the Python side.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .ukf import _predict_moments, _sigma_points, _update, _wrap
+
+N_STATE = 18
+IMU, DVL, DR, BARO = 0, 1, 2, 3
+KIND_NAMES = ("imu", "dvl", "dead_reckoning", "pressure")
+KIND_DIM = (3, 3, 3, 1)
+STATE_ANGLES = np.zeros(N_STATE, dtype=np.bool_)
+STATE_ANGLES[3:6] = True
+# counters returned by _run_filter (after 4 "used" and 4 "gated" counters, one per kind)
+COUNT_NAMES = (
+    "used_imu", "used_dvl", "used_dead_reckoning", "used_pressure",
+    "gated_imu", "gated_dvl", "gated_dead_reckoning", "gated_pressure",
+    "nonfinite_rejected", "dt_capped", "no_predict_dt_nonpositive", "cholesky_repairs",
+    "numerical_reverts",
+)  # fmt: skip
+
+
+@njit(cache=True)
+def _rotation(phi, theta, psi, R):
+    """R_B^W = Rz(psi) Ry(theta) Rx(phi)."""
+    cr, sr = np.cos(phi), np.sin(phi)
+    cp, sp = np.cos(theta), np.sin(theta)
+    cy, sy = np.cos(psi), np.sin(psi)
+    R[0, 0] = cy * cp
+    R[0, 1] = cy * sp * sr - sy * cr
+    R[0, 2] = cy * sp * cr + sy * sr
+    R[1, 0] = sy * cp
+    R[1, 1] = sy * sp * sr + cy * cr
+    R[1, 2] = sy * sp * cr - cy * sr
+    R[2, 0] = -sp
+    R[2, 1] = cp * sr
+    R[2, 2] = cp * cr
+
+
+@njit(cache=True)
+def _euler_rate(phi, theta, T):
+    """T(phi, theta): (phi, theta, psi)-rates = T omega (cos theta kept away from 0)."""
+    cr, sr = np.cos(phi), np.sin(phi)
+    cp, sp = np.cos(theta), np.sin(theta)
+    if abs(cp) < 1e-6:
+        cp = 1e-6 if cp >= 0 else -1e-6
+    T[0, 0] = 1.0
+    T[0, 1] = sr * sp / cp
+    T[0, 2] = cr * sp / cp
+    T[1, 0] = 0.0
+    T[1, 1] = cr
+    T[1, 2] = -sr
+    T[2, 0] = 0.0
+    T[2, 1] = sr / cp
+    T[2, 2] = cr / cp
+
+
+@njit(cache=True)
+def _f(x, dt, mu_bias, out, R, T):
+    """Mean of eq:dynamics_model for one state x (noise-free part)."""
+    _rotation(x[3], x[4], x[5], R)
+    _euler_rate(x[3], x[4], T)
+    for i in range(3):
+        out[i] = x[i] + dt * (R[i, 0] * x[6] + R[i, 1] * x[7] + R[i, 2] * x[8])
+        out[3 + i] = _wrap(x[3 + i] + dt * (T[i, 0] * x[9] + T[i, 1] * x[10] + T[i, 2] * x[11]))
+    for i in range(6, 12):
+        out[i] = x[i]
+    for i in range(6):
+        out[12 + i] = x[12 + i] + mu_bias[i] * dt
+
+
+@njit(cache=True)
+def _process_noise(x, dt, q_acc, q_bias, Q, R, T):
+    """Q = G diag(q_acc)/dt G^T (G = [J dt^2/2; I dt]) plus diag(q_bias) dt, J at the mean."""
+    Q[:, :] = 0.0
+    _rotation(x[3], x[4], x[5], R)
+    _euler_rate(x[3], x[4], T)
+    for blk in range(2):
+        J = R if blk == 0 else T
+        o = 3 * blk
+        q = q_acc[o : o + 3]
+        for i in range(3):
+            for j in range(3):
+                s = 0.0
+                for k in range(3):
+                    s += J[i, k] * q[k] * J[j, k]
+                Q[o + i, o + j] = s * dt**3 / 4.0
+            for k in range(3):
+                c = J[i, k] * q[k] * dt**2 / 2.0
+                Q[o + i, 6 + o + k] = c
+                Q[6 + o + k, o + i] = c
+            Q[6 + o + i, 6 + o + i] = q[i] * dt
+    for i in range(6):
+        Q[12 + i, 12 + i] = q_bias[i] * dt
+
+
+@njit(cache=True)
+def _h(kind, x, imu_Rt, dvl_Rt, dvl_r, baro_r, out, R):
+    """Measurement functions eq:imu_meas_model, eq:dvl_meas_model, eq:dr_meas_model,
+    eq:bar_meas_model for one state x (noise-free part)."""
+    if kind == IMU:
+        for i in range(3):
+            out[i] = imu_Rt[i, 0] * x[9] + imu_Rt[i, 1] * x[10] + imu_Rt[i, 2] * x[11] + x[15 + i]
+    elif kind == DVL:
+        p, q, r = x[9], x[10], x[11]
+        v0 = x[6] + q * dvl_r[2] - r * dvl_r[1]
+        v1 = x[7] + r * dvl_r[0] - p * dvl_r[2]
+        v2 = x[8] + p * dvl_r[1] - q * dvl_r[0]
+        for i in range(3):
+            out[i] = dvl_Rt[i, 0] * v0 + dvl_Rt[i, 1] * v1 + dvl_Rt[i, 2] * v2
+    elif kind == DR:
+        for i in range(3):
+            out[i] = _wrap(x[3 + i] + x[12 + i])
+    else:
+        _rotation(x[3], x[4], x[5], R)
+        out[0] = x[2] + R[2, 0] * baro_r[0] + R[2, 1] * baro_r[1] + R[2, 2] * baro_r[2]
+
+
+@njit(cache=True)
+def _all_finite(a):
+    for v in a.ravel():
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _freeze_bias(x, P):
+    """Baseline / AN variants: bias states held at 0 with a tiny variance and no correlation."""
+    for i in range(12, 18):
+        x[i] = 0.0
+        for j in range(18):
+            P[i, j] = 0.0
+            P[j, i] = 0.0
+        P[i, i] = 1e-12

@@ -1,0 +1,170 @@
+"""From range measurements to BKI training samples (points labelled occupied / free).
+
+Every valid range r of a DVL beam (slant range along its unit vector u, DVL frame) or of the
+sonar (along the sonar frame's +z axis) gives, with the body pose (p, R) interpolated at the
+range's time and the sensor mounting (lever arm t_s, rotation R_s, both in the body frame):
+
+    origin o = p + R t_s,   direction v = R R_s u,   hit m = o + r v   (label y = 1),
+
+plus free samples m = o + s v for s = 0, f, 2f, ... <= r - f (label y = 0), f = free_resolution,
+as la3dm does (NOTES.md section 4). Position and its per-axis variance are interpolated linearly,
+roll/pitch/yaw on the unwrapped angles. Invalid beams, non-finite or out-of-range values (DVL
+0.05-50 m, sonar min_range-max_range) and ranges outside the trajectory's time span are dropped
+and counted in ``Samples.dropped``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ConfigError, DataError, MissingStreamError
+from ..log import Log
+from ..rotations import rpy_to_matrix, wrap_angle
+from ..trajectory import Trajectory
+
+SENSOR_DVL, SENSOR_SONAR = 0, 1
+DVL_MIN_RANGE, DVL_MAX_RANGE = 0.05, 50.0
+
+
+@dataclass(frozen=True, eq=False)
+class Samples:
+    """Training samples: ``points`` (N, 3) world, ``label`` (N,) 1 hit / 0 free, ``sigma0`` (N,),
+    ``pose_variance`` (N, 3) m^2, ``ray`` (N,) index into ``origins`` (R, 3) (-1 if unknown),
+    ``sensor`` (N,) 0 DVL / 1 sonar / -1 unknown, ``dropped`` counts of rejected ranges."""
+
+    points: np.ndarray
+    label: np.ndarray
+    sigma0: np.ndarray
+    pose_variance: np.ndarray
+    ray: np.ndarray
+    sensor: np.ndarray
+    origins: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    dropped: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        pts = np.ascontiguousarray(self.points, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise DataError(f"Samples.points: shape {pts.shape}, expected (N, 3)")
+        n = pts.shape[0]
+        if not np.all(np.isfinite(pts)):
+            raise DataError(f"Samples.points: {int(np.sum(~np.isfinite(pts).all(1)))} non-finite")
+        arrays = {
+            "label": (self.label, float, (n,)),
+            "sigma0": (self.sigma0, float, (n,)),
+            "pose_variance": (self.pose_variance, float, (n, 3)),
+            "ray": (self.ray, np.int64, (n,)),
+            "sensor": (self.sensor, np.int8, (n,)),
+        }
+        object.__setattr__(self, "points", pts)
+        for name, (value, dtype, shape) in arrays.items():
+            arr = np.asarray(value, dtype=dtype)
+            if arr.ndim < len(shape) and arr.shape == shape[len(shape) - arr.ndim :]:
+                arr = np.broadcast_to(arr, shape)  # scalars (and one (3,) row) broadcast
+            arr = np.ascontiguousarray(arr)
+            if arr.shape != shape:
+                raise DataError(f"Samples.{name}: shape {arr.shape}, expected {shape}")
+            object.__setattr__(self, name, arr)
+        if np.any((self.label < 0) | (self.label > 1)) or not np.all(np.isfinite(self.label)):
+            raise DataError("Samples.label: labels must be in [0, 1]")
+        if not np.all(np.isfinite(self.sigma0) & (self.sigma0 > 0)):
+            raise DataError("Samples.sigma0: must be finite and > 0")
+        if not np.all(np.isfinite(self.pose_variance) & (self.pose_variance >= 0)):
+            raise DataError("Samples.pose_variance: must be finite and >= 0")
+        object.__setattr__(self, "origins", np.asarray(self.origins, dtype=float).reshape(-1, 3))
+
+    @classmethod
+    def from_points(cls, points, label, sigma0=1.0, pose_variance=0.0) -> Samples:
+        """Samples from plain arrays (no ray bookkeeping); scalars and a (3,) variance broadcast."""
+        return cls(points, label, sigma0, pose_variance, -1, -1)
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def n_hits(self) -> int:
+        return int(np.sum(self.label > 0.5))
+
+
+def _interpolate_pose(trajectory: Trajectory, t: np.ndarray):
+    """Position (linear), rpy (on unwrapped angles) and position variance at times t."""
+    tt = trajectory.t
+    pos = np.stack([np.interp(t, tt, trajectory.position[:, j]) for j in range(3)], axis=1)
+    ang = np.unwrap(trajectory.orientation, axis=0)
+    rpy = wrap_angle(np.stack([np.interp(t, tt, ang[:, j]) for j in range(3)], axis=1))
+    pv = trajectory.position_variance
+    var = np.stack([np.interp(t, tt, pv[:, j]) for j in range(3)], axis=1)
+    return pos, rpy, var
+
+
+def _rays(t, r, unit, ok, mount, trajectory, sigma0, sensor):
+    """World origins, directions and ranges of the kept rays (flattened), with their metadata."""
+    t, r, unit = t[ok], r[ok], unit[ok]
+    pos, rpy, var = _interpolate_pose(trajectory, t)
+    R = rpy_to_matrix(rpy)
+    origin = pos + R @ np.asarray(mount.translation, float)
+    direction = np.einsum("nij,nj->ni", R @ mount.rotation_matrix(), unit)
+    n = t.size
+    return origin, direction, r, var, np.full(n, sigma0), np.full(n, sensor, np.int8)
+
+
+def _check_range(kind, t, r, flag, lo, hi, span, dropped) -> np.ndarray:
+    finite = np.isfinite(r)
+    in_range = finite & (r >= lo) & (r <= hi)
+    in_time = (t >= span[0]) & (t <= span[1])
+    dropped[f"{kind}_invalid"] = int(np.sum(~flag))
+    dropped[f"{kind}_nonfinite"] = int(np.sum(flag & ~finite))
+    dropped[f"{kind}_out_of_range"] = int(np.sum(flag & finite & ~in_range))
+    dropped[f"{kind}_outside_trajectory"] = int(np.sum(flag & in_range & ~in_time))
+    return flag & in_range & in_time
+
+
+def build_samples(log: Log, trajectory: Trajectory, free_resolution: float = 0.1,
+                  sigma0_dvl: float = 0.9, sigma0_sonar: float = 0.6, use_dvl: bool = True,
+                  use_sonar: bool = True) -> Samples:  # fmt: skip
+    """Hits and free samples from the log's DVL beam ranges and sonar ranges (see module doc)."""
+    if not (free_resolution > 0 and np.isfinite(free_resolution)):
+        raise ConfigError(f"free_resolution must be > 0, got {free_resolution}")
+    if not (sigma0_dvl > 0 and sigma0_sonar > 0):
+        raise ConfigError(f"sigma0 must be > 0, got dvl {sigma0_dvl}, sonar {sigma0_sonar}")
+    wanted = [n for n, use in (("dvl", use_dvl), ("sonar", use_sonar)) if use]
+    if not any(getattr(log, n) is not None and len(getattr(log, n)) for n in wanted):
+        raise MissingStreamError(f"mapping needs a range stream ({' or '.join(wanted) or 'none'} "
+                                 "enabled) but the log has none of them")  # fmt: skip
+    if len(trajectory) == 0:
+        raise DataError("mapping needs a non-empty trajectory")
+    span = (float(trajectory.t[0]), float(trajectory.t[-1]))
+    dropped: dict[str, int] = {}
+    parts = []
+    if use_dvl and log.dvl is not None and len(log.dvl):
+        d = log.dvl
+        t = np.repeat(d.t, 4)
+        r = d.beam_range.reshape(-1)
+        unit = d.beam_unit.reshape(-1, 3)
+        flag = d.beam_valid.reshape(-1) & np.all(np.isfinite(unit), axis=1)
+        ok = _check_range("dvl", t, r, flag, DVL_MIN_RANGE, DVL_MAX_RANGE, span, dropped)
+        parts.append(_rays(t, r, unit, ok, log.mounting.dvl, trajectory, sigma0_dvl, SENSOR_DVL))
+    if use_sonar and log.sonar is not None and len(log.sonar):
+        s = log.sonar
+        flag = np.ones(len(s), bool)
+        ok = _check_range("sonar", s.t, s.range, flag, s.min_range, s.max_range, span, dropped)
+        unit = np.tile([0.0, 0.0, 1.0], (len(s), 1))
+        parts.append(_rays(s.t, s.range, unit, ok, log.mounting.sonar, trajectory,
+                           sigma0_sonar, SENSOR_SONAR))  # fmt: skip
+    origin, direction, r, var, sig, sensor = (np.concatenate(c) for c in zip(*parts, strict=True))
+    return _expand(origin, direction, r, var, sig, sensor, free_resolution, dropped)
+
+
+def _expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
+    """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f."""
+    n_rays = r.size
+    n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
+    ray_free = np.repeat(np.arange(n_rays), n_free)
+    first = np.cumsum(n_free) - n_free
+    k = np.arange(ray_free.size) - np.repeat(first, n_free)
+    s = np.concatenate([r, k * f])
+    ray = np.concatenate([np.arange(n_rays), ray_free])
+    points = origin[ray] + s[:, None] * direction[ray]
+    label = np.concatenate([np.ones(n_rays), np.zeros(ray_free.size)])
+    return Samples(points, label, sig[ray], var[ray], ray, sensor[ray], origin, dropped)

@@ -1,0 +1,209 @@
+"""Scenarios: every parameter of a simulation, as pydantic models with documented defaults.
+
+A scenario is a YAML file; any field left out takes the default below, and ``base: NAME`` starts
+from a built-in scenario (deep merge) so a user file can change a single field. The built-ins
+live in ``undertow/data/scenarios/*.yaml``. Sensor models are in ``scenario_sensors.py``.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from ..errors import ConfigError
+from .scenario_sensors import (
+    BarometerModel,
+    DeadReckoningModel,
+    DvlModel,
+    FloorCloudModel,
+    GroundTruthModel,
+    ImuModel,
+    MountingModel,
+    SonarModel,
+    WaveProbeModel,
+)
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class WaterModel(_Model):
+    depth_m: float = Field(3.0, gt=0, description="still-water depth h; MHL basin ~3 m (NOTES 2)")
+    density_kg_m3: float = Field(998.0, gt=0, description="fresh water 15-20 C: 999.1-998.2")
+    gravity_m_s2: float = Field(9.80665, gt=0, description="standard gravity")
+    sound_speed_m_s: float = Field(
+        1476.0,
+        gt=0,
+        description="true c: fresh water 15 C 1466 m/s, 20 C 1482 m/s (Del Grosso/Marczak 1997)",
+    )
+    surface_pressure_pa: float = Field(101_325.0, description="standard atmosphere")
+
+
+class WaveModel(_Model):
+    amplitude_m: float = Field(0.0, ge=0, description="a; 0 = calm (paper: 0.05, 0.1)")
+    frequency_hz: float = Field(1.0, gt=0, description="f (paper: 0.75, 1.0)")
+    heading_deg: float = Field(
+        180.0, description="propagation direction beta in world x-y; 180 = oncoming (toward -x)"
+    )
+    phase_rad: float = Field(0.0, description="phi_0 of theta = k x - omega t + phi_0")
+
+
+class RockModel(_Model):
+    """Rock platform of known size (the paper gives its dimensions only in a figure; these
+    defaults are assumed, of the same order)."""
+
+    center_x_m: float = 48.0
+    center_y_m: float = 0.3
+    length_m: float = Field(1.0, gt=0)
+    width_m: float = Field(0.8, gt=0)
+    height_m: float = Field(0.4, gt=0)
+    edge_radius_m: float = Field(0.05, ge=0, description="fillet radius of the top edges")
+
+
+class TankModel(_Model):
+    length_m: float = Field(110.0, gt=0, description="MHL towing basin ~110 m (NOTES 2)")
+    width_m: float = Field(6.7, gt=0, description="MHL towing basin ~6.7 m (NOTES 2)")
+    rock: RockModel = RockModel()
+
+
+class MountLoadModel(_Model):
+    """Rigid carriage mount shaken by wave loads (Morison): the strut is a stiff spring of
+    stiffness K whose natural frequency is far above the wave frequency, so the along-wave
+    deflection is quasi-static, delta = F / K, with F the wave part of the Morison force."""
+
+    stiffness_n_m: float = Field(
+        2.0e4, gt=0, description="strut bending stiffness; ~2 m aluminium tube, assumed"
+    )
+    displaced_volume_m3: float = Field(0.0115, gt=0, description="BlueROV2 ~11.5 kg neutrally")
+    inertia_coefficient: float = Field(2.0, ge=0, description="C_M = 1 + C_a, bluff body")
+    drag_coefficient: float = Field(1.0, ge=0, description="C_D of a bluff box")
+    frontal_area_m2: float = Field(0.085, gt=0, description="BlueROV2 0.25 m x 0.34 m")
+
+
+class CarriageModel(_Model):
+    start_x_m: float = Field(30.0, description="carriage start x in the tank")
+    y_m: float = 0.0
+    depth_m: float = Field(0.5, description="body-origin depth (NOTES 2 quotes 0.5 m)")
+    run_length_m: float = Field(36.6, gt=0, description="paper: 36.6 m along x")
+    cruise_speed_m_s: float = Field(1.0, gt=0, description="assumed; below the A50 maximum")
+    acceleration_m_s2: float = Field(0.5, gt=0, description="assumed carriage acceleration")
+    hold_before_s: float = Field(5.0, ge=0, description="at rest before the run")
+    hold_after_s: float = Field(5.0, ge=0, description="at rest after the run")
+    mount: MountLoadModel = MountLoadModel()
+
+
+class SurveyModel(_Model):
+    """Free vehicle: lawnmower passes along x over the rock, carried by the orbital flow."""
+
+    start_x_m: float = Field(45.0, description="x where each pass starts")
+    pass_length_m: float = Field(6.0, gt=0)
+    passes: int = Field(4, ge=1)
+    pass_spacing_m: float = Field(0.6, gt=0, description="y step between passes (turn diameter)")
+    first_pass_y_m: float = -0.6
+    depth_m: float = Field(0.6, description="commanded body depth")
+    speed_m_s: float = Field(0.4, gt=0, description="BlueROV2 survey speed, assumed")
+    ramp_s: float = Field(2.0, ge=0, description="speed ramp at start and end")
+    hold_before_s: float = Field(3.0, ge=0)
+    hold_after_s: float = Field(3.0, ge=0)
+    attitude_gain: float = Field(
+        0.5, ge=0, description="roll/pitch = gain x local orbital-path slope, assumed"
+    )
+
+
+class MotionModel(_Model):
+    kind: Literal["carriage", "survey"] = "carriage"
+    carriage: CarriageModel = CarriageModel()
+    survey: SurveyModel = SurveyModel()
+
+
+class Scenario(_Model):
+    """Everything a simulation uses; ``to_yaml_dict()`` writes it back."""
+
+    name: str = "custom"
+    description: str = ""
+    seed: int = 0
+    water: WaterModel = WaterModel()
+    wave: WaveModel = WaveModel()
+    tank: TankModel = TankModel()
+    motion: MotionModel = MotionModel()
+    mounting: MountingModel = MountingModel()
+    imu: ImuModel = ImuModel()
+    dvl: DvlModel = DvlModel()
+    dead_reckoning: DeadReckoningModel = DeadReckoningModel()
+    barometer: BarometerModel = BarometerModel()
+    sonar: SonarModel = SonarModel()
+    wave_probe: WaveProbeModel = WaveProbeModel()
+    ground_truth: GroundTruthModel = GroundTruthModel()
+    floor_cloud: FloorCloudModel = FloorCloudModel()
+
+    def to_yaml_dict(self) -> dict:
+        """Plain dict of every field (defaults included), YAML-safe."""
+        return self.model_dump(mode="json")
+
+
+def _builtin_dir():
+    return resources.files("undertow") / "data" / "scenarios"
+
+
+def list_scenarios() -> list[str]:
+    """Names of the built-in scenarios."""
+    return sorted(p.name[:-5] for p in _builtin_dir().iterdir() if p.name.endswith(".yaml"))
+
+
+def _deep_merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _deep_merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _read_yaml(path, label: str) -> dict:
+    try:
+        data = yaml.safe_load(Path(path).read_text()) if isinstance(path, Path) else yaml.safe_load(
+            path.read_text()
+        )
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{label}: cannot read scenario YAML: {exc}".replace("\n", " ")) from exc
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{label}: a scenario file must be a mapping of fields")
+    return data
+
+
+def _raw(name_or_path: str | Path, depth: int = 0) -> tuple[dict, str]:
+    text = str(name_or_path)
+    builtin = _builtin_dir() / f"{text}.yaml"
+    if builtin.is_file():
+        data, label = _read_yaml(builtin, f"scenario {text}"), f"built-in scenario {text}"
+    elif Path(text).is_file():
+        data, label = _read_yaml(Path(text), text), text
+    else:
+        names = ", ".join(list_scenarios())
+        raise ConfigError(f"unknown scenario {text!r}: not a file; built-ins are: {names}")
+    base = data.pop("base", None)
+    if base is not None:
+        if depth > 8:
+            raise ConfigError(f"{label}: field base: too deep a chain of base scenarios")
+        parent, _ = _raw(base, depth + 1)
+        data = _deep_merge(parent, data)
+    return data, label
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """A built-in scenario by name, or a YAML file (fields left out keep their defaults)."""
+    data, label = _raw(name_or_path)
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        field = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        raise ConfigError(f"{label}: field {field}: {err['msg']}") from exc
