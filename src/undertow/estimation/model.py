@@ -172,3 +172,123 @@ def _freeze_bias(x, P):
             P[i, j] = 0.0
             P[j, i] = 0.0
         P[i, i] = 1e-12
+
+
+@njit(cache=True)
+def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws):
+    """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place."""
+    chi, chi_f, D, L, Q, R, T, xi = ws
+    status = _sigma_points(x, P, lam, STATE_ANGLES, L, chi)
+    for i in range(chi.shape[0]):
+        _f(chi[i], dt, mu_bias, xi, R, T)
+        chi_f[i, :] = xi
+    _process_noise(x, dt, q_acc, q_bias, Q, R, T)
+    _predict_moments(chi_f, wm, wc, Q, STATE_ANGLES, x, P, D)
+    return status
+
+
+@njit(cache=True)
+def _run_filter(
+    t, kind, z, Rm, x0, P0, t0, wm, wc, lam, q_acc, q_bias, mu_bias,
+    imu_Rt, dvl_Rt, dvl_r, baro_r, dt_max, gate, freeze, out_times, record_all, out_n,
+):  # fmt: skip
+    """Walk the merged measurements (t, kind, z (N, 3), Rm (N, 3, 3)) in order: predict to each
+    measurement time (none if dt <= 0, dt capped at dt_max), redraw sigma points, update.
+
+    Records (x, P) after the last update at each distinct time (record_all) or, otherwise, at
+    ``out_times`` (the filter predicted to that time; the filter itself is not changed).
+    Returns (out_t, out_x, out_P, counts) with counts as in COUNT_NAMES.
+    """
+    n = N_STATE
+    npts = 2 * n + 1
+    x = x0.copy()
+    P = P0.copy()
+    if freeze:
+        _freeze_bias(x, P)
+    counts = np.zeros(len(COUNT_NAMES), dtype=np.int64)
+    out_t = np.empty(out_n)
+    out_x = np.empty((out_n, n))
+    out_P = np.empty((out_n, n, n))
+    ws = (
+        np.empty((npts, n)), np.empty((npts, n)), np.empty((n, npts)), np.zeros((n, n)),
+        np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
+    )  # fmt: skip
+    chi, L, R = ws[0], ws[3], ws[5]
+    Zs = np.empty((npts, 3))
+    zi = np.empty(3)
+    zmask_angle = np.ones(3, dtype=np.bool_)
+    zmask_lin = np.zeros(3, dtype=np.bool_)
+    no_mu = np.zeros(6)
+    mu = no_mu if freeze else mu_bias
+    xb = np.empty(n)
+    Pb = np.empty((n, n))
+    t_cur = t0
+    k_out = 0
+    j_out = 0
+    N = t.size
+    for k in range(N + 1):
+        tk = t[k] if k < N else np.inf
+        while not record_all and j_out < out_times.size and out_times[j_out] < tk:
+            if k_out < out_n:
+                xb[:] = x
+                Pb[:, :] = P
+                dt = min(out_times[j_out] - t_cur, dt_max)
+                if dt > 0:
+                    counts[11] += max(_predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws), 0)
+                out_t[k_out] = out_times[j_out]
+                out_x[k_out] = xb
+                out_P[k_out] = Pb
+                k_out += 1
+            j_out += 1
+        if k == N:
+            break
+        kd = kind[k]
+        m = 1 if kd == BARO else 3
+        if not (_all_finite(z[k, :m]) and _all_finite(Rm[k, :m, :m])):
+            counts[8] += 1
+        else:
+            dt = tk - t_cur
+            if dt > 0:
+                if dt > dt_max:
+                    dt = dt_max
+                    counts[9] += 1
+                xb[:] = x
+                Pb[:, :] = P
+                counts[11] += max(_predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, ws), 0)
+                if not (_all_finite(x) and _all_finite(P)):
+                    x[:] = xb
+                    P[:, :] = Pb
+                    counts[12] += 1
+                if freeze:
+                    _freeze_bias(x, P)
+                t_cur = tk
+            else:
+                counts[10] += 1
+            counts[11] += max(_sigma_points(x, P, lam, STATE_ANGLES, L, chi), 0)
+            for i in range(npts):
+                _h(kd, chi[i], imu_Rt, dvl_Rt, dvl_r, baro_r, zi, R)
+                Zs[i, :m] = zi[:m]
+            xb[:] = x
+            Pb[:, :] = P
+            zmask = zmask_angle if kd == DR else zmask_lin
+            status, _ = _update(
+                x, P, chi, Zs[:, :m], z[k, :m], Rm[k, :m, :m], wm, wc, STATE_ANGLES,
+                zmask[:m], gate[kd],
+            )  # fmt: skip
+            if status == 0 and _all_finite(x) and _all_finite(P):
+                counts[kd] += 1
+            else:
+                if status == 1:
+                    counts[4 + kd] += 1
+                else:
+                    counts[12] += 1
+                x[:] = xb
+                P[:, :] = Pb
+            if freeze:
+                _freeze_bias(x, P)
+        if record_all and k_out < out_n and (k == N - 1 or t[k + 1] != tk):
+            out_t[k_out] = tk
+            out_x[k_out] = x
+            out_P[k_out] = P
+            k_out += 1
+    return out_t[:k_out], out_x[:k_out], out_P[:k_out], counts

@@ -37,8 +37,11 @@ EIG_FLOOR_ABS = 1e-18  # absolute eigenvalue floor in a repair
 
 @njit(cache=True)
 def _wrap(a):
-    """wrap(a) to [-pi, pi)."""
-    return (a + np.pi) % TWO_PI - np.pi
+    """wrap(a) to [-pi, pi) (NaN stays NaN)."""
+    if -np.pi <= a < np.pi:
+        return a
+    r = a - TWO_PI * np.floor((a + np.pi) / TWO_PI)
+    return r - TWO_PI if r >= np.pi else r
 
 
 @njit(cache=True)
@@ -156,34 +159,51 @@ def _mean(chi, wm, angle_mask, out):
 
 
 @njit(cache=True)
-def _residuals(chi, mean, angle_mask, D):
-    """D_i = chi_i - mean (wrapped for angles)."""
+def _residuals(chi, mean, angle_mask, DT):
+    """DT[:, i] = chi_i - mean (wrapped for angles), stored transposed (n, 2n+1)."""
     npts, n = chi.shape
-    for i in range(npts):
-        for j in range(n):
-            d = chi[i, j] - mean[j]
-            D[i, j] = _wrap(d) if angle_mask[j] else d
+    for j in range(n):
+        mj = mean[j]
+        if angle_mask[j]:
+            for i in range(npts):
+                DT[j, i] = _wrap(chi[i, j] - mj)
+        else:
+            for i in range(npts):
+                DT[j, i] = chi[i, j] - mj
 
 
-@njit(cache=True)
-def _weighted_outer(A, B, wc, out):
-    """out = sum_i wc_i A_i B_i^T (rows A_i, B_i)."""
-    npts, na = A.shape
-    nb = B.shape[1]
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _weighted_outer(AT, BT, wc, out):
+    """out = sum_i wc_i A_i B_i^T from transposed residuals AT (na, npts), BT (nb, npts)."""
+    na, npts = AT.shape
+    nb = BT.shape[0]
     for a in range(na):
         for b in range(nb):
             s = 0.0
             for i in range(npts):
-                s += wc[i] * A[i, a] * B[i, b]
+                s += wc[i] * AT[a, i] * BT[b, i]
             out[a, b] = s
+
+
+@njit(cache=True, fastmath={"reassoc", "contract"})
+def _weighted_gram(AT, wc, out):
+    """out = sum_i wc_i A_i A_i^T (symmetric) from transposed residuals AT (na, npts)."""
+    na, npts = AT.shape
+    for a in range(na):
+        for b in range(a, na):
+            s = 0.0
+            for i in range(npts):
+                s += wc[i] * AT[a, i] * AT[b, i]
+            out[a, b] = s
+            out[b, a] = s
 
 
 @njit(cache=True)
 def _predict_moments(chi_f, wm, wc, Q, angle_mask, x, P, D):
-    """Unscented prediction: x = mean(f(chi)), P = sum W^c dx dx^T + Q (symmetrized)."""
+    """D: workspace (n, 2n+1). Unscented prediction: x = mean(f(chi)), P = sum W^c dx dx^T + Q (symmetrized)."""
     _mean(chi_f, wm, angle_mask, x)
     _residuals(chi_f, x, angle_mask, D)
-    _weighted_outer(D, D, wc, P)
+    _weighted_gram(D, wc, P)
     n = x.size
     for i in range(n):
         for j in range(n):
@@ -225,12 +245,12 @@ def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate):
     m = z.size
     zhat = np.empty(m)
     _mean(Zs, wm, z_angles, zhat)
-    Dz = np.empty((npts, m))
+    Dz = np.empty((m, npts))
     _residuals(Zs, zhat, z_angles, Dz)
-    Dx = np.empty((npts, n))
+    Dx = np.empty((n, npts))
     _residuals(chi, x, x_angles, Dx)
     S = np.empty((m, m))
-    _weighted_outer(Dz, Dz, wc, S)
+    _weighted_gram(Dz, wc, S)
     for a in range(m):
         for b in range(m):
             S[a, b] += R[a, b]

@@ -1,0 +1,71 @@
+"""Readers and writers of log formats, all returning or taking a :class:`~undertow.log.Log`.
+
+:func:`read_log` guesses the format from the path: a ``.bag`` file is ROS 1; a directory with
+``metadata.yaml`` or a ``.mcap``/``.db3`` file is ROS 2; ``.txt/.json/.jsonl/.log`` is Water
+Linked TCP JSON. :func:`write_log` writes a ROS 2 mcap bag; TUM trajectories and PLY clouds
+have their own small modules.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import ReaderError
+from ..log import Log
+from .a50_json import JSON_SUFFIXES, read_a50_json
+from .info import LogSummary, StreamSummary, summarize
+from .ply import read_ply, write_ply
+from .rosbag import read_rosbag
+from .rosbag_write import write_log
+from .topics import TopicMap
+from .tum import read_tum, write_tum
+
+ROS2_SUFFIXES = (".mcap", ".db3")
+
+
+def detect_format(path) -> str:
+    """'ros1', 'ros2' or 'a50_json' for ``path``; ReaderError naming the file otherwise."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if path.is_dir():
+        if (path / "metadata.yaml").exists() or any(
+            p.suffix in ROS2_SUFFIXES for p in path.iterdir()
+        ):
+            return "ros2"
+        raise ReaderError(f"{path}: directory is not a ROS 2 bag (no metadata.yaml, .mcap or .db3)")
+    if not path.exists():
+        raise ReaderError(f"{path}: no such file or directory")
+    if suffix == ".bag":
+        return "ros1"
+    if suffix in ROS2_SUFFIXES:
+        return "ros2"
+    if suffix in JSON_SUFFIXES:
+        return "a50_json"
+    raise ReaderError(
+        f"{path}: unknown log format '{suffix or path.name}' (expected .bag, a ROS 2 bag "
+        f"directory, .mcap, .db3, or {', '.join(JSON_SUFFIXES)})"
+    )
+
+
+def read_log(path, topics: TopicMap | None = None) -> Log:
+    """Read any supported log into a Log (format guessed from the path)."""
+    if detect_format(path) == "a50_json":
+        return read_a50_json(path)
+    return read_rosbag(path, topics)
+
+
+__all__ = [
+    "LogSummary",
+    "StreamSummary",
+    "TopicMap",
+    "detect_format",
+    "read_a50_json",
+    "read_log",
+    "read_ply",
+    "read_rosbag",
+    "read_tum",
+    "summarize",
+    "write_log",
+    "write_ply",
+    "write_tum",
+]

@@ -62,7 +62,9 @@ def count_nan_rows(notes: Notes, stream: str, *arrays) -> None:
     bad = None
     for arr in arrays:
         arr = np.asarray(arr, dtype=np.float64)
-        rows = np.isnan(arr.reshape(arr.shape[0], -1)).any(axis=1) if arr.size else np.zeros(0, bool)
+        rows = (
+            np.isnan(arr.reshape(arr.shape[0], -1)).any(axis=1) if arr.size else np.zeros(0, bool)
+        )
         bad = rows if bad is None else bad | rows
     if bad is not None:
         notes.add(f"{stream}: messages with NaN values (kept as NaN)", int(bad.sum()))
@@ -93,8 +95,18 @@ class DvlRows:
     def __len__(self) -> int:
         return len(self.t)
 
-    def append(self, t, velocity, valid, fom=np.nan, covariance=None, altitude=np.nan,
-               beams=(), beam_units=None, **extra) -> None:
+    def append(
+        self,
+        t,
+        velocity,
+        valid,
+        fom=np.nan,
+        covariance=None,
+        altitude=np.nan,
+        beams=(),
+        beam_units=None,
+        **extra,
+    ) -> None:
         """Add one report. ``beams``: (id, radial velocity, distance, valid) per beam; A50 beam
         ids 0..3 place the beam in that column with the A50 geometry unless ``beam_units``
         (4, 3) is given (then beams fill columns in order)."""

@@ -146,7 +146,7 @@ class OccupancyMap:
         return self.occupied(threshold).centres
 
     def slice(self, z_min=None, z_max=None, *, axis: int | None = None, index=None):
-        """Cells with centre z in [z_min, z_max], or (axis, index) the plane cells[:, axis] == index."""
+        """Cells with centre z in [z_min, z_max], or the index plane cells[:, axis] == index."""
         if axis is not None:
             if axis not in (0, 1, 2) or index is None:
                 raise DataError("OccupancyMap.slice: axis must be 0, 1 or 2 and index given")

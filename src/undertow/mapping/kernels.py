@@ -32,7 +32,7 @@ _TWO_PI = 2.0 * np.pi
 
 
 def sparse_kernel(d, length_scale, sigma0: float = 1.0) -> np.ndarray:
-    """``eq:kernel``: sigma_0 [(2 + cos 2 pi d/l)(1 - d/l)/3 + sin(2 pi d/l)/(2 pi)], 0 for d >= l."""
+    """``eq:kernel``: s0 [(2 + cos 2 pi d/l)(1 - d/l)/3 + sin(2 pi d/l)/(2 pi)]; 0 if d >= l."""
     d = np.abs(np.asarray(d, dtype=float))
     r = d / np.asarray(length_scale, dtype=float)
     a = _TWO_PI * r

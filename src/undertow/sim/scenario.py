@@ -167,9 +167,7 @@ def _deep_merge(base: dict, over: dict) -> dict:
 
 def _read_yaml(path, label: str) -> dict:
     try:
-        data = yaml.safe_load(Path(path).read_text()) if isinstance(path, Path) else yaml.safe_load(
-            path.read_text()
-        )
+        data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:
         raise ConfigError(f"{label}: cannot read scenario YAML: {exc}".replace("\n", " ")) from exc
     if data is None:

@@ -26,7 +26,7 @@ import numpy as np
 def solve_wavenumber(omega: float, depth: float, g: float, tol: float = 1e-12) -> float:
     """Wavenumber k (rad/m) with omega^2 = g k tanh(k h), by Newton's method.
 
-    Newton on F(k) = g k tanh(k h) - omega^2, F'(k) = g tanh(k h) + g k h / cosh^2(k h),
+    Newton on F(k) = g k tanh(k h) - omega^2, F'(k) = g tanh(k h) + g k h sech^2(k h),
     started from the larger of the deep (omega^2/g) and shallow (omega/sqrt(g h)) limits, from
     which the iteration is monotone (F is convex in k). Returns 0 for omega = 0.
     """
@@ -36,7 +36,7 @@ def solve_wavenumber(omega: float, depth: float, g: float, tol: float = 1e-12) -
     for _ in range(100):
         th = np.tanh(k * depth)
         f = g * k * th - omega * omega
-        df = g * th + g * k * depth / np.cosh(k * depth) ** 2
+        df = g * th + g * k * depth * (1.0 - th * th)  # sech^2 = 1 - tanh^2, no overflow
         step = f / df
         k -= step
         if abs(step) < tol * k:

@@ -1,0 +1,127 @@
+"""``undertow info``: a per-stream summary of a :class:`~undertow.log.Log`.
+
+:func:`summarize` counts, per stream, messages, median rate, time span, invalid rows (the
+stream's own ``invalid_count``) and missing values (NaN entries in the stream's measurement:
+for the DVL, NaN altitude plus invalid beams; elsewhere non-finite main values).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ..log import Log
+
+
+@dataclass(frozen=True)
+class StreamSummary:
+    """Counts and timing of one stream (times in the log's seconds)."""
+
+    name: str
+    messages: int
+    rate_hz: float
+    start_s: float
+    end_s: float
+    duration_s: float
+    invalid: int
+    missing_values: int
+    missing_detail: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class LogSummary:
+    """What a log holds: one :class:`StreamSummary` per stream plus overall span and notes."""
+
+    source: str
+    streams: list[StreamSummary]
+    start_s: float
+    end_s: float
+    duration_s: float
+    warnings: list[str]
+
+    def to_dict(self) -> dict:
+        """JSON-serializable dict (NaN becomes None)."""
+        return _json_safe(asdict(self))
+
+    def to_rich_table(self):
+        """A rich Table with one row per stream."""
+        from rich.table import Table
+
+        table = Table(title=f"{self.source or 'log'}: {self.duration_s:.1f} s")
+        for col in ("stream", "messages", "rate Hz", "span s", "invalid", "missing values"):
+            table.add_column(col, justify="left" if col == "stream" else "right")
+        for s in self.streams:
+            detail = ", ".join(f"{k} {v}" for k, v in s.missing_detail.items() if v)
+            table.add_row(
+                s.name,
+                str(s.messages),
+                f"{s.rate_hz:.2f}",
+                f"{s.start_s:.3f} - {s.end_s:.3f}",
+                str(s.invalid),
+                f"{s.missing_values}" + (f" ({detail})" if detail else ""),
+            )
+        return table
+
+
+def _json_safe(value):
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def _missing(name: str, stream) -> dict[str, int]:
+    if name == "dvl":
+        return {
+            "altitude": int(np.sum(np.isnan(stream.altitude))),
+            "invalid_beams": int(np.sum(~stream.beam_valid)),
+            "velocity": int(np.sum(np.isnan(stream.velocity).any(axis=1))),
+        }
+    main = {
+        "imu": "angular_velocity",
+        "dead_reckoning": "position",
+        "pressure": "pressure",
+        "sonar": "range",
+        "wave_probe": "elevation",
+        "ground_truth": "position",
+    }[name]
+    values = np.asarray(getattr(stream, main), dtype=np.float64).reshape(len(stream), -1)
+    return {main: int(np.sum(~np.isfinite(values).all(axis=1)))}
+
+
+def summarize(log: Log) -> LogSummary:
+    """Per-stream counts, rates and spans of ``log``."""
+    streams = []
+    for name, s in log.streams().items():
+        n = len(s)
+        start = float(s.t[0]) if n else float("nan")
+        end = float(s.t[-1]) if n else float("nan")
+        detail = _missing(name, s)
+        streams.append(
+            StreamSummary(
+                name=name,
+                messages=n,
+                rate_hz=s.rate_hz,
+                start_s=start,
+                end_s=end,
+                duration_s=end - start,
+                invalid=s.invalid_count(),
+                missing_values=sum(detail.values()),
+                missing_detail=detail,
+            )
+        )
+    start, end = log.time_span
+    return LogSummary(
+        source=log.source,
+        streams=streams,
+        start_s=start,
+        end_s=end,
+        duration_s=end - start,
+        warnings=list(log.metadata.get("warnings", [])),
+    )

@@ -1,0 +1,133 @@
+"""PLY point clouds (readable by CloudCompare, Open3D, Foxglove).
+
+:func:`write_ply` writes vertices as float32 ``x y z`` plus one float32 property per named
+array (e.g. occupancy probability), binary little-endian by default or ASCII; atomic.
+:func:`read_ply` reads the ``vertex`` element of ``ascii`` and ``binary_little_endian`` files
+(any scalar property types; elements before ``vertex`` must have no list properties).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError, ReaderError
+from .tum import _atomic_write_text
+
+_TYPES = {
+    "char": "i1",
+    "uchar": "u1",
+    "short": "<i2",
+    "ushort": "<u2",
+    "int": "<i4",
+    "uint": "<u4",
+    "float": "<f4",
+    "double": "<f8",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "<i2",
+    "uint16": "<u2",
+    "int32": "<i4",
+    "uint32": "<u4",
+    "float32": "<f4",
+    "float64": "<f8",
+}
+
+
+def write_ply(path, points, properties: dict | None = None, binary: bool = True) -> Path:
+    """Write (N,3) ``points`` and optional (N,) ``properties`` as a PLY file."""
+    path = Path(path)
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise DataError(f"write_ply {path}: points must be (N, 3), got {pts.shape}")
+    n = pts.shape[0]
+    props = {k: np.asarray(v, dtype=np.float32).reshape(-1) for k, v in (properties or {}).items()}
+    for name, arr in props.items():
+        if arr.size != n or not name.isidentifier():
+            raise DataError(f"write_ply {path}: property {name!r} must be a name with {n} values")
+    names = ["x", "y", "z", *props]
+    dtype = np.dtype([(name, "<f4") for name in names])
+    table = np.empty(n, dtype=dtype)
+    for i, axis in enumerate("xyz"):
+        table[axis] = pts[:, i]
+    for name, arr in props.items():
+        table[name] = arr
+    fmt = "binary_little_endian" if binary else "ascii"
+    header = (
+        f"ply\nformat {fmt} 1.0\ncomment written by undertow\nelement vertex {n}\n"
+        + "".join(f"property float {name}\n" for name in names)
+        + "end_header\n"
+    )
+    if binary:
+        tmp = path.with_name(f".{path.name}.tmp")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_bytes(header.encode("ascii") + table.tobytes())
+        tmp.replace(path)
+    else:
+        body = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in table.tolist())
+        _atomic_write_text(path, header + body)
+    return path
+
+
+def _parse_header(path: Path, data: bytes):
+    end = data.find(b"end_header")
+    if not data.startswith(b"ply") or end < 0:
+        raise ReaderError(f"{path}: not a PLY file (no 'ply' magic or no end_header)")
+    body_start = data.index(b"\n", end) + 1
+    fmt, elements = None, []
+    for number, line in enumerate(data[:end].decode("ascii", "replace").splitlines(), start=1):
+        words = line.split()
+        if not words or words[0] in ("ply", "comment", "obj_info"):
+            continue
+        if words[0] == "format":
+            fmt = words[1]
+        elif words[0] == "element":
+            elements.append((words[1], int(words[2]), []))
+        elif words[0] == "property" and elements:
+            if words[1] == "list":
+                elements[-1][2].append((words[-1], None))
+            elif words[1] in _TYPES:
+                elements[-1][2].append((words[2], _TYPES[words[1]]))
+            else:
+                raise ReaderError(f"{path}: header line {number}: unknown type {words[1]!r}")
+    if fmt not in ("ascii", "binary_little_endian"):
+        raise ReaderError(f"{path}: unsupported PLY format {fmt!r}")
+    return fmt, elements, body_start
+
+
+def read_ply(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(points (N,3) float64, {property: (N,) array}) of the vertex element of a PLY file."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ReaderError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    fmt, elements, offset = _parse_header(path, data)
+    skip_rows = 0
+    for name, count, props in elements:
+        if name == "vertex":
+            break
+        if any(t is None for _, t in props):
+            raise ReaderError(f"{path}: element {name!r} with list properties before vertex")
+        skip_rows += count
+        offset += count * np.dtype([(p, t) for p, t in props]).itemsize
+    else:
+        raise ReaderError(f"{path}: no vertex element")
+    if any(t is None for _, t in props) or not {"x", "y", "z"} <= {p for p, _ in props}:
+        raise ReaderError(f"{path}: vertex element needs scalar x, y, z properties")
+    dtype = np.dtype([(p, t) for p, t in props])
+    try:
+        if fmt == "binary_little_endian":
+            table = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
+        else:
+            lines = data[offset:].decode("ascii").splitlines()[skip_rows : skip_rows + count]
+            values = np.array([line.split() for line in lines], dtype=np.float64)
+            table = np.empty(count, dtype=dtype)
+            for i, (p, _) in enumerate(props):
+                table[p] = values[:, i]
+    except (ValueError, IndexError) as exc:
+        raise ReaderError(f"{path}: truncated or malformed vertex data ({exc})") from exc
+    points = np.column_stack([table[a].astype(np.float64) for a in "xyz"]).reshape(-1, 3)
+    extra = {p: np.array(table[p]) for p, _ in props if p not in ("x", "y", "z")}
+    return points, extra

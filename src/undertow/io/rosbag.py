@@ -1,0 +1,189 @@
+"""Reader of ROS bags (ROS 1 ``.bag``; ROS 2 sqlite3 and mcap) into a :class:`~undertow.log.Log`.
+
+Topics come from a :class:`~undertow.io.topics.TopicMap` (first candidate found wins); the DVL
+topic is decoded by message type. The raw A50 JSON topic (``/dvl/json_data``) fills what the
+driver message lacks (covariance; ``time_of_validity`` kept in
+``metadata['dvl_time_of_validity_s']``) and stands in for a missing DVL or dead-reckoning topic
+(times: bag record time, i.e. receive time). A sidecar ``undertow.yaml`` written by
+:func:`undertow.io.rosbag_write.write_log` restores mounting and metadata. rosbags errors become
+one-line :class:`~undertow.errors.ReaderError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+from rosbags.highlevel import AnyReader
+
+from ..errors import ReaderError
+from ..log import Dvl, Log, Mounting
+from ._collect import DvlRows, Notes
+from .a50_json import add_velocity_report, dead_reckoning_from_rows
+from .msgdefs import dvl_typestore
+from .rosbag_streams import ACCEPTED, Rows
+from .topics import TopicMap
+
+SIDECAR = "undertow.yaml"
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def _bag_paths(path: Path) -> list[Path]:
+    if path.is_dir() or path.suffix == ".bag":
+        return [path]
+    if (path.parent / "metadata.yaml").exists():
+        return [path.parent]
+    return [path]
+
+
+def read_rosbag(path, topics: TopicMap | None = None) -> Log:
+    """Read a ROS 1 or ROS 2 bag into a Log (see the module docstring)."""
+    path = Path(path)
+    if not path.exists():
+        raise ReaderError(f"{path}: no such file or directory")
+    if path.is_file() and path.stat().st_size == 0:
+        raise ReaderError(f"{path}: empty file")
+    topics = topics or TopicMap()
+    notes = Notes(str(path))
+    rows = Rows(notes)
+    try:
+        reader = AnyReader(_bag_paths(path), default_typestore=dvl_typestore())
+        reader.open()
+    except Exception as exc:  # rosbags raises many types for corrupt input
+        raise ReaderError(f"{path}: cannot open bag ({_one_line(exc)})") from exc
+    try:
+        available = {c.topic: c.msgtype for c in reader.connections}
+        mapped = topics.resolve(available)
+        used = {}
+        for stream, topic in mapped.items():
+            if available[topic] in ACCEPTED[stream]:
+                used[topic] = stream
+            else:
+                notes.add(
+                    f"topic {topic} has unsupported type {available[topic]} for {stream} (skipped)"
+                )
+        conns = [c for c in reader.connections if c.topic in used]
+        _read_messages(reader, conns, used, rows, notes, path)
+    finally:
+        reader.close()
+    log = _assemble(rows, notes, path, used)
+    if not log.streams():
+        listing = ", ".join(f"{t} ({m})" for t, m in sorted(available.items())) or "none"
+        raise ReaderError(f"{path}: no known measurement stream; topics in the bag: {listing}")
+    log.metadata["warnings"] = notes.finish()
+    return log
+
+
+def _read_messages(reader, conns, used, rows: Rows, notes: Notes, path: Path) -> None:
+    if not conns:  # rosbags reads every topic when given no connection
+        return
+    messages = reader.messages(connections=conns)
+    while True:
+        try:
+            conn, record_ns, raw = next(messages)
+        except StopIteration:
+            return
+        except Exception as exc:  # rosbags raises many types for corrupt input
+            raise ReaderError(f"{path}: corrupt or truncated bag ({_one_line(exc)})") from exc
+        try:
+            msg = reader.deserialize(raw, conn.msgtype)
+        except Exception:  # a corrupt message: count it, keep the rest
+            notes.add(f"{conn.topic}: messages that could not be decoded (skipped)")
+            continue
+        rows.add(used[conn.topic], conn.msgtype, msg, record_ns)
+
+
+def _assemble(rows: Rows, notes: Notes, path: Path, used: dict) -> Log:
+    metadata: dict = {"format": "rosbag", "topics": {s: t for t, s in used.items()}}
+    dvl = _dvl(rows, notes, metadata)
+    dead_reckoning = None
+    if rows.rows["dead_reckoning"]:
+        dead_reckoning = dead_reckoning_from_rows(list(rows.dead_reckoning_rows()), notes)
+    elif rows.json_position:
+        dead_reckoning = dead_reckoning_from_rows(rows.json_position, notes)
+        metadata["dead_reckoning_source"] = "dvl_json position_local reports"
+    mounting, source_meta = _sidecar(path, notes)
+    if source_meta:
+        metadata["recorded"] = source_meta
+    log = Log(
+        imu=rows.imu(),
+        dvl=dvl,
+        dead_reckoning=dead_reckoning,
+        pressure=rows.pressure(),
+        sonar=rows.sonar(),
+        wave_probe=rows.wave_probe(),
+        ground_truth=rows.ground_truth(),
+        mounting=mounting,
+        source=str(path),
+        metadata=metadata,
+    )
+    return log
+
+
+def _dvl(rows: Rows, notes: Notes, metadata: dict) -> Dvl | None:
+    if len(rows.dvl):
+        if rows.dvl_mode_given and not any(rows.dvl_mode_given):
+            # marine_acoustic_msgs with velocity_mode never set: judge by the beams instead
+            good = np.array(rows.dvl.extra["good_beams"]) >= 3
+            rows.dvl.valid = [
+                bool(g) and np.isfinite(v).all()
+                for g, v in zip(good, rows.dvl.velocity, strict=True)
+            ]
+            notes.add("dvl: velocity_mode never set; valid = at least 3 good beams", len(good))
+        dvl, order = rows.dvl.build(notes)
+        return _merge_json(dvl, order, rows, metadata)
+    if rows.json_velocity:
+        fallback = DvlRows()
+        for t, obj in rows.json_velocity:
+            add_velocity_report(fallback, obj, t)
+        dvl, order = fallback.build(notes)
+        tov = np.array(fallback.extra["time_of_validity"])[order]
+        if np.isfinite(tov).any():
+            metadata["dvl_time_of_validity_s"] = tov
+        metadata["dvl_source"] = "dvl_json (time: bag record time)"
+        return dvl
+    return None
+
+
+def _merge_json(dvl: Dvl, order: np.ndarray, rows: Rows, metadata: dict) -> Dvl:
+    """Covariance and time_of_validity from raw JSON reports matching (time, vx, vy, vz)."""
+    if not rows.json_velocity or "key" not in rows.dvl.extra:
+        return dvl
+    by_key = {(o.get("time"), o["vx"], o["vy"], o["vz"]): o for _, o in rows.json_velocity}
+    keys = [rows.dvl.extra["key"][i] for i in order]
+    cov = dvl.covariance.copy()
+    tov = np.full(len(dvl), np.nan)
+    for i, key in enumerate(keys):
+        obj = by_key.get(key)
+        if obj is None:
+            continue
+        if "covariance" in obj and np.isnan(cov[i]).all():
+            cov[i] = np.asarray(obj["covariance"], dtype=np.float64).reshape(3, 3)
+        if obj.get("time_of_validity") is not None:
+            tov[i] = float(obj["time_of_validity"]) * 1e-6
+    if np.isfinite(tov).any():
+        metadata["dvl_time_of_validity_s"] = tov
+    metadata["dvl_json_matched"] = int(sum(k in by_key for k in keys))
+    return replace(dvl, covariance=cov)
+
+
+def _sidecar(path: Path, notes: Notes) -> tuple[Mounting, dict]:
+    file = path / SIDECAR if path.is_dir() else path.parent / SIDECAR
+    if not file.exists():
+        return Mounting(), {}
+    try:
+        data = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
+        mounting = Mounting.from_dict(data["mounting"]) if "mounting" in data else Mounting()
+    except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError) as exc:
+        notes.add(f"{SIDECAR} unreadable, default mounting used ({_one_line(exc)})")
+        return Mounting(), {}
+    return mounting, {k: v for k, v in data.items() if k != "mounting"}
+
+
+__all__ = ["read_rosbag", "SIDECAR"]

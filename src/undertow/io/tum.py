@@ -1,0 +1,75 @@
+"""TUM trajectory files (readable by evo): one line ``t tx ty tz qx qy qz qw`` per pose.
+
+Orientation is roll, pitch, yaw (rad) in memory and a quaternion (x, y, z, w) in the file
+(:func:`undertow.rotations.rpy_to_quaternion`). Numbers are written with full precision
+(``repr``), lines starting with ``#`` are comments. Writes are atomic.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError, ReaderError
+from ..rotations import quaternion_to_rpy, rpy_to_quaternion
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_tum(path, t, position, orientation_rpy) -> Path:
+    """Write poses (N times, (N,3) positions, (N,3) roll-pitch-yaw) as a TUM file."""
+    path = Path(path)
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    position = np.asarray(position, dtype=np.float64)
+    rpy = np.asarray(orientation_rpy, dtype=np.float64)
+    n = t.size
+    if position.shape != (n, 3) or rpy.shape != (n, 3):
+        raise DataError(
+            f"write_tum {path}: expected ({n}, 3) position and orientation, got "
+            f"{position.shape} and {rpy.shape}"
+        )
+    q = rpy_to_quaternion(rpy).reshape(n, 4)
+    rows = np.column_stack([t, position, q])
+    text = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows)
+    _atomic_write_text(path, "# t tx ty tz qx qy qz qw\n" + text)
+    return path
+
+
+def read_tum(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, position (N,3), orientation roll-pitch-yaw (N,3)) from a TUM file."""
+    path = Path(path)
+    try:
+        lines = path.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError as exc:
+        raise ReaderError(f"{path}: no such file") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ReaderError(f"{path}: cannot read TUM file: {exc}") from exc
+    rows = []
+    for number, line in enumerate(lines, start=1):
+        text = line.strip()
+        if not text or text.startswith("#"):
+            continue
+        fields = text.replace(",", " ").split()
+        try:
+            if len(fields) != 8:
+                raise ValueError(f"{len(fields)} fields, expected 8 (t tx ty tz qx qy qz qw)")
+            rows.append([float(v) for v in fields])
+        except ValueError as exc:
+            raise ReaderError(f"{path}: line {number}: malformed TUM pose ({exc})") from exc
+    if not rows:
+        raise ReaderError(f"{path}: no poses in TUM file")
+    arr = np.array(rows)
+    return arr[:, 0], arr[:, 1:4], quaternion_to_rpy(arr[:, 4:8])

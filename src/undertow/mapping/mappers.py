@@ -1,0 +1,250 @@
+"""Mappers: counting sensor model (CSM), BKI with the sparse kernel, and the paper's adaptive BKI.
+
+All three share one verb, :meth:`Mapper.integrate`, and accumulate the posterior concentration
+parameters of ``eq:alpha_param`` / ``eq:beta_param``:
+
+    alpha_* = alpha_0 + sum_i k(m_*, m_i) y_i,    beta_* = beta_0 + sum_i k(m_*, m_i)(1 - y_i)
+
+- ``csm``: k = 1 if m_i lies in the cell of m_*, else 0 (per-cell counts; the paper's baseline).
+  The sensor weight sigma_0 is not used: CSM counts.
+- ``bki``: k of ``eq:kernel`` with d = ||m_* - m_i|| and one isotropic length scale l.
+- ``adaptive``: ``eq:decom_kernel`` / ``eq:new_conc_params_alpha``: k = sigma_0 prod_j k_j(|d_j|)
+  (sigma_0 applied once), with per-sample length scales from ``eq:lengthscale_1``:
+  l_j = s~_j^2 (l_max_j - l_min_j) + l_min_j, s~_j^2 = (s_j^2 - s_min_j^2) / (s_max_j^2 - s_min_j^2)
+  clipped to [0, 1]. With ``variance_bounds=None`` ("session" normalization) the min/max are
+  taken over the samples of each :meth:`integrate` call, so integrate a whole session at once to
+  follow the paper; with fixed ``variance_bounds=(min(3,), max(3,))`` the mapper can run
+  incrementally (online). Where max == min on an axis, s~ = 0 there, i.e. l_min is used.
+
+The kernel is evaluated at cell centres; sums are scattered into a sparse chunked grid by numba
+kernels (see :mod:`undertow.mapping.kernels`).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from ..errors import ConfigError, DataError
+from .grid import ChunkedGrid, OccupancyMap
+from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
+from .samples import Samples
+
+Method = Literal["csm", "bki", "adaptive"]
+L_MIN = (0.10, 0.10, 0.05)
+L_MAX = (0.18, 0.18, 0.08)
+
+
+class Mapper:
+    """Base: a chunked grid of evidence mass plus the Beta prior (alpha_0, beta_0)."""
+
+    method = ""
+
+    def __init__(self, resolution: float = 0.1, alpha0: float = 1e-10, beta0: float = 1e-10):
+        self.resolution, self.alpha0, self.beta0 = float(resolution), float(alpha0), float(beta0)
+        self.grid = ChunkedGrid(self.resolution)
+        self.n_samples = 0
+        self.n_integrations = 0
+        self.seeded_from = ""
+
+    def integrate(self, samples: Samples) -> None:
+        """Add the samples' kernel-weighted labels to alpha and beta (callable repeatedly)."""
+        if not isinstance(samples, Samples):
+            raise DataError(f"integrate() needs Samples, got {type(samples).__name__}")
+        if len(samples):
+            self._scatter(samples)
+        self.n_samples += len(samples)
+        self.n_integrations += 1
+
+    def _scatter(self, samples: Samples) -> None:
+        raise NotImplementedError
+
+    def seed(self, prior: OccupancyMap | str | Path) -> None:
+        """Add a saved map's evidence (alpha - alpha_0, beta - beta_0 per cell) to this map."""
+        if not isinstance(prior, OccupancyMap):
+            self.seeded_from = str(prior)
+            prior = OccupancyMap.load(prior)
+        if not np.isclose(prior.resolution, self.resolution):
+            raise ConfigError(
+                f"prior map resolution {prior.resolution} m differs from {self.resolution} m"
+            )
+        self.grid.add_mass(prior.cells, prior.alpha - prior.alpha0, prior.beta - prior.beta0)
+
+    def metadata(self) -> dict:
+        """Parameters and bookkeeping, stored with the map."""
+        return {
+            "method": self.method, "resolution": self.resolution, "alpha0": self.alpha0,
+            "beta0": self.beta0, "n_samples": self.n_samples,
+            "n_integrations": self.n_integrations, "seeded_from": self.seeded_from,
+        }  # fmt: skip
+
+    def occupancy(self) -> OccupancyMap:
+        """Posterior per cell that received kernel mass (``eq:mean_var`` via OccupancyMap)."""
+        cells, a, b = self.grid.cells()
+        return OccupancyMap(cells, self.alpha0 + a, self.beta0 + b, self.resolution,
+                            self.alpha0, self.beta0, self.metadata())  # fmt: skip
+
+
+class CsmMapper(Mapper):
+    """Counting sensor model: hits add 1 to alpha, free samples add 1 to beta, in their cell."""
+
+    method = "csm"
+
+    def _scatter(self, samples: Samples) -> None:
+        self.grid.scatter(MODE_CELL, samples.points, samples.label, samples.sigma0,
+                          np.zeros((1, 3)), 0.0)  # fmt: skip
+
+
+class BkiMapper(Mapper):
+    """BKI with the isotropic sparse kernel of ``eq:kernel`` (length scale l, sigma_0)."""
+
+    method = "bki"
+
+    def __init__(self, resolution=0.1, length_scale=0.15, alpha0=1e-10, beta0=1e-10):
+        super().__init__(resolution, alpha0, beta0)
+        self.length_scale = float(length_scale)
+
+    def _scatter(self, samples: Samples) -> None:
+        lengths = np.full((1, 3), self.length_scale)
+        self.grid.scatter(MODE_RADIAL, samples.points, samples.label, samples.sigma0, lengths,
+                          self.length_scale)  # fmt: skip
+
+    def metadata(self) -> dict:
+        return {**super().metadata(), "length_scale": self.length_scale}
+
+
+class AdaptiveBkiMapper(Mapper):
+    """The paper's adaptive BKI: product kernel with pose-variance length scales (module doc)."""
+
+    method = "adaptive"
+
+    def __init__(self, resolution=0.1, l_min=L_MIN, l_max=L_MAX, alpha0=1e-10, beta0=1e-10,
+                 variance_bounds=None):  # fmt: skip
+        super().__init__(resolution, alpha0, beta0)
+        self.l_min = np.asarray(l_min, float)
+        self.l_max = np.asarray(l_max, float)
+        self.normalization = "session" if variance_bounds is None else "fixed"
+        self.variance_bounds = (
+            None
+            if variance_bounds is None
+            else tuple(np.asarray(v, float) for v in variance_bounds)
+        )
+        self.last_variance_bounds = self.variance_bounds
+
+    def length_scales(self, pose_variance: np.ndarray) -> np.ndarray:
+        """``eq:lengthscale_1`` per sample and axis, (N, 3)."""
+        var = np.asarray(pose_variance, float)
+        if self.variance_bounds is None:
+            lo, hi = var.min(axis=0), var.max(axis=0)
+        else:
+            lo, hi = self.variance_bounds
+        self.last_variance_bounds = (lo, hi)
+        span = hi - lo
+        safe = np.where(span > 0, span, 1.0)
+        s2 = np.where(span > 0, np.clip((var - lo) / safe, 0.0, 1.0), 0.0)
+        return s2 * (self.l_max - self.l_min) + self.l_min
+
+    def _scatter(self, samples: Samples) -> None:
+        lengths = self.length_scales(samples.pose_variance)
+        self.grid.scatter(MODE_PRODUCT, samples.points, samples.label, samples.sigma0, lengths,
+                          float(self.l_max.max()))  # fmt: skip
+
+    def metadata(self) -> dict:
+        bounds = self.last_variance_bounds
+        return {
+            **super().metadata(), "l_min": self.l_min.tolist(), "l_max": self.l_max.tolist(),
+            "normalization": self.normalization,
+            "variance_bounds": None if bounds is None else [np.asarray(b).tolist() for b in bounds],
+        }  # fmt: skip
+
+
+def _positive(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ConfigError(f"{name} must be a number, got {value!r}") from exc
+    if not (np.isfinite(v) and v > 0):
+        raise ConfigError(f"{name} must be finite and > 0, got {value}")
+    return v
+
+
+def _triple(name: str, value) -> np.ndarray:
+    arr = np.asarray(value, float)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr) & (arr > 0)):
+        raise ConfigError(f"{name} must be three finite values > 0 (x, y, z), got {value}")
+    return arr
+
+
+def make_mapper(method: Method, resolution: float = 0.1, length_scale: float = 0.15,
+                l_min=L_MIN, l_max=L_MAX, alpha0: float = 1e-10, beta0: float = 1e-10,
+                variance_bounds=None, prior=None) -> Mapper:  # fmt: skip
+    """A mapper by name ("csm", "bki", "adaptive"), optionally seeded from a prior map."""
+    resolution = _positive("resolution", resolution)
+    alpha0, beta0 = _positive("alpha0", alpha0), _positive("beta0", beta0)
+    if method == "csm":
+        mapper: Mapper = CsmMapper(resolution, alpha0, beta0)
+    elif method == "bki":
+        mapper = BkiMapper(resolution, _positive("length_scale", length_scale), alpha0, beta0)
+    elif method == "adaptive":
+        lo, hi = _triple("l_min", l_min), _triple("l_max", l_max)
+        if np.any(lo > hi):
+            raise ConfigError(f"l_min {lo.tolist()} must not exceed l_max {hi.tolist()}")
+        if variance_bounds is not None:
+            try:
+                vb = np.asarray(variance_bounds, float)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"variance_bounds must be (min(3,), max(3,)): {exc}") from exc
+            if vb.shape != (2, 3) or not np.all(np.isfinite(vb)) or np.any(vb < 0):
+                raise ConfigError("variance_bounds must be (min(3,), max(3,)), finite and >= 0")
+            if np.any(vb[0] > vb[1]):
+                raise ConfigError(
+                    f"variance_bounds min {vb[0].tolist()} exceeds max {vb[1].tolist()}"
+                )
+            variance_bounds = (vb[0], vb[1])
+        mapper = AdaptiveBkiMapper(resolution, lo, hi, alpha0, beta0, variance_bounds)
+    else:
+        raise ConfigError(f"unknown mapping method {method!r}; choose csm, bki or adaptive")
+    if prior is not None:
+        mapper.seed(prior)
+    return mapper
+
+
+def write_map_ply(path, occupancy_map: OccupancyMap, threshold: float = 0.5) -> Path:
+    """Occupied cell centres (double x, y, z) with float ``mean`` and ``variance`` vertex
+    properties as a binary little-endian PLY (CloudCompare, Open3D); atomic write."""
+    occ = occupancy_map.occupied(threshold)
+    props = {"mean": occ.mean, "variance": occ.variance}
+    try:
+        from ..io.ply import write_ply
+    except ImportError:
+        write_ply = _write_ply
+    return Path(write_ply(path, occ.centres, props) or path)
+
+
+def _write_ply(path, points: np.ndarray, properties: dict) -> Path:
+    """Small binary PLY writer (used until ``undertow.io.ply`` exists)."""
+    path = Path(path)
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")] + [(k, "<f4") for k in properties]
+    rows = np.empty(len(points), dtype=fields)
+    rows["x"], rows["y"], rows["z"] = points[:, 0], points[:, 1], points[:, 2]
+    for k, v in properties.items():
+        rows[k] = v
+    names = {"<f8": "double", "<f4": "float"}
+    header = ["ply", "format binary_little_endian 1.0", "comment undertow occupancy map",
+              f"element vertex {len(points)}"]  # fmt: skip
+    header += [f"property {names[t]} {n}" for n, t in fields] + ["end_header", ""]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".ply.tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write("\n".join(header).encode("ascii"))
+            fh.write(rows.tobytes())
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path

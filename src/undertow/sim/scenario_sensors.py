@@ -1,0 +1,139 @@
+"""Sensor, mounting and output parameters of a scenario (pydantic), defaults from NOTES.md and
+the sensor datasheets cited in each field. None of them is fitted to the paper's tables."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..log import Mounting, SensorMount
+
+Vec3 = tuple[float, float, float]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ImuModel(_Model):
+    """Gyro and accelerometer given as continuous densities (NOTES.md section 1 convention):
+    per-sample white sigma_d = sigma_c sqrt(rate); bias walk step = sigma_bc / sqrt(rate)."""
+
+    rate_hz: float = Field(100.0, gt=0)
+    gyro_noise_density: float = Field(
+        1.75e-4, ge=0, description="rad/s/sqrt(Hz); MPU-9250 datasheet 0.01 deg/s/sqrt(Hz)"
+    )
+    gyro_bias_random_walk: float = Field(
+        2.0e-5, ge=0, description="rad/s^2/sqrt(Hz); MEMS order (Kalibr IMU examples)"
+    )
+    gyro_initial_bias_sigma: float = Field(
+        2.0e-3, ge=0, description="rad/s; residual after the autopilot's boot calibration"
+    )
+    accel_noise_density: float = Field(
+        2.9e-3, ge=0, description="m/s^2/sqrt(Hz); MPU-9250 datasheet 300 ug/sqrt(Hz)"
+    )
+
+
+class DvlModel(_Model):
+    rate_hz: float = Field(8.0, gt=0, description="A50 at 1.5-3 m altitude: 5-10 Hz (NOTES 1)")
+    beam_tilt_deg: float = Field(22.5, gt=0, lt=90, description="A50 beam tilt (NOTES 1)")
+    beam_velocity_sigma: float = Field(
+        2.0e-3, ge=0, description="m/s per beam; A50 ~1 % of 0.2 m/s, order of magnitude"
+    )
+    range_sigma: float = Field(5.0e-3, ge=0, description="m per beam range, assumed")
+    min_range: float = Field(0.05, ge=0, description="A50 altitude limit (NOTES 1)")
+    max_range: float = Field(50.0, gt=0, description="A50 altitude limit (NOTES 1)")
+    sound_speed_setting: float = Field(
+        1500.0, gt=0, description="c_set configured in the DVL (A50 default 1500 m/s)"
+    )
+    wave_noise_coefficient: Vec3 = Field(
+        (1.0, 0.0, 0.0),
+        description=(
+            "kappa (along-wave, cross-wave, vertical): extra velocity noise sigma = kappa U/sqrt2,"
+            " U the orbital speed amplitude at the DVL depth; only the along-wave axis grows"
+            " with wave energy (NOTES 2). kappa = 1: noise with the orbital velocity's own RMS"
+        ),
+    )
+    wave_noise_sigma: Vec3 | None = Field(
+        None, description="m/s (along, cross, vertical); if set, used instead of kappa U/sqrt2"
+    )
+    wave_range_noise_coefficient: float = Field(
+        1.0, ge=0, description="extra range sigma = coeff x vertical orbital displacement RMS"
+    )
+
+
+class DeadReckoningModel(_Model):
+    rate_hz: float = Field(5.0, gt=0, description="A50 position_local rate, assumed")
+    yaw_drift_rate: float = Field(
+        3.5e-4, description="rad/s; uncalibrated MEMS gyro bias ~0.02 deg/s, assumed"
+    )
+    roll_pitch_drift_rate: tuple[float, float] = Field(
+        (0.0, 0.0), description="rad/s; gravity keeps roll/pitch from drifting"
+    )
+    orientation_sigma: float = Field(1.0e-3, ge=0, description="rad, white noise per report")
+
+
+class BarometerModel(_Model):
+    rate_hz: float = Field(10.0, gt=0, description="Bar30 as read by ArduSub, ~10 Hz")
+    noise_sigma_pa: float = Field(
+        20.0, ge=0, description="MS5837-30BA resolution 0.2 mbar (OSR 8192)"
+    )
+
+
+class SonarModel(_Model):
+    rate_hz: float = Field(10.0, gt=0, description="Ping2 ~10 Hz at a few metres")
+    beam_angle_deg: float = Field(25.0, gt=0, description="Ping2 full cone (NOTES 1)")
+    fan_rings: int = Field(3, ge=1, description="rings of rays in the cone (plus the axis)")
+    fan_azimuths: int = Field(12, ge=3, description="rays per ring")
+    range_sigma: float = Field(0.01, ge=0, description="m, assumed")
+    range_sigma_fraction: float = Field(5.0e-3, ge=0, description="Ping2 0.5 % of range")
+    min_range: float = Field(0.3, ge=0, description="Ping2 spec")
+    max_range: float = Field(100.0, gt=0, description="Ping2 spec (NOTES 1)")
+    confidence_window: float = Field(
+        0.1, gt=0, description="m; confidence = share of cone rays within this of the first return"
+    )
+
+
+class WaveProbeModel(_Model):
+    rate_hz: float = Field(100.0, gt=0)
+    x_m: float = Field(80.0, description="fixed probe x, ahead of the run (toward the paddle)")
+    y_m: float = 0.0
+    noise_sigma: float = Field(1.0e-3, ge=0, description="m; resistance wave probe, assumed")
+
+
+class GroundTruthModel(_Model):
+    rate_hz: float = Field(2000.0, gt=0, description="carriage position log rate (paper)")
+
+
+class FloorCloudModel(_Model):
+    spacing_m: float = Field(0.025, gt=0, description="2.5 cm, a dense LiDAR scan")
+    margin_m: float = Field(2.0, ge=0, description="around the area the robot covers")
+    max_points: int = Field(2_000_000, gt=0)
+
+
+class SensorMountModel(_Model):
+    translation: Vec3 = (0.0, 0.0, 0.0)
+    rotation: Vec3 = (0.0, 0.0, 0.0)
+
+
+class MountingModel(_Model):
+    """Lever arms (m, body FRD) and rotations (rad): BlueROV2 URDF defaults (NOTES 1)."""
+
+    imu: SensorMountModel = SensorMountModel()
+    dvl: SensorMountModel = SensorMountModel(
+        translation=(0.164, 0.004, 0.284), rotation=(0, 0, 0.05)
+    )
+    sonar: SensorMountModel = SensorMountModel(translation=(0.164, 0.106, 0.306))
+    barometer: SensorMountModel = SensorMountModel()
+
+    def to_mounting(self) -> Mounting:
+        return Mounting(
+            **{
+                name: SensorMount(tuple(m.translation), tuple(m.rotation))
+                for name, m in (
+                    ("imu", self.imu),
+                    ("dvl", self.dvl),
+                    ("sonar", self.sonar),
+                    ("barometer", self.barometer),
+                )
+            }
+        )

@@ -1,0 +1,170 @@
+"""Run a scenario: motion, waves, tank and sensors -> a Log, a ground-truth floor cloud.
+
+Randomness: one numpy Generator per sensor, children of SeedSequence(seed) in the fixed order
+of ``RNG_STREAMS`` (SeedSequence.spawn). A child depends only on (seed, its index), so a new
+sensor appended to ``RNG_STREAMS`` leaves every other stream's noise unchanged.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import ConfigError
+from ..log import GroundTruth, Log
+from ..rotations import wrap_angle
+from .motion import CarriageMotion, SurveyMotion, kinematics
+from .scenario import Scenario
+from .sensors_dvl import simulate_dead_reckoning, simulate_dvl
+from .sensors_env import simulate_barometer, simulate_sonar, simulate_wave_probe
+from .sensors_imu import sample_times, simulate_imu
+from .tank import Tank
+from .waves import LinearWave
+
+RNG_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe")
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """A simulated log (with ground truth), the floor cloud (M, 3) and the scenario used."""
+
+    log: Log
+    floor_cloud: np.ndarray
+    scenario: Scenario
+
+
+def build_wave(s: Scenario) -> LinearWave:
+    return LinearWave(
+        a=s.wave.amplitude_m,
+        f=s.wave.frequency_hz,
+        h=s.water.depth_m,
+        beta=float(np.deg2rad(s.wave.heading_deg)),
+        phi_0=s.wave.phase_rad,
+        rho=s.water.density_kg_m3,
+        g=s.water.gravity_m_s2,
+    )
+
+
+def build_tank(s: Scenario) -> Tank:
+    r = s.tank.rock
+    return Tank(
+        s.tank.length_m, s.tank.width_m, s.water.depth_m, r.center_x_m, r.center_y_m,
+        r.length_m, r.width_m, r.height_m, r.edge_radius_m,
+    )  # fmt: skip
+
+
+def build_motion(s: Scenario, wave: LinearWave):
+    if s.motion.kind == "carriage":
+        return CarriageMotion(s.motion.carriage, wave)
+    return SurveyMotion(s.motion.survey, wave)
+
+
+def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
+    """Simulate ``scenario`` with ``seed`` (default: the scenario's own seed)."""
+    s = scenario if seed is None else scenario.model_copy(update={"seed": int(seed)})
+    rngs = dict(
+        zip(
+            RNG_STREAMS,
+            (
+                np.random.default_rng(c)
+                for c in np.random.SeedSequence(s.seed).spawn(len(RNG_STREAMS))
+            ),
+            strict=True,
+        )
+    )
+    wave, tank = build_wave(s), build_tank(s)
+    motion = build_motion(s, wave)
+    mounting = s.mounting.to_mounting()
+    T = motion.duration
+    g = s.water.gravity_m_s2
+
+    imu, _ = simulate_imu(motion, s.imu, mounting.imu, g, T, rngs["imu"])
+    dvl = simulate_dvl(
+        motion, wave, tank, s.dvl, mounting.dvl, s.water.sound_speed_m_s, T, rngs["dvl"]
+    )
+    dr = simulate_dead_reckoning(
+        motion, dvl, s.dead_reckoning, mounting.dvl, T, rngs["dead_reckoning"]
+    )
+    pressure = simulate_barometer(
+        motion,
+        wave,
+        s.barometer,
+        mounting.barometer,
+        s.water.surface_pressure_pa,
+        T,
+        rngs["pressure"],
+    )
+    sonar = simulate_sonar(motion, tank, s.sonar, mounting.sonar, T, rngs["sonar"])
+    probe = simulate_wave_probe(wave, s.wave_probe, T, rngs["wave_probe"])
+
+    t_gt = sample_times(T, s.ground_truth.rate_hz)
+    kin = kinematics(motion, t_gt)
+    rpy = kin.rpy.copy()
+    rpy[:, 2] = wrap_angle(rpy[:, 2])
+    gt = GroundTruth(t=t_gt, position=kin.position, orientation=rpy, velocity=kin.velocity)
+
+    log = Log(
+        imu=imu, dvl=dvl, dead_reckoning=dr, pressure=pressure, sonar=sonar, wave_probe=probe,
+        ground_truth=gt, mounting=mounting, source=f"simulator:{s.name}",
+        metadata={
+            "scenario": s.name,
+            "seed": s.seed,
+            "wave": {"amplitude_m": s.wave.amplitude_m, "frequency_hz": s.wave.frequency_hz},
+            "wavenumber_rad_m": wave.k,
+            "water_density_kg_m3": s.water.density_kg_m3,
+            "surface_pressure_pa": s.water.surface_pressure_pa,
+        },
+    )  # fmt: skip
+    return SimulationResult(log=log, floor_cloud=floor_cloud(s, tank, kin.position), scenario=s)
+
+
+def floor_cloud(s: Scenario, tank: Tank, positions: np.ndarray) -> np.ndarray:
+    """Dense floor points over the robot's x-y extent plus the configured margin."""
+    c = s.floor_cloud
+    lo = positions[:, :2].min(axis=0) - c.margin_m
+    hi = positions[:, :2].max(axis=0) + c.margin_m
+    count = np.prod(np.floor((hi - lo) / c.spacing_m) + 1)
+    if count > c.max_points:
+        raise ConfigError(
+            f"scenario {s.name}: field floor_cloud.spacing_m: {c.spacing_m} m gives ~{int(count)}"
+            f" points, more than floor_cloud.max_points = {c.max_points}"
+        )
+    return tank.floor_cloud(lo[0], hi[0], lo[1], hi[1], c.spacing_m)
+
+
+def write_simulation(result: SimulationResult, out_dir, overwrite: bool = False) -> Path:
+    """Write DIR/log/ (ROS 2 mcap bag), ground_truth.tum (2000 Hz), ground_truth.ply (floor
+    cloud) and scenario.yaml. Everything goes to a temporary sibling folder first and is renamed
+    into place, so nothing is left half-written."""
+    from ..io import write_log
+    from ..io.ply import write_ply
+    from ..io.tum import write_tum
+
+    out = Path(out_dir)
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise ConfigError(f"{out}: output folder exists and is not empty (use overwrite)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        gt = result.log.ground_truth
+        write_log(result.log, tmp / "log", flavor="driver", overwrite=False)
+        write_tum(tmp / "ground_truth.tum", gt.t, gt.position, gt.orientation)
+        write_ply(tmp / "ground_truth.ply", result.floor_cloud)
+        with open(tmp / "scenario.yaml", "w") as f:
+            yaml.safe_dump(result.scenario.to_yaml_dict(), f, sort_keys=False)
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+__all__ = ["SimulationResult", "simulate", "write_simulation"]

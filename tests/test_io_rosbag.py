@@ -1,0 +1,219 @@
+"""ROS bag reading and writing: real ROS 1 recording, round trips, and bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from io_fixtures import T0, full_log, header, write_raw_bag
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import Stores, get_typestore
+
+from undertow.errors import ReaderError, UndertowError
+from undertow.io import TopicMap, read_log, write_log
+from undertow.io.msgdefs import dvl_typestore
+from undertow.log import Log, Pressure
+
+REAL = Path("/work/shared/data/real")
+BAG = REAL / "a50_ros1_circle.bag"
+T = dvl_typestore().types
+
+
+def _plain_messages(path, topic):
+    """(record ns, message) of ``topic`` read with plain rosbags, no undertow code."""
+    with AnyReader([Path(path)]) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [(t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages(conns)]
+
+
+def test_real_ros1_bag_matches_plain_rosbags():
+    log = read_log(BAG)
+    msgs = [m for _, m in _plain_messages(BAG, "/dvl/data")]
+    raw_json = [json.loads(m.data) for _, m in _plain_messages(BAG, "/dvl/json_data")]
+    assert len(log.dvl) == len(msgs) == 378
+    stamps = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in msgs])
+    np.testing.assert_array_equal(log.dvl.t, np.sort(stamps))
+    assert np.isnan(log.dvl.altitude).sum() == sum(m.altitude < 0 for m in msgs)
+    assert (~log.dvl.beam_valid).sum() == sum(not b.valid for m in msgs for b in m.beams)
+    assert (~log.dvl.valid).sum() == sum(not m.velocity_valid for m in msgs)
+    # covariance and time_of_validity come from the raw JSON topic
+    by_time = {r["time"]: r for r in raw_json}
+    first = msgs[0]
+    np.testing.assert_array_equal(log.dvl.covariance[0], by_time[first.time]["covariance"])
+    tov = log.metadata["dvl_time_of_validity_s"]
+    assert tov[0] == by_time[first.time]["time_of_validity"] * 1e-6
+    assert log.ground_truth is None and log.imu is None
+
+
+def _assert_logs_equal(a: Log, b: Log, flavor: str) -> None:
+    for name, s in a.streams().items():
+        r = getattr(b, name)
+        assert r is not None, name
+        assert np.max(np.abs(r.t - s.t)) <= 1e-9, name
+    d, e = a.dvl, b.dvl
+    np.testing.assert_array_equal(e.velocity, d.velocity)
+    np.testing.assert_array_equal(e.valid, d.valid)
+    np.testing.assert_array_equal(e.covariance, d.covariance)
+    np.testing.assert_array_equal(e.altitude, d.altitude)
+    np.testing.assert_array_equal(e.beam_valid, d.beam_valid)
+    np.testing.assert_array_equal(e.beam_range, d.beam_range)
+    np.testing.assert_array_equal(e.beam_velocity, d.beam_velocity)
+    np.testing.assert_array_equal(e.beam_unit, d.beam_unit)
+    if flavor == "driver":
+        np.testing.assert_array_equal(e.fom, d.fom)
+    else:  # marine_acoustic_msgs/Dvl has no figure of merit
+        assert np.isnan(e.fom).all()
+    np.testing.assert_array_equal(b.imu.angular_velocity, a.imu.angular_velocity)
+    np.testing.assert_array_equal(b.imu.linear_acceleration, a.imu.linear_acceleration)
+    np.testing.assert_array_equal(b.imu.orientation, a.imu.orientation)
+    np.testing.assert_array_equal(b.pressure.pressure, a.pressure.pressure)
+    np.testing.assert_array_equal(b.sonar.range, a.sonar.range)
+    assert b.sonar.field_of_view == a.sonar.field_of_view
+    assert (b.sonar.min_range, b.sonar.max_range) == (a.sonar.min_range, a.sonar.max_range)
+    np.testing.assert_array_equal(b.wave_probe.elevation, a.wave_probe.elevation)
+    assert b.wave_probe.x == a.wave_probe.x
+    for name in ("dead_reckoning", "ground_truth"):
+        s, r = getattr(a, name), getattr(b, name)
+        np.testing.assert_array_equal(r.position, s.position)
+        np.testing.assert_allclose(r.orientation, s.orientation, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(b.dead_reckoning.std, a.dead_reckoning.std)
+    np.testing.assert_allclose(b.ground_truth.velocity, a.ground_truth.velocity, atol=1e-12)
+    assert b.mounting == a.mounting
+    assert b.metadata["recorded"]["metadata"] == a.metadata
+
+
+@pytest.mark.parametrize("flavor", ["driver", "standard"])
+def test_round_trip_every_stream(tmp_path, flavor):
+    log = full_log()
+    path = write_log(log, tmp_path / "bag", flavor=flavor)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # no temp dir left behind
+    _assert_logs_equal(log, read_log(path), flavor)
+
+
+def test_standard_flavor_is_readable_by_plain_rosbags(tmp_path):
+    log = full_log(n=10)
+    path = write_log(log, tmp_path / "bag", flavor="standard")
+    humble = get_typestore(Stores.ROS2_HUMBLE)
+    with AnyReader([path], default_typestore=humble) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types["/dvl/data"] == "marine_acoustic_msgs/msg/Dvl"
+        assert types["/imu/data"] == "sensor_msgs/msg/Imu"
+        assert types["/ground_truth/odom"] == "nav_msgs/msg/Odometry"
+        conns = [c for c in reader.connections if c.topic == "/dvl/data"]
+        msgs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(conns)]
+    assert len(msgs) == 10
+    np.testing.assert_array_equal([m.velocity.x for m in msgs], log.dvl.velocity[:, 0])
+    unit = msgs[0].beam_unit_vec[3]
+    np.testing.assert_allclose([unit.x, unit.y, unit.z], log.dvl.beam_unit[0, 3])
+
+
+def test_write_refuses_overwrite_and_decimates_ground_truth(tmp_path):
+    log = full_log(n=10)
+    path = write_log(log, tmp_path / "bag")
+    with pytest.raises(UndertowError, match="already exists"):
+        write_log(log, path)
+    t = T0 + np.arange(2000) / 1000.0  # 1 kHz for 2 s
+    gt = log.ground_truth.__class__(
+        t=t, position=np.zeros((2000, 3)), orientation=np.zeros((2000, 3))
+    )
+    write_log(log.replace(ground_truth=gt), path, overwrite=True, ground_truth_rate_hz=100.0)
+    back = read_log(path)
+    assert len(back.ground_truth) == 200
+    assert back.ground_truth.rate_hz == pytest.approx(100.0)
+
+
+def test_missing_empty_unknown_and_truncated(tmp_path):
+    with pytest.raises(ReaderError, match="no such file"):
+        read_log(tmp_path / "missing.bag")
+    (tmp_path / "empty.bag").write_bytes(b"")
+    with pytest.raises(ReaderError, match="empty"):
+        read_log(tmp_path / "empty.bag")
+    (tmp_path / "x.csv").write_text("1,2\n")
+    with pytest.raises(ReaderError, match="unknown log format"):
+        read_log(tmp_path / "x.csv")
+    cut1 = tmp_path / "cut.bag"
+    cut1.write_bytes(BAG.read_bytes()[: BAG.stat().st_size // 2])
+    with pytest.raises(ReaderError, match=r"cut\.bag"):
+        read_log(cut1)
+    bag = write_log(full_log(n=50), tmp_path / "ros2")
+    mcap = next(bag.glob("*.mcap"))
+    mcap.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    with pytest.raises(ReaderError, match="ros2"):
+        read_log(bag)
+
+
+def _pressure_msgs(times, values, topic="/fluid_pressure"):
+    fp = T["sensor_msgs/msg/FluidPressure"]
+    return [
+        (
+            topic,
+            "sensor_msgs/msg/FluidPressure",
+            int(i * 1e6),
+            fp(header=header(t), fluid_pressure=float(v), variance=0.0),
+        )
+        for i, (t, v) in enumerate(zip(times, values, strict=True))
+    ]
+
+
+def test_unknown_type_on_mapped_topic_and_missing_topics(tmp_path):
+    string = T["std_msgs/msg/String"]
+    msgs = [("/imu/data", "std_msgs/msg/String", 1, string(data="hello"))]
+    write_raw_bag(tmp_path / "only_unknown", msgs)
+    with pytest.raises(ReaderError, match=r"no known measurement stream.*/imu/data"):
+        read_log(tmp_path / "only_unknown")
+    write_raw_bag(tmp_path / "mixed", msgs + _pressure_msgs([1.0, 2.0], [101325.0, 101400.0]))
+    with pytest.warns(UserWarning, match="unsupported type std_msgs/msg/String"):
+        log = read_log(tmp_path / "mixed")
+    assert log.imu is None and log.dvl is None
+    np.testing.assert_array_equal(log.pressure.pressure, [101325.0, 101400.0])
+
+
+def test_time_backwards_nan_and_hpa(tmp_path):
+    write_raw_bag(
+        tmp_path / "b",
+        _pressure_msgs([3.0, 1.0, 2.0], [1013.0, np.nan, 1020.0], topic="/BlueROV/pressure2_fluid"),
+    )
+    with pytest.warns(UserWarning) as record:
+        log = read_log(tmp_path / "b")
+    text = " ".join(str(w.message) for w in record)
+    assert "backwards" in text and "NaN" in text and "hPa" in text
+    np.testing.assert_array_equal(log.pressure.t, [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(log.pressure.pressure, [np.nan, 102000.0, 101300.0])
+    assert len(log.metadata["warnings"]) == 3
+
+
+def test_json_topic_alone_gives_dvl_and_custom_topic_map(tmp_path):
+    string = T["std_msgs/msg/String"]
+    lines = [m.data for _, m in _plain_messages(BAG, "/dvl/json_data")][:20]
+    msgs = [
+        ("/a50/raw", "std_msgs/msg/String", (10 + i) * 10**9, string(data=s))
+        for i, s in enumerate(lines)
+    ]
+    write_raw_bag(tmp_path / "j", msgs)
+    cfg = tmp_path / "topics.yaml"
+    cfg.write_text("dvl_json: /a50/raw\npressure: [/baro]\n")
+    log = read_log(tmp_path / "j", TopicMap.from_yaml(cfg))
+    assert len(log.dvl) == 20
+    np.testing.assert_array_equal(log.dvl.t, 10.0 + np.arange(20))
+    assert log.dvl.velocity[0, 0] == json.loads(lines[0])["vx"]
+    assert np.isfinite(log.dvl.covariance).all()
+
+
+def test_nan_values_are_kept_with_a_warning(tmp_path):
+    log = full_log(n=10)
+    p = log.pressure.pressure.copy()
+    p[4] = np.nan
+    path = write_log(log.replace(pressure=Pressure(t=log.pressure.t, pressure=p)), tmp_path / "b")
+    with pytest.warns(UserWarning, match="pressure: messages with NaN"):
+        back = read_log(path)
+    assert np.isnan(back.pressure.pressure[4]) and np.isfinite(back.pressure.pressure).sum() == 9
+
+
+def test_ros2_bag_read_from_mcap_file_and_copy(tmp_path):
+    path = write_log(full_log(n=5), tmp_path / "bag")
+    assert len(read_log(next(path.glob("*.mcap"))).dvl) == 5
+    shutil.copytree(path, tmp_path / "copy")
+    assert read_log(tmp_path / "copy").mounting == full_log(n=5).mounting

@@ -1,0 +1,66 @@
+"""TUM trajectories and PLY clouds: round trips, hand-written files, malformed input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from undertow.errors import ReaderError
+from undertow.io import read_ply, read_tum, write_ply, write_tum
+from undertow.rotations import rpy_to_quaternion
+
+
+def test_tum_round_trip_and_format(tmp_path):
+    rng = np.random.default_rng(1)
+    t = 1.7e9 + np.cumsum(rng.uniform(0.01, 0.1, 20))
+    pos = rng.normal(0, 10, (20, 3))
+    rpy = np.column_stack([rng.uniform(-1, 1, (20, 2)), rng.uniform(-3, 3, 20)])
+    path = write_tum(tmp_path / "traj.tum", t, pos, rpy)
+    rows = np.loadtxt(path)  # plain numpy parse of the file: t tx ty tz qx qy qz qw
+    np.testing.assert_array_equal(rows[:, 0], t)
+    np.testing.assert_array_equal(rows[:, 1:4], pos)
+    np.testing.assert_allclose(rows[:, 4:8], rpy_to_quaternion(rpy), atol=0)
+    t2, pos2, rpy2 = read_tum(path)
+    np.testing.assert_array_equal(t2, t)
+    np.testing.assert_array_equal(pos2, pos)
+    np.testing.assert_allclose(rpy2, rpy, atol=1e-12)
+
+
+def test_tum_malformed_line(tmp_path):
+    path = tmp_path / "bad.tum"
+    path.write_text("# header\n0 0 0 0 0 0 0 1\n1 2 3\n")
+    with pytest.raises(ReaderError, match=r"bad\.tum: line 3"):
+        read_tum(path)
+
+
+@pytest.mark.parametrize("binary", [True, False])
+def test_ply_round_trip(tmp_path, binary):
+    rng = np.random.default_rng(2)
+    pts = rng.normal(0, 3, (100, 3))
+    prob = rng.uniform(0, 1, 100)
+    path = write_ply(tmp_path / "map.ply", pts, {"probability": prob}, binary=binary)
+    assert path.read_bytes().startswith(
+        b"ply\nformat " + (b"binary_little" if binary else b"ascii")
+    )
+    pts2, props = read_ply(path)
+    np.testing.assert_array_equal(pts2, pts.astype(np.float32))
+    np.testing.assert_array_equal(props["probability"], prob.astype(np.float32))
+
+
+def test_hand_written_ascii_ply_with_faces(tmp_path):
+    path = tmp_path / "hand.ply"
+    path.write_text(
+        "ply\nformat ascii 1.0\ncomment by hand\nelement vertex 3\nproperty double x\n"
+        "property double y\nproperty double z\nproperty uchar red\nelement face 1\n"
+        "property list uchar int vertex_indices\nend_header\n"
+        "0 0 0 255\n1.5 0 0 0\n0 2.25 -1 10\n3 0 1 2\n"
+    )
+    pts, props = read_ply(path)
+    np.testing.assert_array_equal(pts, [[0, 0, 0], [1.5, 0, 0], [0, 2.25, -1]])
+    np.testing.assert_array_equal(props["red"], [255, 0, 10])
+
+
+def test_ply_not_a_ply(tmp_path):
+    (tmp_path / "x.ply").write_text("hello\n")
+    with pytest.raises(ReaderError, match=r"x\.ply: not a PLY"):
+        read_ply(tmp_path / "x.ply")

@@ -1,0 +1,106 @@
+"""Ranges -> training samples: hits on a known plane, free-sample spacing, dropped counts,
+pose interpolation (position, wrapped yaw, variance)."""
+
+import numpy as np
+import pytest
+
+from undertow.errors import ConfigError, MissingStreamError
+from undertow.log import Dvl, Log, Mounting, SonarRange
+from undertow.mapping.samples import SENSOR_DVL, SENSOR_SONAR, build_samples
+from undertow.trajectory import Trajectory
+
+TILT = np.deg2rad(22.5)
+AZ = np.deg2rad([135.0, -135.0, -45.0, 45.0])
+
+
+def _trajectory(t, pos, rpy, var=(0.0, 0.0, 0.0)):
+    t = np.asarray(t, float)
+    x = np.zeros((t.size, 18))
+    x[:, :3], x[:, 3:6] = pos, rpy
+    P = np.zeros((t.size, 18, 18))
+    var = np.broadcast_to(np.asarray(var, float), (t.size, 3))
+    for k in range(3):
+        P[:, k, k] = var[:, k]
+    return Trajectory(t, x, P)
+
+
+def _log(t, beam_range, beam_valid, sonar_t=None, sonar_range=None):
+    t = np.asarray(t, float)
+    dvl = Dvl.from_velocity(t, np.zeros((t.size, 3)), beam_range=beam_range, beam_valid=beam_valid)
+    sonar = None if sonar_t is None else SonarRange(t=sonar_t, range=sonar_range)
+    return Log(dvl=dvl, sonar=sonar, mounting=Mounting())
+
+
+def test_hits_land_on_known_plane_with_mounting():
+    pos, yaw, floor = np.array([1.0, 2.0, 0.5]), 0.3, 2.5
+    traj = _trajectory([0.0, 10.0], [pos, pos], [[0, 0, yaw]] * 2)
+    m = Mounting()
+    o_dvl = pos + np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0],
+                            [0, 0, 1]]) @ np.array(m.dvl.translation)  # fmt: skip
+    r = (floor - o_dvl[2]) / np.cos(TILT)
+    o_sonar_z = pos[2] + m.sonar.translation[2]
+    log = _log([5.0], np.full((1, 4), r), np.ones((1, 4), bool), [5.0], [floor - o_sonar_z])
+    s = build_samples(log, traj, free_resolution=0.1)
+    hits = s.points[s.label == 1]
+    assert hits.shape == (5, 3)
+    np.testing.assert_allclose(hits[:, 2], floor, atol=1e-12)
+    # horizontal: r sin(tilt) along azimuth + DVL mount yaw (0.05) + vehicle yaw
+    heading = AZ + m.dvl.rotation[2] + yaw
+    dvl_hits = hits[s.sensor[s.label == 1] == SENSOR_DVL]
+    expect = o_dvl[:2] + r * np.sin(TILT) * np.column_stack([np.cos(heading), np.sin(heading)])
+    np.testing.assert_allclose(dvl_hits[:, :2], expect, atol=1e-12)
+    assert np.sum(s.sensor[s.label == 1] == SENSOR_SONAR) == 1
+    np.testing.assert_allclose(s.sigma0[s.sensor == SENSOR_DVL], 0.9)
+    np.testing.assert_allclose(s.sigma0[s.sensor == SENSOR_SONAR], 0.6)
+
+
+def test_free_samples_spacing_and_margin():
+    traj = _trajectory([0.0, 1.0], [[0, 0, 0]] * 2, [[0, 0, 0]] * 2)
+    ranges = np.array([[1.0, 1.234, 0.15, 0.07]])
+    s = build_samples(_log([0.5], ranges, np.ones((1, 4), bool)), traj, free_resolution=0.1,
+                      use_sonar=False)  # fmt: skip
+    for b, (r, count) in enumerate(zip(ranges[0], [10, 12, 1, 0], strict=True)):  # hand counts
+        ray = s.ray == b
+        origin = s.origins[b]
+        dist = np.sort(np.linalg.norm(s.points[ray & (s.label == 0)] - origin, axis=1))
+        assert len(dist) == count
+        if len(dist):
+            assert dist[0] == pytest.approx(0.0)
+            np.testing.assert_allclose(np.diff(dist), 0.1)
+            assert r - 0.2 < dist[-1] <= r - 0.1 + 1e-9
+        hit = s.points[ray & (s.label == 1)]
+        assert np.linalg.norm(hit - origin) == pytest.approx(r)
+
+
+def test_invalid_ranges_dropped_and_counted():
+    traj = _trajectory([1.0, 2.0], [[0, 0, 0]] * 2, [[0, 0, 0]] * 2)
+    ranges = np.array([[1.0, np.nan, 60.0, 1.0], [0.01, 1.0, 1.0, -1.0], [1.0, 1.0, 1.0, 1.0]])
+    valid = np.array([[True, True, True, False], [True, True, True, True], [True] * 4])
+    sonar_t, sonar_r = np.array([1.5, 1.6, 3.0]), np.array([0.1, 1.5, 1.5])
+    s = build_samples(_log([1.5, 1.5, 5.0], ranges, valid, sonar_t, sonar_r), traj)
+    assert s.dropped == {
+        "dvl_invalid": 1, "dvl_nonfinite": 1, "dvl_out_of_range": 3,
+        "dvl_outside_trajectory": 4, "sonar_invalid": 0, "sonar_nonfinite": 0,
+        "sonar_out_of_range": 1, "sonar_outside_trajectory": 1,
+    }  # fmt: skip
+    assert s.n_hits == 4  # 3 DVL beams + 1 sonar range kept
+
+
+def test_pose_interpolation_position_wrapped_yaw_and_variance():
+    traj = _trajectory([0.0, 2.0], [[0, 0, 0], [2.0, 0, 0]], [[0, 0, 3.1], [0, 0, -3.1]],
+                       var=[[1.0, 0.0, 0.5], [3.0, 0.0, 0.5]])  # fmt: skip
+    log = Log(sonar=SonarRange(t=[1.0], range=[1.0]), mounting=Mounting())
+    s = build_samples(log, traj, use_dvl=True)
+    # yaw passes through +-pi (not 0): the sonar lever arm (0.164, 0.106) points backwards.
+    hit = s.points[s.label == 1][0]
+    np.testing.assert_allclose(hit, [1.0 - 0.164, -0.106, 0.306 + 1.0], atol=1e-9)
+    np.testing.assert_allclose(s.pose_variance, np.tile([2.0, 0.0, 0.5], (len(s), 1)))
+
+
+def test_bad_configuration_and_missing_streams():
+    traj = _trajectory([0.0, 1.0], [[0, 0, 0]] * 2, [[0, 0, 0]] * 2)
+    log = Log(sonar=SonarRange(t=[0.5], range=[1.0]))
+    with pytest.raises(ConfigError, match="free_resolution"):
+        build_samples(log, traj, free_resolution=0.0)
+    with pytest.raises(MissingStreamError, match="range stream"):
+        build_samples(log, traj, use_sonar=False)
