@@ -28,7 +28,9 @@ def test_dvl_noise_about_truth_excludes_motion_and_acceleration():
     )
     mounting = Mounting()
     td = np.arange(0.1, 59.9, 0.1)
-    v_true = np.column_stack([np.interp(td, t, speed), 0 * td, 0 * td]) @ mounting.dvl.rotation_matrix()
+    v_true = (
+        np.column_stack([np.interp(td, t, speed), 0 * td, 0 * td]) @ mounting.dvl.rotation_matrix()
+    )
     sigma = np.array([0.03, 0.01, 0.003])
     dvl = Dvl.from_velocity(td, v_true + rng.normal(size=v_true.shape) * sigma)
     run = characterize_run(Log(dvl=dvl, ground_truth=gt, mounting=mounting))

@@ -29,10 +29,14 @@ def _run(drift=(0.0, 0.0, 2e-4), gyro_bias=(0.01, -0.02, 0.005), scale=1.02, see
     dr = DeadReckoning(
         t=tr,
         position=np.zeros((tr.size, 3)),
-        orientation=np.array([0, 0, 0.3]) + np.outer(tr, drift) + rng.normal(scale=1e-3, size=(tr.size, 3)),
+        orientation=np.array([0, 0, 0.3])
+        + np.outer(tr, drift)
+        + rng.normal(scale=1e-3, size=(tr.size, 3)),
     )
     ti = np.arange(0.5, 59.5, 0.01)
-    imu = Imu(t=ti, angular_velocity=np.array(gyro_bias) + rng.normal(scale=0.002, size=(ti.size, 3)))
+    imu = Imu(
+        t=ti, angular_velocity=np.array(gyro_bias) + rng.normal(scale=0.002, size=(ti.size, 3))
+    )
     return Log(imu=imu, dvl=dvl, dead_reckoning=dr, ground_truth=gt, mounting=mounting)
 
 

@@ -33,7 +33,9 @@ def _estimate(gt, t, dpos=(0, 0, 0), dyaw=0.0, dvel=(0, 0, 0), sigma=0.1):
 
 def test_constant_offsets_give_their_rmse():
     gt = _carriage()
-    est = _estimate(gt, np.linspace(1, 19, 500), dpos=(0.3, -0.2, 0.01), dyaw=0.02, dvel=(0.05, 0, 0))
+    est = _estimate(
+        gt, np.linspace(1, 19, 500), dpos=(0.3, -0.2, 0.01), dyaw=0.02, dvel=(0.05, 0, 0)
+    )
     r = trajectory_rmse(est, gt).rmse
     assert r["x_m"] == pytest.approx(0.3, abs=1e-9)
     assert r["y_m"] == pytest.approx(0.2, abs=1e-9)
@@ -44,7 +46,9 @@ def test_constant_offsets_give_their_rmse():
 
 def test_angle_errors_wrap_across_pi():
     gt = _carriage()
-    gt = GroundTruth(t=gt.t, position=gt.position, orientation=np.tile([0, 0, np.pi - 0.01], (gt.t.size, 1)))
+    gt = GroundTruth(
+        t=gt.t, position=gt.position, orientation=np.tile([0, 0, np.pi - 0.01], (gt.t.size, 1))
+    )
     est = _estimate(gt, np.linspace(1, 19, 100), dyaw=-np.pi + 0.01)
     assert trajectory_rmse(est, gt).rmse["yaw_rad"] == pytest.approx(0.02, abs=1e-9)
 
@@ -52,7 +56,9 @@ def test_angle_errors_wrap_across_pi():
 def test_ground_truth_velocity_of_a_ramp_profile():
     t = np.arange(0, 10, 1 / 2000)
     x = np.where(t < 5, 0.1 * t**2, 2.5 + 1.0 * (t - 5))  # accelerate at 0.2 m/s^2, then 1 m/s
-    gt = GroundTruth(t=t, position=np.column_stack([x, 0 * t, 0 * t]), orientation=np.zeros((t.size, 3)))
+    gt = GroundTruth(
+        t=t, position=np.column_stack([x, 0 * t, 0 * t]), orientation=np.zeros((t.size, 3))
+    )
     v = ground_truth_velocity(gt, smoothing_s=0.05)
     steady = (t > 1) & (t < 4.9)
     np.testing.assert_allclose(v[steady, 0], 0.2 * t[steady], atol=1e-6)

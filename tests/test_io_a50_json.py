@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REAL_DATA
 
 from undertow.errors import ReaderError
 from undertow.io import read_log
 from undertow.io.a50_json import velocity_report_line
 
-V1 = Path("/work/shared/data/real/a50_tcp_json_v1_straight.txt")
+V1 = REAL_DATA / "a50_tcp_json_v1_straight.txt"
 
 
 def test_real_v1_log():

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import json
 import warnings
-from pathlib import Path
 
 import numpy as np
+from conftest import REAL_DATA
 from rich.table import Table
 from rosbags.highlevel import AnyReader
 
 from undertow.io import read_log, summarize
 
-REAL = Path("/work/shared/data/real")
+REAL = REAL_DATA
 
 
 def test_summary_of_ros1_bag():

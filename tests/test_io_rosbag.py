@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REAL_DATA
 from io_fixtures import T0, full_log, header, write_raw_bag
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
@@ -17,7 +18,7 @@ from undertow.io import TopicMap, read_log, write_log
 from undertow.io.msgdefs import dvl_typestore
 from undertow.log import Log, Pressure
 
-REAL = Path("/work/shared/data/real")
+REAL = REAL_DATA
 BAG = REAL / "a50_ros1_circle.bag"
 T = dvl_typestore().types
 

@@ -37,7 +37,9 @@ def test_depth_is_hydrostatic():
 def test_require_names_missing_streams_and_what_exists():
     log = Log(dvl=Dvl.from_velocity([0.0, 0.2], np.zeros((2, 3))), source="run.bag")
     log.require("dvl")
-    with pytest.raises(MissingStreamError, match="localize needs stream.s. imu in run.bag; the log has: dvl"):
+    with pytest.raises(
+        MissingStreamError, match="localize needs stream.s. imu in run.bag; the log has: dvl"
+    ):
         log.require("imu", "dvl", stage="localize")
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import functools
 import json
 import sys
+import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -35,6 +36,16 @@ app.add_typer(evaluate_app, name="evaluate")
 
 out = Console()
 err = Console(stderr=True)
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    err.print(f"[yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+
+
+@app.callback()
+def _setup() -> None:
+    """Library warnings (bad rows dropped, units fixed) become one line each on stderr."""
+    warnings.showwarning = _one_line_warning
 
 
 def user_errors(fn):
@@ -110,7 +121,8 @@ def simulate(
 
     Example: `undertow simulate wave-a0.10-f0.75 --out runs/a10f075 --seed 3`
     """
-    from .sim import list_scenarios, load_scenario, simulate as run_simulation, write_simulation
+    from .sim import list_scenarios, load_scenario, write_simulation
+    from .sim import simulate as run_simulation
 
     if list_:
         for name, description in list_scenarios().items():

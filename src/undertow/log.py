@@ -32,7 +32,9 @@ def _as_array(value, dtype, name: str, stream: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=dtype, copy=True)
     except (TypeError, ValueError) as exc:
-        raise DataError(f"{stream}.{name}: cannot convert to {np.dtype(dtype).name}: {exc}") from exc
+        raise DataError(
+            f"{stream}.{name}: cannot convert to {np.dtype(dtype).name}: {exc}"
+        ) from exc
     arr.setflags(write=False)
     return arr
 
@@ -52,7 +54,8 @@ class _Stream:
         if t.size > 1 and np.any(np.diff(t) < 0):
             i = int(np.argmax(np.diff(t) < 0))
             raise DataError(
-                f"{self.kind}.t: time goes backwards at sample {i + 1} ({t[i]:.6f} -> {t[i + 1]:.6f})"
+                f"{self.kind}.t: time goes backwards at sample {i + 1} "
+                f"({t[i]:.6f} -> {t[i + 1]:.6f})"
             )
         n = t.size
         for name, tail in self._shapes.items():
@@ -62,7 +65,8 @@ class _Stream:
             arr = _as_array(value, self._dtypes.get(name, np.float64), name, self.kind)
             if arr.shape != (n, *tail):
                 raise DataError(
-                    f"{self.kind}.{name}: shape {arr.shape}, expected {(n, *tail)} (one row per time)"
+                    f"{self.kind}.{name}: shape {arr.shape}, expected {(n, *tail)} "
+                    "(one row per time)"
                 )
             object.__setattr__(self, name, arr)
 
@@ -136,7 +140,11 @@ class Dvl(_Stream):
         "beam_valid": (4,),
         "beam_velocity": (4,),
     }
-    _dtypes: ClassVar[dict[str, type]] = {"valid": np.bool_, "beam_valid": np.bool_, "beam_id": np.int64}
+    _dtypes: ClassVar[dict[str, type]] = {
+        "valid": np.bool_,
+        "beam_valid": np.bool_,
+        "beam_id": np.int64,
+    }
     t: np.ndarray
     velocity: np.ndarray
     valid: np.ndarray
@@ -324,7 +332,9 @@ class Mounting:
 
     @classmethod
     def from_dict(cls, data: dict) -> Mounting:
-        return cls(**{k: SensorMount(**{kk: tuple(vv) for kk, vv in v.items()}) for k, v in data.items()})
+        return cls(
+            **{k: SensorMount(**{kk: tuple(vv) for kk, vv in v.items()}) for k, v in data.items()}
+        )
 
 
 STREAM_NAMES = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe", "ground_truth")

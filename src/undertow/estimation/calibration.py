@@ -41,7 +41,9 @@ class Calibration:
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        d["dead_reckoning_drift_rad_per_s"] = [float(v) for v in self.dead_reckoning_drift_rad_per_s]
+        d["dead_reckoning_drift_rad_per_s"] = [
+            float(v) for v in self.dead_reckoning_drift_rad_per_s
+        ]
         d["imu_gyro_bias_rad_per_s"] = [float(v) for v in self.imu_gyro_bias_rad_per_s]
         return d
 
@@ -59,7 +61,9 @@ class Calibration:
         try:
             data = yaml.safe_load(Path(path).read_text()) or {}
             return cls(
-                dead_reckoning_drift_rad_per_s=tuple(data.get("dead_reckoning_drift_rad_per_s", (0, 0, 0))),
+                dead_reckoning_drift_rad_per_s=tuple(
+                    data.get("dead_reckoning_drift_rad_per_s", (0, 0, 0))
+                ),
                 imu_gyro_bias_rad_per_s=tuple(data.get("imu_gyro_bias_rad_per_s", (0, 0, 0))),
                 dvl_scale_factor=float(data.get("dvl_scale_factor", 1.0)),
                 dvl_scale_factor_std=float(data.get("dvl_scale_factor_std", float("nan"))),
@@ -119,7 +123,9 @@ def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) 
     if imu is not None and len(imu):
         keep = inside(imu.t) & np.all(np.isfinite(imu.angular_velocity), axis=1)
         if keep.any():
-            omega = np.column_stack([np.interp(imu.t[keep], gt.t, omega_full[:, i]) for i in range(3)])
+            omega = np.column_stack(
+                [np.interp(imu.t[keep], gt.t, omega_full[:, i]) for i in range(3)]
+            )
             result["imu_gyro_bias_rad_per_s"] = tuple(
                 float(v) for v in np.mean(imu.angular_velocity[keep] - omega, axis=0)
             )
@@ -142,7 +148,5 @@ def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) 
             result["dvl_scale_factor_std"] = s_std
             counts["dvl_moving"] = int(moving.sum())
     if not counts:
-        raise DataError(
-            "calibrate: no dead_reckoning, imu or dvl samples overlap the ground truth"
-        )
+        raise DataError("calibrate: no dead_reckoning, imu or dvl samples overlap the ground truth")
     return Calibration(**result, samples=counts, source=log.source)

@@ -109,9 +109,7 @@ def trajectory_rmse(
     pos, rpy = x[:, 0:3], x[:, 3:6]
     if align == "origin":
         pos, rpy = _align_origin(pos, rpy, gt_pos[0], gt_rpy[0])
-    err = np.concatenate(
-        [pos - gt_pos, wrap_angle(rpy - gt_rpy), x[:, 6:9] - gt_vel_body], axis=1
-    )
+    err = np.concatenate([pos - gt_pos, wrap_angle(rpy - gt_rpy), x[:, 6:9] - gt_vel_body], axis=1)
     rmse = {
         f"{a}_{u}": float(np.sqrt(np.mean(err[:, i] ** 2)))
         for i, (a, u) in enumerate(zip(AXES, UNITS, strict=True))
