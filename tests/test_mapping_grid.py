@@ -21,7 +21,11 @@ def floor_survey():
     t = np.linspace(0, 60, 601)
     x = np.zeros((t.size, 18))
     x[:, 0], x[:, 1], x[:, 2] = 0.05 * t, 0.3 * np.sin(0.2 * t), 1.2
-    x[:, 3], x[:, 4], x[:, 5] = 0.03 * np.sin(0.5 * t), 0.02 * np.cos(0.4 * t), 0.2 * np.sin(0.1 * t)
+    x[:, 3], x[:, 4], x[:, 5] = (
+        0.03 * np.sin(0.5 * t),
+        0.02 * np.cos(0.4 * t),
+        0.2 * np.sin(0.1 * t),
+    )
     P = np.zeros((t.size, 18, 18))
     P[:, 0, 0], P[:, 1, 1], P[:, 2, 2] = 0.001 + 0.01 * t / 60, 0.001 + 0.005 * t / 60, 4e-4
     traj = Trajectory(t, x, P)

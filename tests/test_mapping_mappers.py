@@ -22,8 +22,10 @@ def _cells_around(p, half=4):
 
 
 def _mass_by_cell(occ):
-    return {tuple(c): (a - occ.alpha0, b - occ.beta0) for c, a, b in zip(occ.cells, occ.alpha,
-                                                                           occ.beta, strict=True)}
+    return {
+        tuple(c): (a - occ.alpha0, b - occ.beta0)
+        for c, a, b in zip(occ.cells, occ.alpha, occ.beta, strict=True)
+    }
 
 
 @pytest.mark.parametrize("method", ["bki", "adaptive"])
@@ -166,3 +168,5 @@ def test_invalid_inputs_rejected_with_clear_message():
         Samples.from_points([[0, 0, np.nan]], [1.0])
     with pytest.raises(DataError, match="needs Samples"):
         make_mapper("csm").integrate(np.zeros((3, 3)))
+    with pytest.raises(DataError, match="beyond"):  # would alias chunk keys
+        make_mapper("bki").integrate(Samples.from_points([[1e6, 0.0, 0.0]], [1.0]))

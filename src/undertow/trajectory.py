@@ -11,13 +11,12 @@ Positions in m (world, z down), angles in rad, velocities in m/s and rad/s.
 from __future__ import annotations
 
 import dataclasses
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ._atomic import atomic_path
 from .errors import ReaderError
 
 STATE_NAMES = (
@@ -78,23 +77,15 @@ class Trajectory:
     def save_npz(self, path: str | Path) -> Path:
         """Write times, full state and full covariance (atomic: temp file then rename)."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        os.close(fd)
-        try:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(
-                    fh,
-                    t=self.t,
-                    x=self.x,
-                    P=self.P,
-                    state_names=np.array(STATE_NAMES),
-                    variant=np.array(self.variant),
-                )
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(
+                fh,
+                t=self.t,
+                x=self.x,
+                P=self.P,
+                state_names=np.array(STATE_NAMES),
+                variant=np.array(self.variant),
+            )
         return path
 
     @classmethod

@@ -14,14 +14,13 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from .._atomic import atomic_path
 from ..errors import ConfigError, DataError
 from ..evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
 from ..log import Log
@@ -49,11 +48,8 @@ class Calibration:
 
     def save_yaml(self, path: str | Path) -> Path:
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".yaml.tmp")
-        with os.fdopen(fd, "w") as fh:
-            yaml.safe_dump(self.to_dict(), fh, sort_keys=False)
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            tmp.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
         return path
 
     @classmethod

@@ -96,9 +96,8 @@ def _euler_rate(phi, theta, T):
 
 @njit(cache=True)
 def _f(x, dt, mu_bias, out, R, T):
-    """Mean of eq:dynamics_model for one state x (noise-free part)."""
-    _rotation(x[3], x[4], x[5], R)
-    _euler_rate(x[3], x[4], T)
+    """Mean of eq:dynamics_model for one state x (noise-free part), given R = R_B^W(eta) and
+    T = T(phi, theta) already evaluated at x's angles."""
     for i in range(3):
         out[i] = x[i] + dt * (R[i, 0] * x[6] + R[i, 1] * x[7] + R[i, 2] * x[8])
         out[3 + i] = _wrap(x[3 + i] + dt * (T[i, 0] * x[9] + T[i, 1] * x[10] + T[i, 2] * x[11]))
@@ -179,9 +178,14 @@ def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws):
     """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place."""
     chi, chi_f, D, L, Q, R, T, xi = ws
     status = _sigma_points(x, P, lam, STATE_ANGLES, L, chi)
+    # L is lower triangular, so most sigma points share chi_0's angles: trig only when they change
+    a0, a1, a2 = np.nan, np.nan, np.nan
     for i in range(chi.shape[0]):
-        _f(chi[i], dt, mu_bias, xi, R, T)
-        chi_f[i, :] = xi
+        if not (chi[i, 3] == a0 and chi[i, 4] == a1 and chi[i, 5] == a2):
+            a0, a1, a2 = chi[i, 3], chi[i, 4], chi[i, 5]
+            _rotation(a0, a1, a2, R)
+            _euler_rate(a0, a1, T)
+        _f(chi[i], dt, mu_bias, chi_f[i], R, T)
     _process_noise(x, dt, q_acc, q_bias, Q, R, T)
     _predict_moments(chi_f, wm, wc, Q, STATE_ANGLES, x, P, D)
     return status
@@ -214,10 +218,16 @@ def _run_filter(
         np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
     )  # fmt: skip
     chi, L, R = ws[0], ws[3], ws[5]
-    Zs = np.empty((npts, 3))
+    Zs3 = np.empty((npts, 3))
+    Zs1 = np.empty((npts, 1))
+    zk3 = np.empty(3)
+    zk1 = np.empty(1)
+    Rk3 = np.empty((3, 3))
+    Rk1 = np.empty((1, 1))
     zi = np.empty(3)
     zmask_angle = np.ones(3, dtype=np.bool_)
     zmask_lin = np.zeros(3, dtype=np.bool_)
+    zmask_lin1 = np.zeros(1, dtype=np.bool_)
     no_mu = np.zeros(6)
     mu = no_mu if freeze else mu_bias
     xb = np.empty(n)
@@ -244,7 +254,14 @@ def _run_filter(
             break
         kd = kind[k]
         m = 1 if kd == BARO else 3
-        if not (_all_finite(z[k, :m]) and _all_finite(Rm[k, :m, :m])):
+        zk = zk1 if m == 1 else zk3
+        Rk = Rk1 if m == 1 else Rk3
+        Zs = Zs1 if m == 1 else Zs3
+        for a in range(m):
+            zk[a] = z[k, a]
+            for b in range(m):
+                Rk[a, b] = Rm[k, a, b]
+        if not (_all_finite(zk) and _all_finite(Rk)):
             counts[8] += 1
         else:
             dt = tk - t_cur
@@ -267,14 +284,12 @@ def _run_filter(
             counts[11] += max(_sigma_points(x, P, lam, STATE_ANGLES, L, chi), 0)
             for i in range(npts):
                 _h(kd, chi[i], imu_Rt, dvl_Rt, dvl_r, baro_r, zi, R)
-                Zs[i, :m] = zi[:m]
+                for a in range(m):
+                    Zs[i, a] = zi[a]
             xb[:] = x
             Pb[:, :] = P
-            zmask = zmask_angle if kd == DR else zmask_lin
-            status, _ = _update(
-                x, P, chi, Zs[:, :m], z[k, :m], Rm[k, :m, :m], wm, wc, STATE_ANGLES,
-                zmask[:m], gate[kd],
-            )  # fmt: skip
+            zmask = zmask_angle if kd == DR else (zmask_lin1 if m == 1 else zmask_lin)
+            status, _ = _update(x, P, chi, Zs, zk, Rk, wm, wc, STATE_ANGLES, zmask, gate[kd])
             if status == 0 and _all_finite(x) and _all_finite(P):
                 counts[kd] += 1
             else:

@@ -200,7 +200,8 @@ def _weighted_gram(AT, wc, out):
 
 @njit(cache=True)
 def _predict_moments(chi_f, wm, wc, Q, angle_mask, x, P, D):
-    """D: workspace (n, 2n+1). Unscented prediction: x = mean(f(chi)), P = sum W^c dx dx^T + Q (symmetrized)."""
+    """Unscented prediction: x = mean(f(chi)), P = sum W^c dx dx^T + Q (symmetrized);
+    D is a workspace (n, 2n+1)."""
     _mean(chi_f, wm, angle_mask, x)
     _residuals(chi_f, x, angle_mask, D)
     _weighted_gram(D, wc, P)

@@ -86,7 +86,7 @@ def dead_reckoning_from_rows(rows: list[tuple], notes: Notes) -> DeadReckoning:
     arr = np.array(rows, dtype=np.float64).reshape(-1, 8)
     order = time_order(arr[:, 0], "dead_reckoning", notes)
     arr = arr[order]
-    count_nan_rows(notes, "dead_reckoning", arr[:, 1:])
+    count_nan_rows(notes, "dead_reckoning", arr[:, [1, 2, 3, 5, 6, 7]])  # std is optional
     return DeadReckoning(t=arr[:, 0], position=arr[:, 1:4], orientation=arr[:, 5:8], std=arr[:, 4])
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import atomic_path
 from ..errors import DataError, ReaderError
 from .tum import _atomic_write_text
 
@@ -60,10 +61,8 @@ def write_ply(path, points, properties: dict | None = None, binary: bool = True)
         + "end_header\n"
     )
     if binary:
-        tmp = path.with_name(f".{path.name}.tmp")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_bytes(header.encode("ascii") + table.tobytes())
-        tmp.replace(path)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(header.encode("ascii") + table.tobytes())
     else:
         body = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in table.tolist())
         _atomic_write_text(path, header + body)

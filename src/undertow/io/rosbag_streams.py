@@ -40,7 +40,7 @@ def ns_to_s(ns: int) -> float:
 def stamp(msg, record_ns: int, notes: Notes) -> float:
     """header.stamp in seconds; the record time (with a note) when the stamp is zero."""
     st = msg.header.stamp
-    if st.sec == 0 and st.nanosec == 0:
+    if st.sec == 0 and st.nanosec == 0 and record_ns != 0:  # a stamp the driver never filled
         notes.add("messages with a zero header.stamp (bag record time used)")
         return ns_to_s(record_ns)
     return st.sec + st.nanosec * 1e-9

@@ -14,9 +14,6 @@ renamed (nothing half-written is left at ``path``).
 from __future__ import annotations
 
 import math
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Literal
 
@@ -24,6 +21,7 @@ import numpy as np
 import yaml
 from rosbags.rosbag2 import StoragePlugin, Writer
 
+from .._atomic import atomic_path
 from ..errors import UndertowError
 from ..log import Log
 from ..rotations import rpy_to_matrix, rpy_to_quaternion
@@ -104,10 +102,7 @@ def write_log(
     b = _Builder()
     records = list(_messages(log, flavor, b, ground_truth_rate_hz))
     records.sort(key=lambda r: r[1])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
-    try:
-        bag = tmp / path.name
+    with atomic_path(path) as bag:
         with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
             conns = {}
             for stream, msgtype in sorted({(r[0], r[2]) for r in records}):
@@ -123,11 +118,6 @@ def write_log(
             "metadata": _plain(log.metadata) or {},
         }
         (bag / SIDECAR).write_text(yaml.safe_dump(sidecar, sort_keys=False), encoding="utf-8")
-        if path.exists():
-            os.replace(path, tmp / "old")
-        os.replace(bag, path)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return path
 
 

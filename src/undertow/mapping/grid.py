@@ -23,11 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, ReaderError
+from .kernels import _OFFSET as _CHUNK_LIMIT
 from .kernels import CHUNK, _add_mass, _rehash, _scatter
 
 
 class ChunkedGrid:
-    """Hash of dense CHUNK^3 blocks of (alpha mass, beta mass); grows by doubling."""
+    """Hash of dense CHUNK^3 blocks of (alpha mass, beta mass); grows by a factor 1.5."""
 
     def __init__(self, resolution: float, capacity: int = 64) -> None:
         self.resolution = float(resolution)
@@ -38,13 +39,14 @@ class ChunkedGrid:
         self._keys = np.zeros((capacity, 3), np.int64)
         self._alpha = np.zeros((capacity, CHUNK, CHUNK, CHUNK), np.float32)
         self._beta = np.zeros((capacity, CHUNK, CHUNK, CHUNK), np.float32)
-        self._table_keys = np.full(4 * capacity, -1, np.int64)
-        self._table_vals = np.zeros(4 * capacity, np.int64)
+        size = 1 << int(np.ceil(np.log2(2 * capacity)))  # power of two, load factor <= 1/2
+        self._table_keys = np.full(size, -1, np.int64)
+        self._table_vals = np.zeros(size, np.int64)
 
     def _grow(self) -> None:
         n = int(self._n[0])
         keys, alpha, beta = self._keys, self._alpha, self._beta
-        self._allocate(2 * keys.shape[0])
+        self._allocate(keys.shape[0] * 3 // 2)
         self._keys[:n], self._alpha[:n], self._beta[:n] = keys[:n], alpha[:n], beta[:n]
         _rehash(self._keys, n, self._table_keys, self._table_vals)
 
@@ -61,18 +63,27 @@ class ChunkedGrid:
     def _tables(self):
         return (self._table_keys, self._table_vals, self._keys, self._n, self._alpha, self._beta)
 
-    def scatter(self, mode, points, label, sigma0, lengths, max_length: float) -> None:
+    def scatter(self, mode, points, label, sigma0, variance, var_bounds, l_min, l_max) -> None:
         """Run the scatter kernel over all samples, growing the chunk arrays as needed."""
         start, n = 0, points.shape[0]
+        self._check_extent(points)
+        lo, hi = var_bounds
         while start < n:
-            start = _scatter(start, mode, points, label, sigma0, lengths, self.resolution,
-                             float(max_length), *self._tables())  # fmt: skip
+            start = _scatter(start, mode, points, label, sigma0, variance, lo, hi, l_min, l_max,
+                             self.resolution, *self._tables())  # fmt: skip
             if start < n:
                 self._grow()
+
+    def _check_extent(self, points: np.ndarray) -> None:
+        """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range."""
+        limit = (_CHUNK_LIMIT - 2) * CHUNK * self.resolution
+        if points.size and np.abs(points).max() >= limit:
+            raise DataError(f"map coordinates beyond +-{limit:.0f} m: shift the origin closer")
 
     def add_mass(self, cells, d_alpha, d_beta) -> None:
         """Add evidence mass to given cells (seeding from a prior map)."""
         start, n = 0, cells.shape[0]
+        self._check_extent((cells + 0.5) * self.resolution)
         while start < n:
             start = _add_mass(start, cells, d_alpha, d_beta, *self._tables())
             if start < n:

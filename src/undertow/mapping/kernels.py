@@ -109,25 +109,34 @@ def _rehash(chunk_keys, n, table_keys, table_vals):
 
 
 @njit(cache=True)
-def _scatter(start, mode, points, label, sigma0, lengths, res, max_len,
+def _scatter(start, mode, points, label, sigma0, variance, var_lo, var_hi, l_min, l_max, res,
              table_keys, table_vals, chunk_keys, n_chunks, alpha, beta):  # fmt: skip
     """Add k(m_*, m_i) y_i to alpha and k(m_*, m_i)(1 - y_i) to beta (``eq:alpha_param``,
     ``eq:beta_param``; ``eq:new_conc_params_*`` in product mode) for samples start.. .
 
-    mode 0: sigma_0 prod_j k(|d_j|; l_ij); 1: sigma_0 k(||d||; l_i0); 2: weight 1 in the
-    sample's own cell (counting sensor model). Returns len(points) when done, else the index
-    of the first sample not applied (chunk arrays full; nothing of that sample was added).
+    mode 0: sigma_0 prod_j k(|d_j|; l_ij) with l_ij from ``eq:lengthscale_1``:
+    l_ij = s~_ij^2 (l_max_j - l_min_j) + l_min_j,
+    s~_ij^2 = clip((s_ij^2 - lo_j) / (hi_j - lo_j), 0, 1) (0 where hi_j <= lo_j);
+    mode 1: sigma_0 k(||d||; l_min_0); mode 2: weight 1 in the sample's own cell (counting
+    sensor model). Returns len(points) when done, else the index of the first sample not
+    applied (chunk arrays full; nothing of that sample was added).
     """
     n = points.shape[0]
+    max_len = max(l_max[0], l_max[1], l_max[2], l_min[0], l_min[1], l_min[2])
     nmax = int(np.ceil(2.0 * max_len / res)) + 3
     w = np.zeros((3, nmax))
     lo = np.zeros(3, np.int64)
     cnt = np.zeros(3, np.int64)
+    lengths = np.empty(3)
     ncm = (nmax >> CHUNK_SHIFT) + 2
     chunks = np.empty((ncm, ncm, ncm), np.int64)
-    per_sample = lengths.shape[0] > 1
     for s in range(start, n):
-        ls = s if per_sample else 0
+        for j in range(3):
+            lengths[j] = l_min[j]
+            span = var_hi[j] - var_lo[j]
+            if mode == MODE_PRODUCT and span > 0.0:
+                v = min(max((variance[s, j] - var_lo[j]) / span, 0.0), 1.0)
+                lengths[j] = v * (l_max[j] - l_min[j]) + l_min[j]
         for j in range(3):
             p = points[s, j] / res
             if mode == MODE_CELL:
@@ -135,7 +144,7 @@ def _scatter(start, mode, points, label, sigma0, lengths, res, max_len,
                 cnt[j] = 1
                 w[j, 0] = 1.0
                 continue
-            lj = lengths[ls, j] if mode == MODE_PRODUCT else lengths[ls, 0]
+            lj = lengths[j] if mode == MODE_PRODUCT else lengths[0]
             r = lj / res
             i0 = np.int64(np.floor(p - r - 0.5)) + 1
             i1 = np.int64(np.ceil(p + r - 0.5)) - 1
@@ -162,7 +171,7 @@ def _scatter(start, mode, points, label, sigma0, lengths, res, max_len,
                     chunks[a, b, c] = ci
         y = label[s]
         sig = 1.0 if mode == MODE_CELL else sigma0[s]
-        l0 = lengths[ls, 0]
+        l0 = lengths[0]
         for a in range(cnt[0]):
             ix = lo[0] + a
             wa = w[0, a]

@@ -95,12 +95,13 @@ class CsmMapper(Mapper):
     method = "csm"
 
     def _scatter(self, samples: Samples) -> None:
+        zero = np.zeros(3)
         self.grid.scatter(MODE_CELL, samples.points, samples.label, samples.sigma0,
-                          np.zeros((1, 3)), 0.0)  # fmt: skip
+                          samples.pose_variance, (zero, zero), zero, zero)  # fmt: skip
 
 
 class BkiMapper(Mapper):
-    """BKI with the isotropic sparse kernel of ``eq:kernel`` (length scale l, sigma_0)."""
+    """BKI with the isotropic sparse kernel of ``eq:kernel`` (one length scale l)."""
 
     method = "bki"
 
@@ -109,9 +110,9 @@ class BkiMapper(Mapper):
         self.length_scale = float(length_scale)
 
     def _scatter(self, samples: Samples) -> None:
-        lengths = np.full((1, 3), self.length_scale)
-        self.grid.scatter(MODE_RADIAL, samples.points, samples.label, samples.sigma0, lengths,
-                          self.length_scale)  # fmt: skip
+        l, zero = np.full(3, self.length_scale), np.zeros(3)
+        self.grid.scatter(MODE_RADIAL, samples.points, samples.label, samples.sigma0,
+                          samples.pose_variance, (zero, zero), l, l)  # fmt: skip
 
     def metadata(self) -> dict:
         return {**super().metadata(), "length_scale": self.length_scale}
@@ -135,23 +136,27 @@ class AdaptiveBkiMapper(Mapper):
         )
         self.last_variance_bounds = self.variance_bounds
 
-    def length_scales(self, pose_variance: np.ndarray) -> np.ndarray:
-        """``eq:lengthscale_1`` per sample and axis, (N, 3)."""
-        var = np.asarray(pose_variance, float)
+    def _bounds(self, var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(s_min^2, s_max^2) per axis: over the given samples (session) or the fixed bounds."""
         if self.variance_bounds is None:
-            lo, hi = var.min(axis=0), var.max(axis=0)
-        else:
-            lo, hi = self.variance_bounds
-        self.last_variance_bounds = (lo, hi)
+            return var.min(axis=0), var.max(axis=0)
+        return self.variance_bounds
+
+    def length_scales(self, pose_variance) -> np.ndarray:
+        """``eq:lengthscale_1`` per sample and axis, (N, 3) (the scatter kernel computes the
+        same inline; this is for inspection)."""
+        var = np.asarray(pose_variance, float).reshape(-1, 3)
+        lo, hi = self._bounds(var)
         span = hi - lo
         safe = np.where(span > 0, span, 1.0)
         s2 = np.where(span > 0, np.clip((var - lo) / safe, 0.0, 1.0), 0.0)
         return s2 * (self.l_max - self.l_min) + self.l_min
 
     def _scatter(self, samples: Samples) -> None:
-        lengths = self.length_scales(samples.pose_variance)
-        self.grid.scatter(MODE_PRODUCT, samples.points, samples.label, samples.sigma0, lengths,
-                          float(self.l_max.max()))  # fmt: skip
+        bounds = self._bounds(samples.pose_variance)
+        self.last_variance_bounds = bounds
+        self.grid.scatter(MODE_PRODUCT, samples.points, samples.label, samples.sigma0,
+                          samples.pose_variance, bounds, self.l_min, self.l_max)  # fmt: skip
 
     def metadata(self) -> dict:
         bounds = self.last_variance_bounds

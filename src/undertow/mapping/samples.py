@@ -62,7 +62,7 @@ class Samples:
             arr = np.asarray(value, dtype=dtype)
             if arr.ndim < len(shape) and arr.shape == shape[len(shape) - arr.ndim :]:
                 arr = np.broadcast_to(arr, shape)  # scalars (and one (3,) row) broadcast
-            arr = np.ascontiguousarray(arr)
+            arr = np.require(arr, requirements=["C", "W"])  # one array type for the kernels
             if arr.shape != shape:
                 raise DataError(f"Samples.{name}: shape {arr.shape}, expected {shape}")
             object.__setattr__(self, name, arr)

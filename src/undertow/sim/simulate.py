@@ -7,15 +7,13 @@ sensor appended to ``RNG_STREAMS`` leaves every other stream's noise unchanged.
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from .._atomic import atomic_path
 from ..errors import ConfigError
 from ..log import GroundTruth, Log
 from ..rotations import wrap_angle
@@ -149,21 +147,13 @@ def write_simulation(result: SimulationResult, out_dir, overwrite: bool = False)
     out = Path(out_dir)
     if out.exists() and any(out.iterdir()) and not overwrite:
         raise ConfigError(f"{out}: output folder exists and is not empty (use overwrite)")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with atomic_path(out, directory=True) as tmp:
         gt = result.log.ground_truth
         write_log(result.log, tmp / "log", flavor="driver", overwrite=False)
         write_tum(tmp / "ground_truth.tum", gt.t, gt.position, gt.orientation)
         write_ply(tmp / "ground_truth.ply", result.floor_cloud)
         with open(tmp / "scenario.yaml", "w") as f:
             yaml.safe_dump(result.scenario.to_yaml_dict(), f, sort_keys=False)
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 

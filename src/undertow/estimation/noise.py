@@ -1,0 +1,215 @@
+"""Wave noise profiles: wave condition (amplitude a, frequency f) -> extra measurement noise.
+
+A profile lists characterized conditions with the standard deviation gamma that waves add to
+the acoustic measurements (the gamma_DVL of eq:dvl_meas_model per DVL-frame axis, and
+optionally gamma_DR of eq:dr_meas_model per angle). The filter adds gamma^2 to R. The profile
+shipped with the package, ``noise_profile_paper.yaml``, holds the paper's measured Table I.
+
+Between characterized conditions the std devs are interpolated linearly over a Delaunay
+triangulation of the (a, f) nodes (scipy ``LinearNDInterpolator``; each axis scaled by the span
+of the nodes first so that metres and hertz weigh alike). A ``calm`` condition (amplitude 0,
+``frequency_hz: null``) holds at every frequency: it adds a node at a = 0 for each frequency of
+the other conditions, and any a = 0 query returns it. A query outside the convex hull of the
+nodes raises :class:`ConfigError` unless ``extrapolate=True``, which returns the nearest node.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import ConfigError
+
+_NAME = re.compile(r"^wave-a(\d+(?:\.\d*)?)-f(\d+(?:\.\d*)?)$")
+
+
+@dataclass(frozen=True)
+class WaveCondition:
+    """One characterized condition: extra std devs of DVL velocity (m/s, DVL x y z) and of the
+    DR angles (rad, roll pitch yaw; zeros when not characterized)."""
+
+    name: str
+    amplitude_m: float
+    frequency_hz: float | None
+    dvl_std: tuple[float, float, float]
+    dr_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class WaveNoise:
+    """The extra noise used for one run (what the Localizer reports in its metadata)."""
+
+    condition: str
+    amplitude_m: float
+    frequency_hz: float | None
+    dvl_std: np.ndarray
+    dr_std: np.ndarray
+    how: str  # "node", "interpolated", "nearest" or "calm"
+
+    def to_dict(self) -> dict:
+        return {
+            "condition": self.condition,
+            "amplitude_m": self.amplitude_m,
+            "frequency_hz": self.frequency_hz,
+            "dvl_std": [float(v) for v in self.dvl_std],
+            "dr_std": [float(v) for v in self.dr_std],
+            "how": self.how,
+        }
+
+
+def wave_name(amplitude_m: float, frequency_hz: float) -> str:
+    """Canonical condition name, e.g. ``wave-a0.10-f1.00``."""
+    return f"wave-a{amplitude_m:.2f}-f{frequency_hz:.2f}"
+
+
+def parse_wave(wave) -> tuple[str, float, float | None]:
+    """(name, amplitude, frequency) from ``"calm"``, ``"wave-a0.10-f1.00"`` or (a, f)."""
+    if wave is None or (isinstance(wave, str) and wave.strip().lower() == "calm"):
+        return "calm", 0.0, None
+    if isinstance(wave, str):
+        m = _NAME.match(wave.strip())
+        if not m:
+            raise ConfigError(f"wave condition {wave!r}: expected 'calm' or like wave-a0.10-f1.00")
+        a, f = float(m.group(1)), float(m.group(2))
+    else:
+        try:
+            a, f = (float(v) for v in wave)
+        except (TypeError, ValueError) as exc:
+            msg = f"wave condition {wave!r}: expected a name or (amplitude, frequency)"
+            raise ConfigError(msg) from exc
+    if not (math.isfinite(a) and math.isfinite(f) and a >= 0 and f > 0):
+        raise ConfigError(f"wave condition {wave!r}: amplitude must be >= 0 and frequency > 0")
+    return (wave_name(a, f) if a > 0 else "calm"), a, (f if a > 0 else None)
+
+
+def _opt_float(v) -> float | None:
+    return None if v is None else float(v)
+
+
+@dataclass
+class NoiseProfile:
+    """Characterized wave conditions; :meth:`noise` maps a condition to a :class:`WaveNoise`."""
+
+    conditions: list[WaveCondition]
+    name: str = ""
+    source: str = ""
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @classmethod
+    def paper(cls) -> NoiseProfile:
+        """The paper's Table I (shipped as package data ``noise_profile_paper.yaml``)."""
+        text = resources.files("undertow").joinpath("data/noise_profile_paper.yaml").read_text()
+        return cls.from_dict(yaml.safe_load(text), origin="noise_profile_paper.yaml")
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> NoiseProfile:
+        try:
+            data = yaml.safe_load(Path(path).read_text())
+        except (OSError, yaml.YAMLError) as exc:
+            raise ConfigError(f"{path}: cannot read noise profile ({exc})") from exc
+        return cls.from_dict(data, origin=str(path))
+
+    @classmethod
+    def from_dict(cls, data, origin: str = "noise profile") -> NoiseProfile:
+        try:
+            conds = [
+                WaveCondition(
+                    name=str(c.get("name") or wave_name(c["amplitude_m"], c["frequency_hz"])),
+                    amplitude_m=float(c["amplitude_m"]),
+                    frequency_hz=_opt_float(c.get("frequency_hz")),
+                    dvl_std=tuple(float(v) for v in c["dvl_std"]),
+                    dr_std=tuple(float(v) for v in c.get("dr_std") or (0.0, 0.0, 0.0)),
+                )
+                for c in data["conditions"]
+            ]
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ConfigError(f"{origin}: invalid noise profile ({exc!r})") from exc
+        for c in conds:
+            bad = len(c.dvl_std) != 3 or len(c.dr_std) != 3
+            if bad or not all(math.isfinite(v) and v >= 0 for v in c.dvl_std + c.dr_std):
+                raise ConfigError(f"{origin}: condition {c.name}: need 3 finite std devs >= 0")
+            if c.amplitude_m > 0 and c.frequency_hz is None:
+                raise ConfigError(f"{origin}: condition {c.name}: a wave needs frequency_hz")
+        return cls(conds, name=str(data.get("name", "")), source=str(data.get("source", "")))
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "source": self.source,
+            "conditions": [
+                {
+                    "name": c.name,
+                    "amplitude_m": c.amplitude_m,
+                    "frequency_hz": c.frequency_hz,
+                    "dvl_std": list(c.dvl_std),
+                    "dr_std": list(c.dr_std),
+                }
+                for c in self.conditions
+            ],
+        }
+
+    def to_yaml(self, path: str | Path) -> Path:
+        path = Path(path)
+        path.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+        return path
+
+    def noise(self, wave, extrapolate: bool = False) -> WaveNoise:
+        """Extra noise for ``wave`` ("calm", "wave-a0.10-f1.00" or (a, f)); see module doc."""
+        name, a, f = parse_wave(wave)
+        for c in self.conditions:
+            same = c.amplitude_m > 0 and f is not None and abs(c.amplitude_m - a) < 1e-9
+            if (a == 0 and c.amplitude_m == 0) or (same and abs(c.frequency_hz - f) < 1e-9):
+                return self._result(name, a, f, c.dvl_std, c.dr_std, "calm" if a == 0 else "node")
+        if a == 0:
+            return self._result(name, a, f, (0.0,) * 3, (0.0,) * 3, "calm")
+        nodes, values, scale = self._nodes()
+        q = (np.array([a, f]) - scale[0]) / scale[1]
+        v = None
+        if len(nodes) >= 3:
+            v = self._interp(nodes, values)(q[None, :])[0]
+        if v is not None and np.all(np.isfinite(v)):
+            return self._result(name, a, f, v[:3], v[3:], "interpolated")
+        if not extrapolate:
+            raise ConfigError(
+                f"wave condition {name} is outside the characterized conditions of profile "
+                f"{self.name or '?'} (pass extrapolate=True to use the nearest)"
+            )
+        i = int(np.argmin(np.sum((nodes - q) ** 2, axis=1)))
+        return self._result(name, a, f, values[i, :3], values[i, 3:], "nearest")
+
+    def _nodes(self):
+        waves = [c for c in self.conditions if c.amplitude_m > 0]
+        pts = [(c.amplitude_m, c.frequency_hz) for c in waves]
+        vals = [c.dvl_std + c.dr_std for c in waves]
+        calm = [c for c in self.conditions if c.amplitude_m == 0]
+        if calm:
+            for freq in sorted({c.frequency_hz for c in waves}):
+                pts.append((0.0, freq))
+                vals.append(calm[0].dvl_std + calm[0].dr_std)
+        if not pts:
+            raise ConfigError(f"noise profile {self.name or '?'} has no wave conditions")
+        pts = np.asarray(pts, float)
+        lo, span = pts.min(axis=0), np.ptp(pts, axis=0)
+        span[span == 0] = 1.0
+        return (pts - lo) / span, np.asarray(vals, float), (lo, span)
+
+    def _interp(self, nodes, values):
+        if "interp" not in self._cache:
+            from scipy.interpolate import LinearNDInterpolator
+            from scipy.spatial import QhullError
+
+            try:
+                self._cache["interp"] = LinearNDInterpolator(nodes, values, fill_value=np.nan)
+            except QhullError:  # collinear nodes: only exact nodes (or nearest) are usable
+                self._cache["interp"] = lambda q: np.full((len(q), values.shape[1]), np.nan)
+        return self._cache["interp"]
+
+    @staticmethod
+    def _result(name, a, f, dvl, dr, how) -> WaveNoise:
+        return WaveNoise(name, a, f, np.array(dvl, float), np.array(dr, float), how)
