@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/undertow simulate calm --out out/calm --seed 0
+	$(BIN)/undertow simulate calm --out out/calm --seed 0 --overwrite
 	$(BIN)/undertow info out/calm/log
 
 test: $(STAMP)
