@@ -30,12 +30,12 @@ def test_plane_offset_gives_c2c_equal_to_offset():
 def test_c2c_against_dense_plane_with_two_offsets():
     # half the points at d1, half at d2 above a dense plane: mean (d1+d2)/2, rmse sqrt mean sq.
     rng = np.random.default_rng(0)
-    gt = _plane(-1, 3, -1, 2, 0.002)
+    gt = _plane(-0.1, 2.1, -0.1, 2.1, 0.003)
     xy = rng.uniform(0, 2, (400, 2))
     z = np.where(np.arange(400) < 200, 0.05, 0.2)
     ev = evaluate_map(np.column_stack([xy, z]), gt)
-    assert ev.c2c_mean_m == pytest.approx(0.125, abs=2e-5)
-    assert ev.c2c_rmse_m == pytest.approx(np.sqrt((0.05**2 + 0.2**2) / 2), abs=2e-5)
+    assert ev.c2c_mean_m == pytest.approx(0.125, abs=5e-5)
+    assert ev.c2c_rmse_m == pytest.approx(np.sqrt((0.05**2 + 0.2**2) / 2), abs=5e-5)
 
 
 def test_bad_clouds_rejected():

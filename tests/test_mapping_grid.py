@@ -143,10 +143,11 @@ def test_ply_written_with_mean_and_variance(tmp_path):
     assert "format binary_little_endian 1.0" in lines
     names = [ln.split()[-1] for ln in lines if ln.startswith("property")]
     assert names[:3] == ["x", "y", "z"] and {"mean", "variance"} <= set(names)
+    assert not list(tmp_path.glob("*.tmp"))
     kinds = {"double": "<f8", "float": "<f4"}
     dtype = [(ln.split()[2], kinds[ln.split()[1]]) for ln in lines if ln.startswith("property")]
     rows = np.frombuffer(body, dtype=dtype)
     k = occ.occupied()
     assert len(rows) == len(k)
-    np.testing.assert_allclose(rows["z"], k.centres[:, 2])
+    np.testing.assert_allclose(rows["z"], k.centres[:, 2], rtol=1e-6)
     np.testing.assert_allclose(rows["mean"], k.mean, rtol=1e-6)

@@ -34,8 +34,8 @@ class LocalizerConfig(BaseModel):
 
     variant: Literal["baseline", "be", "an", "proposed"] = "proposed"
     # process noise (eq:dynamics_model): Gamma = density / dt, Gamma_b dt
-    accel_density: Vec3 = (0.05, 0.05, 0.05)  # (m/s^2)^2/Hz
-    angular_accel_density: Vec3 = (0.05, 0.05, 0.05)  # (rad/s^2)^2/Hz
+    accel_density: Vec3 = (0.01, 0.01, 0.01)  # (m/s^2)^2/Hz
+    angular_accel_density: Vec3 = (0.005, 0.005, 0.005)  # (rad/s^2)^2/Hz
     dr_bias_walk_density: Vec3 = (1e-7, 1e-7, 1e-6)  # rad^2/s
     gyro_bias_walk_density: Vec3 = (1e-8, 1e-8, 1e-8)  # (rad/s)^2/s
     dr_bias_drift_rad_s: Vec3 = (0.0, 0.0, 0.0)  # mu_b: mean drift of the DR bias (calibration)
@@ -50,6 +50,8 @@ class LocalizerConfig(BaseModel):
     dr_orientation_frame: Literal["body", "dvl"] = "body"
     # initial state (None: zeros, orientation from the first DR report, z from the first depth)
     initial_state: list[float] | None = None
+    # start position (m, world) when initial_state is None; None: x = y = 0, z from the first depth
+    initial_position: Vec3 | None = None
     initial_std: list[float] = Field(
         default_factory=lambda: [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3
         + [0.005] * 3 + [0.01] * 3
@@ -213,7 +215,8 @@ def _finite_rows(a: np.ndarray) -> np.ndarray:
 
 
 def _initial_state(log: Log, cfg: LocalizerConfig, t0: float):
-    """x0 from the config, else zeros with the first DR orientation and the first depth."""
+    """x0 from the config, else zeros with the first DR orientation and the first depth, and the
+    configured start position (DVL and IMU observe no absolute x, y: the user gives the start)."""
     std = np.asarray(cfg.initial_std, float)
     x0 = None if cfg.initial_state is None else np.asarray(cfg.initial_state, float)
     if std.shape != (model.N_STATE,) or (x0 is not None and x0.shape != (model.N_STATE,)):
@@ -235,6 +238,8 @@ def _initial_state(log: Log, cfg: LocalizerConfig, t0: float):
         if ok.size:
             lever = rpy_to_matrix(x0[3:6]) @ np.asarray(log.mounting.barometer.translation, float)
             x0[2] = d[ok[0]] - lever[2]
+    if cfg.initial_position is not None:
+        x0[0:3] = cfg.initial_position
     return x0, np.diag(np.maximum(std, 1e-9) ** 2)
 
 

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .._atomic import atomic_path
 from ..errors import ConfigError
 
 _NAME = re.compile(r"^wave-a(\d+(?:\.\d*)?)-f(\d+(?:\.\d*)?)$")
@@ -69,7 +70,10 @@ def wave_name(amplitude_m: float, frequency_hz: float) -> str:
 
 
 def parse_wave(wave) -> tuple[str, float, float | None]:
-    """(name, amplitude, frequency) from ``"calm"``, ``"wave-a0.10-f1.00"`` or (a, f)."""
+    """(name, amplitude, frequency) from ``"calm"``, ``"wave-a0.10-f1.00"``, (a, f) or a mapping
+    with ``amplitude_m`` and ``frequency_hz`` (as simulated logs carry in their metadata)."""
+    if isinstance(wave, dict) and {"amplitude_m", "frequency_hz"} <= wave.keys():
+        wave = (wave["amplitude_m"], wave["frequency_hz"])
     if wave is None or (isinstance(wave, str) and wave.strip().lower() == "calm"):
         return "calm", 0.0, None
     if isinstance(wave, str):
@@ -155,8 +159,10 @@ class NoiseProfile:
         }
 
     def to_yaml(self, path: str | Path) -> Path:
+        """Write the profile as YAML (atomically: temp file, then rename)."""
         path = Path(path)
-        path.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
+        with atomic_path(path) as tmp:
+            tmp.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
         return path
 
     def noise(self, wave, extrapolate: bool = False) -> WaveNoise:

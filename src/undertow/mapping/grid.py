@@ -15,13 +15,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .._atomic import atomic_path
 from ..errors import DataError, ReaderError
 from .kernels import _OFFSET as _CHUNK_LIMIT
 from .kernels import CHUNK, _add_mass, _rehash, _scatter
@@ -183,20 +182,12 @@ class OccupancyMap:
     def save(self, path: str | Path) -> Path:
         """Write the map as ``.npz`` (atomic: temp file then rename)."""
         path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        os.close(fd)
-        try:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(
-                    fh, cells=self.cells, alpha=self.alpha, beta=self.beta,
-                    resolution=self.resolution, alpha0=self.alpha0, beta0=self.beta0,
-                    metadata=np.array(json.dumps(self.metadata, default=str)),
-                )  # fmt: skip
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(
+                fh, cells=self.cells, alpha=self.alpha, beta=self.beta,
+                resolution=self.resolution, alpha0=self.alpha0, beta0=self.beta0,
+                metadata=np.array(json.dumps(self.metadata, default=str)),
+            )  # fmt: skip
         return path
 
     @classmethod

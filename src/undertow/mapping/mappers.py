@@ -22,8 +22,6 @@ kernels (see :mod:`undertow.mapping.kernels`).
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Literal
 
@@ -219,37 +217,9 @@ def make_mapper(method: Method, resolution: float = 0.1, length_scale: float = 0
 
 
 def write_map_ply(path, occupancy_map: OccupancyMap, threshold: float = 0.5) -> Path:
-    """Occupied cell centres (double x, y, z) with float ``mean`` and ``variance`` vertex
-    properties as a binary little-endian PLY (CloudCompare, Open3D); atomic write."""
+    """Occupied cell centres with float ``mean`` and ``variance`` vertex properties, as a binary
+    little-endian PLY (CloudCompare, Open3D) through :func:`undertow.io.ply.write_ply`."""
+    from ..io.ply import write_ply
+
     occ = occupancy_map.occupied(threshold)
-    props = {"mean": occ.mean, "variance": occ.variance}
-    try:
-        from ..io.ply import write_ply
-    except ImportError:
-        write_ply = _write_ply
-    return Path(write_ply(path, occ.centres, props) or path)
-
-
-def _write_ply(path, points: np.ndarray, properties: dict) -> Path:
-    """Small binary PLY writer (used until ``undertow.io.ply`` exists)."""
-    path = Path(path)
-    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")] + [(k, "<f4") for k in properties]
-    rows = np.empty(len(points), dtype=fields)
-    rows["x"], rows["y"], rows["z"] = points[:, 0], points[:, 1], points[:, 2]
-    for k, v in properties.items():
-        rows[k] = v
-    names = {"<f8": "double", "<f4": "float"}
-    header = ["ply", "format binary_little_endian 1.0", "comment undertow occupancy map",
-              f"element vertex {len(points)}"]  # fmt: skip
-    header += [f"property {names[t]} {n}" for n, t in fields] + ["end_header", ""]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".ply.tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write("\n".join(header).encode("ascii"))
-            fh.write(rows.tobytes())
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return write_ply(path, occ.centres, {"mean": occ.mean, "variance": occ.variance})

@@ -1,0 +1,165 @@
+"""Localizer on synthetic logs generated here from a known truth (closed-form kinematics)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from undertow.errors import ConfigError, MissingStreamError
+from undertow.estimation.localize import Localizer
+from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
+from undertow.rotations import rpy_to_matrix, wrap_angle
+
+RHO = 997.0
+
+
+def truth(t, u=0.0, r=0.0, psi0=0.0, depth=1.0):
+    """Level vehicle, body velocity (u, 0, 0), yaw rate r: closed-form pose (circle or line)."""
+    psi = psi0 + r * t
+    if abs(r) > 0:
+        x = u / r * (np.sin(psi) - np.sin(psi0))
+        y = -u / r * (np.cos(psi) - np.cos(psi0))
+    else:
+        x, y = u * t * np.cos(psi0), u * t * np.sin(psi0)
+    pos = np.stack([x, y, np.full_like(t, depth)], axis=1)
+    rpy = np.stack([np.zeros_like(t), np.zeros_like(t), wrap_angle(psi)], axis=1)
+    return pos, rpy
+
+
+def make_log(duration=30.0, u=0.0, r=0.0, psi0=0.0, depth=1.0, imu_bias=(0, 0, 0),
+             dr_bias_rate=(0, 0, 0), seed=0, mounting=None):  # fmt: skip
+    """IMU 100 Hz, DVL 8 Hz, DR 5 Hz, baro 10 Hz following the paper's measurement models."""
+    rng = np.random.default_rng(seed)
+    mounting = mounting or Mounting()
+    omega = np.array([0.0, 0.0, r])
+    v = np.array([u, 0.0, 0.0])
+    ti = np.arange(0, duration, 0.01)
+    imu = Imu(ti, omega + np.asarray(imu_bias) + rng.normal(0, 0.003, (ti.size, 3)))
+    td = np.arange(0, duration, 0.125)
+    Rd = mounting.dvl.rotation_matrix()
+    v_dvl = Rd.T @ (v + np.cross(omega, mounting.dvl.translation))
+    dvl = Dvl.from_velocity(td, v_dvl + rng.normal(0, 0.005, (td.size, 3)))
+    tr = np.arange(0, duration, 0.2)
+    _, rpy = truth(tr, u, r, psi0, depth)
+    meas = rpy + np.outer(tr, dr_bias_rate) + rng.normal(0, 0.003, (tr.size, 3))
+    dr = DeadReckoning(tr, np.zeros((tr.size, 3)), wrap_angle(meas))
+    tp = np.arange(0, duration, 0.1)
+    pos, rpy_p = truth(tp, u, r, psi0, depth)
+    z_bar = pos[:, 2] + (rpy_to_matrix(rpy_p) @ np.asarray(mounting.barometer.translation))[:, 2]
+    p = P_ATM + RHO * G0 * (z_bar + rng.normal(0, 0.005, tp.size))
+    return Log(imu=imu, dvl=dvl, dead_reckoning=dr, pressure=Pressure(tp, p), mounting=mounting)
+
+
+def test_static_vehicle_converges():
+    log = make_log(duration=20.0, depth=2.0)
+    loc = Localizer("proposed")
+    traj = loc.run(log)
+    assert np.all(np.isfinite(traj.x)) and np.all(np.isfinite(traj.P))
+    var0, var1 = np.square(loc.config.initial_std), np.diagonal(traj.P[-1])
+    assert np.all(var1[2:12] < var0[2:12])  # x, y are not observed: they may only grow
+    err = traj.x[-1, :12] - np.r_[0, 0, 2.0, 0, 0, 0, np.zeros(6)]
+    assert np.all(np.abs(err[2:]) < 3 * np.sqrt(var1[2:12]) + 1e-3)
+    assert np.linalg.norm(traj.x[-1, 6:9]) < 0.01
+    assert traj.metadata["counts"]["used_dvl"] == len(log.dvl)
+
+
+def test_yaw_crosses_pi_continuously():
+    psi0, r, u = np.pi - 0.3, 0.1, 0.3
+    log = make_log(duration=8.0, u=u, r=r, psi0=psi0)
+    traj = Localizer("proposed").run(log)
+    pos, rpy = truth(traj.t, u, r, psi0)
+    yaw_err = wrap_angle(traj.x[:, 5] - rpy[:, 2])
+    assert np.max(np.abs(yaw_err)) < 0.03
+    assert np.max(np.abs(wrap_angle(np.diff(traj.x[:, 5])))) < 0.02  # no jumps at the cut
+    assert np.any(traj.x[:, 5] < -2.9) and np.any(traj.x[:, 5] > 2.9)  # really crossed
+    assert np.max(np.linalg.norm(traj.x[:, :2] - pos[:, :2], axis=1)) < 0.1
+
+
+def test_gyro_bias_recovered_within_3_sigma():
+    b = np.array([0.01, -0.008, 0.015])
+    traj = Localizer("be").run(make_log(duration=60.0, u=0.2, imu_bias=b))
+    est, sd = traj.x[-1, 15:18], np.sqrt(np.diagonal(traj.P[-1])[15:18])
+    assert np.all(np.abs(est - b) < 3 * sd)
+    assert np.all(np.abs(est - b) < 0.003)
+
+
+def test_dr_yaw_bias_drift_recovered_and_baseline_is_not():
+    d = np.array([0.0, 0.0, 0.002])  # rad/s drift of the DR yaw (the DVL gyro's bias)
+    log = make_log(duration=60.0, u=0.2, dr_bias_rate=d)
+    std = [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3 + [0.005] * 3 + [1e-4] * 3
+    be = Localizer("be", initial_std=std, dr_bias_drift_rad_s=tuple(d)).run(log)
+    base = Localizer("baseline", initial_std=std, dr_bias_drift_rad_s=tuple(d)).run(log)
+    est, sd = be.x[-1, 14], np.sqrt(be.P[-1, 14, 14])
+    assert abs(est - d[2] * be.t[-1]) < 3 * sd
+    assert abs(be.x[-1, 5]) < 0.02  # true yaw is 0
+    assert abs(base.x[-1, 5]) > 0.08  # the baseline follows the drifting DR yaw
+    assert np.all(base.x[:, 12:18] == 0.0)
+
+
+def test_variants_differ_as_designed():
+    log = make_log(duration=10.0, u=0.3, imu_bias=(0, 0, 0.01))
+    runs = {v: Localizer(v, wave="wave-a0.10-f0.75").run(log) for v in ("baseline", "be", "an",
+                                                                         "proposed")}  # fmt: skip
+    for v in ("baseline", "an"):
+        assert np.all(runs[v].x[:, 12:18] == 0.0)
+    assert np.any(runs["be"].x[:, 17] != 0.0)
+    assert runs["baseline"].metadata["wave_noise"] is None
+    assert runs["an"].metadata["wave_noise"]["dvl_std"] == [0.040, 0.010, 0.003]
+    # added noise weighs the DVL less: larger velocity variance
+    assert runs["an"].P[-1, 6, 6] > runs["baseline"].P[-1, 6, 6]
+    assert runs["proposed"].P[-1, 6, 6] > runs["be"].P[-1, 6, 6]
+
+
+def test_adversarial_run_never_nan():
+    log = make_log(duration=30.0, u=0.3, r=0.05)
+    rng = np.random.default_rng(3)
+    gap = {n: s.select((s.t < 10) | (s.t > 20)) for n, s in log.streams().items()}  # 10 s gap
+    log = log.replace(**gap)
+    imu, dvl, dr = log.imu, log.dvl, log.dead_reckoning
+    w = np.array(imu.angular_velocity)
+    w[rng.integers(0, w.shape[0], 50)] = np.nan
+    w[rng.integers(0, w.shape[0], 50)] = 1e6
+    v = np.array(dvl.velocity)
+    v[::7] = np.nan
+    v[::11] = -1e5
+    valid = np.ones(len(dvl), bool)
+    valid[::5] = False
+    cov = np.tile(np.eye(3) * 1e-30, (len(dvl), 1, 1))  # tiny R
+    o = np.array(dr.orientation)
+    o[::3] = np.nan
+    o[::4] = 1e9
+    bad = Log(
+        imu=Imu(imu.t, w),
+        dvl=Dvl.from_velocity(dvl.t, v, valid=valid, covariance=cov),
+        dead_reckoning=DeadReckoning(dr.t, dr.position, o),
+        pressure=Pressure(log.pressure.t[log.pressure.t < 25], log.pressure.pressure[
+            log.pressure.t < 25]),
+    )  # fmt: skip
+    for gate in (None, 0.999):
+        traj = Localizer("proposed", gate_probability=gate, max_dt_s=0.5).run(bad)
+        assert np.all(np.isfinite(traj.x)) and np.all(np.isfinite(traj.P))
+        c = traj.metadata["counts"]
+        assert c["rejected_imu"] > 0 and c["rejected_dvl_invalid"] > 0
+        assert c["rejected_dvl_nonfinite"] > 0 and c["rejected_dead_reckoning"] > 0
+        assert c["dt_capped"] > 0
+        assert np.all(np.diagonal(traj.P, axis1=1, axis2=2) > 0)
+    assert c["gated_imu"] > 0 and c["gated_dvl"] > 0
+
+
+def test_output_rate_missing_stream_and_bad_config():
+    log = make_log(duration=5.0)
+    traj = Localizer("baseline", output_rate_hz=2.0).run(log)
+    np.testing.assert_allclose(traj.t, np.arange(0, 5.0, 0.5))
+    with pytest.raises(MissingStreamError):
+        Localizer().run(log.replace(imu=None))
+    with pytest.raises(ConfigError):
+        Localizer(variant="fancy")
+    with pytest.raises(ConfigError):
+        Localizer(alpha=1e-3)
+
+
+def test_dvl_scale_factor_and_wave_from_log_metadata():
+    log = make_log(duration=10.0, u=0.3).replace(metadata={"wave": "wave-a0.10-f1.00"})
+    traj = Localizer("proposed", dvl_scale_factor=1.5).run(log)
+    assert abs(traj.x[-1, 6] - 0.2) < 0.02  # v_used = v_measured / scale
+    assert traj.metadata["wave_noise"]["condition"] == "wave-a0.10-f1.00"

@@ -1,0 +1,55 @@
+"""Wave noise profiles: the paper's Table I at the nodes, linear in between, errors outside."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from undertow.errors import ConfigError
+from undertow.estimation.noise import NoiseProfile
+
+TABLE_I = {  # (a, f): (vx, vy, vz) std devs, m/s, the paper's tab:wave_table
+    (0.10, 1.00): (0.025, 0.010, 0.003),
+    (0.10, 0.75): (0.040, 0.010, 0.003),
+    (0.05, 0.75): (0.011, 0.010, 0.003),
+}
+
+
+def test_table_entries_reproduced_at_nodes():
+    prof = NoiseProfile.paper()
+    for (a, f), std in TABLE_I.items():
+        by_name = prof.noise(f"wave-a{a:.2f}-f{f:.2f}")
+        assert by_name.dvl_std.tolist() == list(std) and by_name.how == "node"
+        # the interpolator itself reproduces the nodes (queried a hair away from the node)
+        near = prof.noise((a * (1 - 1e-12), f))
+        np.testing.assert_allclose(near.dvl_std, std, rtol=1e-9)
+    assert prof.noise("calm").dvl_std.tolist() == [0.0, 0.0, 0.0]
+    assert prof.noise((0.0, 3.0)).how == "calm"
+
+
+def test_linear_between_nodes():
+    prof = NoiseProfile.paper()
+    mid = prof.noise((0.10, 0.875))  # on the a = 0.1 edge: the mean of its two nodes
+    np.testing.assert_allclose(mid.dvl_std, [0.0325, 0.010, 0.003], atol=1e-12)
+    half = prof.noise((0.025, 0.75))  # halfway from calm to (0.05, 0.75)
+    np.testing.assert_allclose(half.dvl_std, [0.0055, 0.005, 0.0015], atol=1e-12)
+    assert mid.how == "interpolated"
+
+
+def test_outside_hull_errors_unless_extrapolate():
+    prof = NoiseProfile.paper()
+    with pytest.raises(ConfigError, match="outside"):
+        prof.noise((0.2, 1.0))
+    near = prof.noise("wave-a0.20-f1.00", extrapolate=True)
+    assert near.how == "nearest" and near.dvl_std.tolist() == [0.025, 0.010, 0.003]
+    with pytest.raises(ConfigError):
+        prof.noise("big waves")
+
+
+def test_yaml_round_trip(tmp_path):
+    prof = NoiseProfile.paper()
+    back = NoiseProfile.from_yaml(prof.to_yaml(tmp_path / "p.yaml"))
+    assert back.to_dict() == prof.to_dict()
+    (tmp_path / "bad.yaml").write_text("conditions: [{amplitude_m: 0.1}]")
+    with pytest.raises(ConfigError):
+        NoiseProfile.from_yaml(tmp_path / "bad.yaml")
