@@ -30,3 +30,70 @@ def test_missing_file_is_one_line_and_exit_1():
 def test_help_has_examples():
     result = runner.invoke(app, ["--help"])
     assert result.exit_code == 0 and "undertow simulate" in result.output
+
+
+def test_simulate_localize_evaluate_map_end_to_end(tmp_path):
+    """The README's workflow through the bag on disk, checked against the ground truth files."""
+    run = tmp_path / "run"
+    assert (
+        runner.invoke(app, ["simulate", "wave-a0.05-f0.75", "--out", str(run), "-q"]).exit_code == 0
+    )
+    cal = tmp_path / "cal.yaml"
+    r = runner.invoke(
+        app, ["calibrate", str(run / "log"), str(run / "ground_truth.tum"), "--out", str(cal)]
+    )
+    assert r.exit_code == 0, r.output
+    # the simulator's sound-speed error is c_set / c_true; calibration must find it
+    scenario = __import__("yaml").safe_load((run / "scenario.yaml").read_text())
+    expected = scenario["dvl"]["sound_speed_setting"] / scenario["water"]["sound_speed_m_s"]
+    assert abs(json.loads(r.stdout)["dvl_scale_factor"] - expected) < 2e-3
+    r = runner.invoke(
+        app,
+        ["localize", str(run / "log"), "--calibration", str(cal), "--out", str(run / "est"), "-q"],
+    )
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(
+        app, ["evaluate", "trajectory", str(run / "est"), str(run / "ground_truth.tum"), "--json"]
+    )
+    assert r.exit_code == 0, r.output
+    rmse = json.loads(r.stdout)["rmse"]
+    assert rmse["x_m"] < 0.2 and rmse["y_m"] < 0.2 and rmse["z_m"] < 0.05
+    r = runner.invoke(
+        app,
+        [
+            "map",
+            str(run / "log"),
+            "--trajectory",
+            str(run / "est"),
+            "--out",
+            str(run / "map"),
+            "-q",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(
+        app, ["evaluate", "map", str(run / "map"), str(run / "ground_truth.ply"), "--json"]
+    )
+    assert r.exit_code == 0, r.output
+    # occupied cell centres lie on a 0.1 m grid: at best 0.05 m from a floor at a cell boundary
+    assert json.loads(r.stdout)["c2c_mean_m"] < 0.1
+
+
+def test_bad_variant_and_missing_trajectory_are_one_line(tmp_path):
+    r = runner.invoke(
+        app, ["localize", str(REAL / "a50_ros1_circle.bag"), "--out", str(tmp_path / "x")]
+    )
+    assert r.exit_code == 1 and "imu" in r.output and "Traceback" not in r.output
+    r = runner.invoke(
+        app,
+        [
+            "map",
+            str(REAL / "a50_ros1_circle.bag"),
+            "--trajectory",
+            str(tmp_path / "nope.npz"),
+            "--out",
+            str(tmp_path / "m"),
+        ],
+    )
+    assert r.exit_code == 1 and "nope.npz" in r.output
+    assert not (tmp_path / "x").exists() and not (tmp_path / "m").exists()

@@ -139,5 +139,246 @@ def simulate(
         err.print(f"wrote {out_dir}/log, ground_truth.tum, ground_truth.ply, scenario.yaml")
 
 
+def _load_log(path: Path, topics: Path | None):
+    from .io import read_log
+    from .io.topics import TopicMap
+
+    return read_log(path, topics=TopicMap.from_yaml(topics) if topics else None)
+
+
+def _triple(text: str | None, name: str):
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise UndertowError(f"{name}: expected three comma-separated numbers, got {text!r}")
+    return values
+
+
+TopicsOption = Annotated[
+    Path | None, typer.Option(help="YAML topic map overriding the BlueROV2 defaults.")
+]
+
+
+@app.command()
+@user_errors
+def localize(
+    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
+    out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    variant: Annotated[
+        str, typer.Option(help="baseline | be (bias estimation) | an (added noise) | proposed")
+    ] = "proposed",
+    profile: Annotated[
+        Path | None, typer.Option(help="Wave noise profile YAML (default: the paper's Table I).")
+    ] = None,
+    wave: Annotated[
+        str | None, typer.Option(help="Wave condition by name, e.g. calm or wave-a0.10-f1.00.")
+    ] = None,
+    wave_amplitude: Annotated[float | None, typer.Option(help="Wave amplitude, m.")] = None,
+    wave_frequency: Annotated[float | None, typer.Option(help="Wave frequency, Hz.")] = None,
+    extrapolate: Annotated[
+        bool, typer.Option(help="Allow wave conditions outside the characterized ones.")
+    ] = False,
+    calibration: Annotated[
+        Path | None, typer.Option(help="Calibration YAML from `undertow calibrate`.")
+    ] = None,
+    initial_position: Annotated[
+        str | None,
+        typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
+    ] = None,
+    smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
+    output_rate: Annotated[
+        float | None, typer.Option(help="Output rate, Hz (default: every measurement).")
+    ] = None,
+    topics: TopicsOption = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Localize a log with the paper's 18-state UKF; writes trajectory.tum/.npz and config.yaml.
+
+    Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
+    --calibration calm_cal.yaml --out runs/a10/proposed`
+    """
+    from .estimation.run import localize as run_localize
+    from .estimation.run import save_trajectory
+
+    if (wave_amplitude is None) != (wave_frequency is None):
+        raise UndertowError("give both --wave-amplitude and --wave-frequency (or --wave NAME)")
+    condition = (wave_amplitude, wave_frequency) if wave_amplitude is not None else wave
+    params = {}
+    if output_rate is not None:
+        params["output_rate_hz"] = output_rate
+    with _progress(quiet) as progress:
+        progress.add_task(f"localizing ({variant})", total=None)
+        log = _load_log(log_path, topics)
+        trajectory = run_localize(
+            log,
+            variant=variant,
+            profile=profile,
+            wave=condition,
+            calibration=calibration,
+            initial_position=_triple(initial_position, "--initial-position") or "auto",
+            extrapolate=extrapolate,
+            smooth=smooth,
+            **params,
+        )
+        save_trajectory(trajectory, out_dir)
+    if not quiet:
+        err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
+
+
+@app.command()
+@user_errors
+def calibrate(
+    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="A run with ground truth.")],
+    ground_truth: Annotated[
+        Path | None,
+        typer.Argument(help="Ground-truth TUM file (default: the log's ground_truth stream)."),
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", help="Calibration YAML to write.")] = Path(
+        "calibration.yaml"
+    ),
+    topics: TopicsOption = None,
+) -> None:
+    """Estimate the DR drift mu_b, the IMU gyro bias and the DVL scale factor from a run with
+    ground truth, for later runs (`undertow localize --calibration`).
+
+    Example: `undertow calibrate runs/calm/log runs/calm/ground_truth.tum --out calm_cal.yaml`
+    """
+    from .estimation.calibration import calibrate as run_calibration
+
+    log = _load_log(log_path, topics)
+    if ground_truth is not None:
+        log = log.replace(ground_truth=_read_ground_truth(ground_truth))
+    result = run_calibration(log)
+    result.save_yaml(out)
+    _print_json(result.to_dict())
+
+
+def _read_ground_truth(path: Path):
+    from .io.tum import read_tum
+    from .log import GroundTruth
+
+    t, position, rpy = read_tum(path)
+    return GroundTruth(t=t, position=position, orientation=rpy)
+
+
+@evaluate_app.command("trajectory")
+@user_errors
+def evaluate_trajectory(
+    estimate: Annotated[Path, typer.Argument(help="Localization folder or trajectory.npz.")],
+    ground_truth: Annotated[Path, typer.Argument(help="Ground-truth TUM file (e.g. 2000 Hz).")],
+    align: Annotated[str, typer.Option(help="none | origin (first poses made equal).")] = "none",
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Per-axis RMSE (x, y, z, roll, pitch, yaw, vx, vy, vz; the paper's Table II) and NEES.
+
+    Example: `undertow evaluate trajectory runs/a10/proposed runs/a10/ground_truth.tum --json`
+    """
+    from rich.table import Table
+
+    from .evaluation.trajectory import trajectory_rmse
+    from .trajectory import Trajectory
+
+    result = trajectory_rmse(Trajectory.load_npz(estimate), _read_ground_truth(ground_truth), align)
+    if as_json:
+        _print_json(result.to_dict())
+        return
+    table = Table(title=f"RMSE of {estimate} (align {align})")
+    table.add_column("axis")
+    table.add_column("RMSE", justify="right")
+    for key, value in result.rmse.items():
+        table.add_row(key, f"{value:.4f}")
+    out.print(table)
+    out.print(
+        f"NEES (pose, 6 dof): mean {result.nees_mean:.2f}, "
+        f"{100 * result.nees_fraction_in_95:.0f} % inside the 95 % bound; {result.samples} samples"
+    )
+
+
+@app.command("map")
+@user_errors
+def map_command(
+    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
+    trajectory: Annotated[
+        Path, typer.Option(help="Localization folder or trajectory.npz (with covariances).")
+    ],
+    out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    method: Annotated[str, typer.Option(help="adaptive | bki | csm")] = "adaptive",
+    resolution: Annotated[float, typer.Option(help="Grid size, m.")] = 0.1,
+    length_scale: Annotated[float, typer.Option(help="Length scale of bki, m.")] = 0.15,
+    prior: Annotated[Path | None, typer.Option(help="Seed from a saved map.npz.")] = None,
+    config: Annotated[Path | None, typer.Option(help="Mapping config YAML.")] = None,
+    topics: TopicsOption = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Occupancy map of the seafloor from DVL beams and sonar ranges; writes map.npz, map.ply
+    (occupied cell centres with mean and variance) and config.yaml.
+
+    Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --method adaptive
+    --out runs/a10/map`
+    """
+    import yaml
+
+    from .mapping.config import MappingConfig
+    from .mapping.run import map_log, save_map
+    from .trajectory import Trajectory
+
+    settings = {}
+    if config is not None:
+        try:
+            settings = yaml.safe_load(config.read_text()) or {}
+        except (OSError, yaml.YAMLError) as exc:
+            raise UndertowError(f"{config}: cannot read mapping config ({exc})") from exc
+    settings.update(method=method, resolution=resolution, length_scale=length_scale)
+    cfg = MappingConfig.from_dict(settings)
+    with _progress(quiet) as progress:
+        progress.add_task(f"mapping ({method})", total=None)
+        log = _load_log(log_path, topics)
+        result = map_log(log, Trajectory.load_npz(trajectory), cfg, prior=prior)
+        save_map(result, out_dir)
+    if not quiet:
+        err.print(
+            f"wrote {out_dir}/map.npz, map.ply ({result.metadata['occupied_cells']} occupied "
+            "cells), config.yaml"
+        )
+
+
+@evaluate_app.command("map")
+@user_errors
+def evaluate_map_command(
+    map_path: Annotated[Path, typer.Argument(metavar="MAP", help="map.npz, map.ply or folder.")],
+    ground_truth: Annotated[Path, typer.Argument(help="Ground-truth point cloud (PLY).")],
+    threshold: Annotated[float, typer.Option(help="Occupied if mean > threshold.")] = 0.5,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Average cloud-to-cloud distance map -> ground truth (CloudCompare's C2C), occupied cells
+    (the paper's Table IV) and the reverse distance (coverage).
+
+    Example: `undertow evaluate map runs/a10/map runs/a10/ground_truth.ply --json`
+    """
+    from .evaluation.cloud import evaluate_map
+    from .io.ply import read_ply
+    from .mapping.grid import OccupancyMap
+
+    if map_path.is_dir():
+        map_path = map_path / "map.npz"
+    resolution = None
+    if map_path.suffix == ".ply":
+        points, _ = read_ply(map_path)
+    else:
+        occupancy = OccupancyMap.load(map_path)
+        points, resolution = occupancy.points(threshold), occupancy.resolution
+    gt_points, _ = read_ply(ground_truth)
+    result = evaluate_map(points, gt_points, resolution=resolution)
+    if as_json:
+        _print_json(result.to_dict())
+        return
+    for key, value in result.to_dict().items():
+        out.print(f"{key:>28}: {value:.4f}" if isinstance(value, float) else f"{key:>28}: {value}")
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()

@@ -124,6 +124,7 @@ class Localizer:
             gate[:] = chi2.ppf(cfg.gate_probability, model.KIND_DIM)
         mu = np.array(cfg.dr_bias_drift_rad_s + cfg.gyro_bias_drift_rad_s2, float)
         mount = log.mounting
+        nis_stats = np.zeros((4, len(model.NIS_FIELDS)))
         out_t, out_x, out_P, counts = model._run_filter(
             t, kind, z, R, x0, P0, float(t[0]), wm, wc, float(lam),
             np.array(cfg.accel_density + cfg.angular_accel_density, float),
@@ -132,16 +133,34 @@ class Localizer:
             np.ascontiguousarray(mount.dvl.rotation_matrix().T),
             np.array(mount.dvl.translation, float), np.array(mount.barometer.translation, float),
             float(cfg.max_dt_s), gate, not cfg.estimates_bias, out_times, record_all, out_n,
+            nis_stats,
         )  # fmt: skip
         metadata = {
             "variant": cfg.variant,
             "counts": {**rejected, **dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))},
+            "nis": _nis_summary(nis_stats),
             "wave_noise": noise.to_dict() if cfg.adds_wave_noise else None,
             "wave_condition": noise.condition,
             "config": cfg.model_dump(),
             "source": log.source,
         }
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
+
+
+def _nis_summary(stats: np.ndarray) -> dict:
+    """Per sensor: mean NIS (sum nu^T S^-1 nu / count; None without innovations), its expected
+    value dof = dim z, the fraction with NIS <= chi2_95(dof) and the count."""
+    out = {}
+    for k, name in enumerate(model.KIND_NAMES):
+        total, count, inside = stats[k]
+        n = int(count)
+        out[name] = {
+            "mean": float(total / n) if n else None,
+            "dof": model.KIND_DIM[k],
+            "fraction_in_95": float(inside / n) if n else None,
+            "count": n,
+        }
+    return out
 
 
 def _measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise):

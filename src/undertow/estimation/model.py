@@ -57,6 +57,10 @@ COUNT_NAMES = (
     "nonfinite_rejected", "dt_capped", "no_predict_dt_nonpositive", "cholesky_repairs",
     "numerical_reverts",
 )  # fmt: skip
+# NIS accumulators (optional last argument of _run_filter), one row per kind:
+# [sum of nu^T S^-1 nu, innovations evaluated, innovations with nis <= CHI2_95[kind]]
+NIS_FIELDS = ("nis_sum", "count", "in_95")
+CHI2_95 = np.array([7.814727903251179, 7.814727903251179, 7.814727903251179, 3.841458820694124])
 
 
 @njit(cache=True)
@@ -195,6 +199,7 @@ def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws):
 def _run_filter(
     t, kind, z, Rm, x0, P0, t0, wm, wc, lam, q_acc, q_bias, mu_bias,
     imu_Rt, dvl_Rt, dvl_r, baro_r, dt_max, gate, freeze, out_times, record_all, out_n,
+    nis_stats=None,
 ):  # fmt: skip
     """Walk the merged measurements (t, kind, z (N, 3), Rm (N, 3, 3)) in order: predict to each
     measurement time (none if dt <= 0, dt capped at dt_max), redraw sigma points, update.
@@ -202,6 +207,11 @@ def _run_filter(
     Records (x, P) after the last update at each distinct time (record_all) or, otherwise, at
     ``out_times`` (the filter predicted to that time; the filter itself is not changed).
     Returns (out_t, out_x, out_P, counts) with counts as in COUNT_NAMES.
+
+    ``nis_stats`` (optional, (4, 3) float, zeroed by the caller) accumulates per kind the
+    normalized innovation squared NIS = nu^T S^-1 nu of every innovation evaluated (applied or
+    gated; not when S cannot be factorized): rows as in NIS_FIELDS. For a consistent filter
+    E[NIS] = dim z (KIND_DIM) and NIS <= CHI2_95[kind] with probability 0.95.
     """
     n = N_STATE
     npts = 2 * n + 1
@@ -289,7 +299,12 @@ def _run_filter(
             xb[:] = x
             Pb[:, :] = P
             zmask = zmask_angle if kd == DR else (zmask_lin1 if m == 1 else zmask_lin)
-            status, _ = _update(x, P, chi, Zs, zk, Rk, wm, wc, STATE_ANGLES, zmask, gate[kd])
+            status, nis = _update(x, P, chi, Zs, zk, Rk, wm, wc, STATE_ANGLES, zmask, gate[kd])
+            if nis_stats is not None and status < 2 and np.isfinite(nis):
+                nis_stats[kd, 0] += nis
+                nis_stats[kd, 1] += 1.0
+                if nis <= CHI2_95[kd]:
+                    nis_stats[kd, 2] += 1.0
             if status == 0 and _all_finite(x) and _all_finite(P):
                 counts[kd] += 1
             else:

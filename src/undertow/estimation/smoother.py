@@ -1,0 +1,189 @@
+"""Unscented Rauch-Tung-Striebel smoother (Saerkkae 2008) for offline use: Trajectory -> Trajectory.
+
+Backward pass over the filtered (x_k, P_k) at the filter's distinct update times t_k, from
+k = N-2 down to 0, with the filter's own step dt_k = min(t_{k+1} - t_k, max_dt_s) and its
+process model f and noise Q (eq:dynamics_model, :mod:`undertow.estimation.model`):
+
+    chi_i  = sigma points of N(x_k, P_k)                            (ukf.py, angles wrapped)
+    m^-    = mean_i f(chi_i, dt_k)                                  (reference-point angle mean)
+    P^-    = sum_i W^c_i (f(chi_i) - m^-)(f(chi_i) - m^-)^T + Q(x_k, dt_k)
+    C      = sum_i W^c_i (chi_i - x_k)(f(chi_i) - m^-)^T             (wrapped residuals)
+    G      = C (P^-)^-1                                             (Cholesky solves)
+    x^s_k  = x_k + G wrap(x^s_{k+1} - m^-)
+    P^s_k  = P_k + G (P^s_{k+1} - P^-) G^T                          (symmetrized, repaired)
+
+starting from x^s_{N-1} = x_{N-1}, P^s_{N-1} = P_{N-1}. Variants without bias estimation use
+the filter's handling: no mean drift mu_b, and the bias states frozen at 0 (variance 1e-12, no
+correlation) in (m^-, P^-) and in the result. A step whose result is not finite keeps the
+filtered (x_k, P_k) and is counted.
+
+The smoother needs the filter output at every processed measurement time
+(``LocalizerConfig.output_rate_hz = None``): a decimated trajectory has lost the updates between
+its rows and is refused.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..errors import ConfigError, DataError
+from ..trajectory import Trajectory
+from . import model
+from .localize import LocalizerConfig
+from .ukf import (
+    _cholesky_repair,
+    _residuals,
+    _solve_lower,
+    _solve_upper_t,
+    _symmetrize,
+    _weighted_outer,
+    _weights,
+    _wrap,
+)
+
+SMOOTHER_COUNT_NAMES = ("cholesky_repairs", "nonfinite_kept_filtered")
+
+
+@njit(cache=True)
+def _rts_workspace(n):
+    npts = 2 * n + 1
+    return (
+        np.empty((n, npts)), np.empty((n, n)), np.zeros((n, n)), np.empty((n, n)), np.empty(n),
+        np.empty(n), np.empty((n, n)),
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, ws):
+    """One URTS backward step, in place: (x, P) = (x_k, P_k) -> (x^s_k, P^s_k).
+
+    chi: sigma points (2n+1, n) of N(x_k, P_k); DfT: transposed residuals f(chi_i) - m^-
+    (n, 2n+1); (m_pred, P_pred) = (m^-, P^-), P_pred is used as a workspace. Returns the number
+    of Cholesky repairs (0-2) or -1 if P^- is not finite.
+    """
+    DxT, C, L, G, row, d, GA = ws
+    n = x.size
+    _residuals(chi, x, angle_mask, DxT)
+    _weighted_outer(DxT, DfT, wc, C)  # C = sum W^c (chi_i - x_k)(f(chi_i) - m^-)^T
+    status = _cholesky_repair(P_pred, L)
+    if status < 0:
+        return -1
+    for i in range(n):  # G_i^T = (P^-)^-1 C_i^T  (P^- symmetric)
+        for a in range(n):
+            row[a] = C[i, a]
+        _solve_lower(L, row)
+        _solve_upper_t(L, row)
+        for a in range(n):
+            G[i, a] = row[a]
+    for a in range(n):
+        v = xs_next[a] - m_pred[a]
+        d[a] = _wrap(v) if angle_mask[a] else v
+    for i in range(n):
+        s = 0.0
+        for a in range(n):
+            s += G[i, a] * d[a]
+        x[i] += s
+        if angle_mask[i]:
+            x[i] = _wrap(x[i])
+    for i in range(n):  # GA = G (P^s_{k+1} - P^-)
+        for b in range(n):
+            s = 0.0
+            for a in range(n):
+                s += G[i, a] * (Ps_next[a, b] - P_pred[a, b])
+            GA[i, b] = s
+    for i in range(n):
+        for j in range(i, n):
+            s = 0.0
+            for a in range(n):
+                s += GA[i, a] * G[j, a]
+            v = P[i, j] + s
+            P[i, j] = v
+            P[j, i] = v
+    _symmetrize(P)
+    repaired = _cholesky_repair(P, L)  # floor eigenvalues if round-off made P^s indefinite
+    return status + max(repaired, 0)
+
+
+@njit(cache=True)
+def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze):
+    """URTS backward pass of the 18-state model over filtered (t, xf (N, 18), Pf (N, 18, 18)).
+
+    Returns (xs, Ps, counts) with counts as in SMOOTHER_COUNT_NAMES.
+    """
+    n = model.N_STATE
+    npts = 2 * n + 1
+    N = t.size
+    xs = xf.copy()
+    Ps = Pf.copy()
+    counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
+    ws = (
+        np.empty((npts, n)), np.empty((npts, n)), np.empty((n, npts)), np.zeros((n, n)),
+        np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
+    )  # fmt: skip
+    ws_rts = _rts_workspace(n)
+    no_mu = np.zeros(6)
+    mu = no_mu if freeze else mu_bias
+    m = np.empty(n)
+    Pm = np.empty((n, n))
+    x = np.empty(n)
+    P = np.empty((n, n))
+    for k in range(N - 2, -1, -1):
+        dt = min(t[k + 1] - t[k], dt_max)
+        m[:] = xf[k]
+        Pm[:, :] = Pf[k]
+        status = model._predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu, ws)
+        if freeze:
+            model._freeze_bias(m, Pm)
+        x[:] = xf[k]
+        P[:, :] = Pf[k]
+        flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], wc,
+                         model.STATE_ANGLES, ws_rts)  # fmt: skip
+        if status < 0 or flag < 0 or not (model._all_finite(x) and model._all_finite(P)):
+            counts[1] += 1
+            continue
+        counts[0] += max(status, 0) + flag
+        if freeze:
+            model._freeze_bias(x, P)
+        xs[k] = x
+        Ps[k] = P
+    return xs, Ps, counts
+
+
+def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Trajectory:
+    """Unscented RTS smoothing of a filtered trajectory (see the module docstring).
+
+    ``config``: the LocalizerConfig the trajectory was filtered with; None takes it from
+    ``trajectory.metadata["config"]`` (set by :meth:`Localizer.run`). The result has
+    ``metadata["smoothed"] = True`` and ``metadata["smoother_counts"]``.
+    """
+    meta = trajectory.metadata or {}
+    if meta.get("smoothed"):
+        raise ConfigError("smooth: the trajectory is already smoothed")
+    if config is None:
+        if "config" not in meta:
+            raise ConfigError("smooth: the trajectory carries no filter config; pass the "
+                              "LocalizerConfig it was filtered with")  # fmt: skip
+        config = LocalizerConfig(**meta["config"])
+    rate = meta.get("config", {}).get("output_rate_hz", config.output_rate_hz)
+    if rate is not None or config.output_rate_hz is not None:
+        raise ConfigError(f"smooth: the trajectory was decimated (output_rate_hz={rate}); run the "
+                          "Localizer with output_rate_hz=None to smooth it")  # fmt: skip
+    t = trajectory.t
+    if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
+        raise DataError("smooth: trajectory times must be finite and strictly increasing")
+    cfg = config
+    wm, wc, lam = _weights(model.N_STATE, cfg.alpha, cfg.beta, cfg.kappa)
+    xs, Ps, counts = _run_smoother(
+        t, np.ascontiguousarray(trajectory.x), np.ascontiguousarray(trajectory.P), wm, wc,
+        float(lam), np.array(cfg.accel_density + cfg.angular_accel_density, float),
+        np.array(cfg.dr_bias_walk_density + cfg.gyro_bias_walk_density, float),
+        np.array(cfg.dr_bias_drift_rad_s + cfg.gyro_bias_drift_rad_s2, float),
+        float(cfg.max_dt_s), not cfg.estimates_bias,
+    )  # fmt: skip
+    metadata = {
+        **meta,
+        "smoothed": True,
+        "smoother_counts": dict(zip(SMOOTHER_COUNT_NAMES, counts.tolist(), strict=True)),
+    }
+    return trajectory.replace(x=xs, P=Ps, metadata=metadata)
