@@ -5,4 +5,11 @@ from .grid import OccupancyMap
 from .mappers import make_mapper, write_map_ply
 from .samples import Samples, build_samples
 
-__all__ = ["MappingConfig", "OccupancyMap", "Samples", "build_samples", "make_mapper", "write_map_ply"]
+__all__ = [
+    "MappingConfig",
+    "OccupancyMap",
+    "Samples",
+    "build_samples",
+    "make_mapper",
+    "write_map_ply",
+]
