@@ -9,7 +9,8 @@ For each run:
   trough height / 2 over the zero-up-crossing waves, which is robust to a slow drift.
 - DVL standard deviation per axis (DVL frame) during the wave segment, taken about the TRUE motion
   (ground truth expressed in the DVL frame) restricted to the constant-speed phase (|acceleration|
-  below a threshold), so neither the motion nor the acceleration phases inflate it. Without ground
+  below a threshold and speed above half the run's maximum), so neither the motion, the
+  acceleration phases nor a speed-proportional scale error inflate it. Without ground
   truth the reference is a centred moving average over two wave periods.
 - The barometer's wave-induced depth noise (not in the paper): std of depth(p) - true depth.
 
@@ -25,6 +26,7 @@ import numpy as np
 from scipy.signal import periodogram
 
 from .errors import DataError
+from .estimation.noise import NoiseProfile, wave_name
 from .evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
 from .log import Log, WaveProbe
 from .rotations import rpy_to_matrix
@@ -106,7 +108,11 @@ def characterize_run(log: Log, max_accel_mps2: float = 0.02, water_density: floa
         accel = np.gradient(v_world, gt.t, axis=0)
         steady_full = np.linalg.norm(_moving_average(accel, 0.5 * gt.rate_hz), axis=1)
         steady = np.interp(dvl.t, gt.t, steady_full) < max_accel_mps2
-        keep &= steady
+        # moving at cruise speed: a sound-speed scale error makes the offset speed-dependent,
+        # so mixing rest and cruise would inflate the std
+        speed = np.linalg.norm(v_world, axis=1)
+        cruising = np.interp(dvl.t, gt.t, speed) > max(0.05, 0.5 * float(speed.max()))
+        keep &= steady & cruising
         _, rpy, vel = interpolate_ground_truth(gt, dvl.t[keep], v_world)
         v_body = np.einsum("nji,nj->ni", rpy_to_matrix(rpy), vel)
         reference = v_body @ log.mounting.dvl.rotation_matrix()
@@ -145,3 +151,67 @@ def wave_noise(run: RunCharacterization, calm: RunCharacterization | None) -> tu
         float(np.sqrt(max(w**2 - c**2, 0.0)))
         for w, c in zip(run.dvl_std_mps, calm.dvl_std_mps, strict=True)
     )
+
+
+CALM_AMPLITUDE_M = 0.01  # a run whose probe shows less than this is the calm reference
+
+
+@dataclass(frozen=True)
+class Characterization:
+    """All runs, the calm reference among them (if any) and the resulting noise profile."""
+
+    runs: list[RunCharacterization]
+    calm: RunCharacterization | None
+    profile: NoiseProfile
+
+    def table(self) -> list[dict]:
+        """Rows of the paper's Table I: amplitude, frequency, DVL std (total and extra), depth."""
+        rows = []
+        for run in self.runs:
+            extra = wave_noise(run, self.calm) if run is not self.calm else (0.0, 0.0, 0.0)
+            rows.append(
+                {
+                    "source": run.source,
+                    "amplitude_m": run.wave.amplitude_m if run.wave else None,
+                    "amplitude_zero_crossing_m": (
+                        run.wave.amplitude_zero_crossing_m if run.wave else None
+                    ),
+                    "frequency_hz": run.wave.frequency_hz if run.wave else None,
+                    "dvl_std_mps": list(run.dvl_std_mps),
+                    "dvl_extra_std_mps": list(extra),
+                    "depth_std_m": run.depth_std_m,
+                    "samples": run.dvl_samples,
+                }
+            )
+        return rows
+
+
+def characterize(logs: list[Log], name: str = "characterized") -> Characterization:
+    """Characterize every run; the calmest run below :data:`CALM_AMPLITUDE_M` (or without waves)
+    is the calm reference whose noise is subtracted in quadrature; the rest become profile
+    conditions at their MEASURED amplitude and frequency."""
+    if not logs:
+        raise DataError("characterize: no logs given")
+    runs = [characterize_run(log) for log in logs]
+
+    def amplitude(run):
+        return run.wave.amplitude_m if run.wave else 0.0
+
+    calm_runs = [r for r in runs if amplitude(r) < CALM_AMPLITUDE_M]
+    calm = min(calm_runs, key=amplitude) if calm_runs else None
+    conditions = [{"name": "calm", "amplitude_m": 0.0, "frequency_hz": None, "dvl_std": [0.0] * 3}]
+    for run in runs:
+        if run in calm_runs or run.wave is None:
+            continue
+        conditions.append(
+            {
+                "name": wave_name(run.wave.amplitude_m, run.wave.frequency_hz),
+                "amplitude_m": run.wave.amplitude_m,
+                "frequency_hz": run.wave.frequency_hz,
+                "dvl_std": list(wave_noise(run, calm)),
+            }
+        )
+    how = "extra noise over the calm run" if calm else "total noise (no calm run given)"
+    source = f"undertow characterize: {how}; runs: " + ", ".join(r.source for r in runs)
+    profile = NoiseProfile.from_dict({"name": name, "source": source, "conditions": conditions})
+    return Characterization(runs, calm, profile)

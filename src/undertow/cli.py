@@ -34,7 +34,7 @@ app = typer.Typer(
 evaluate_app = typer.Typer(no_args_is_help=True, help="Evaluate results against ground truth.")
 app.add_typer(evaluate_app, name="evaluate")
 
-out = Console()
+console = Console()
 err = Console(stderr=True)
 
 
@@ -102,7 +102,7 @@ def info(
     if as_json:
         _print_json(summary.to_dict())
     else:
-        out.print(summary.to_rich_table())
+        console.print(summary.to_rich_table())
 
 
 @app.command()
@@ -126,7 +126,7 @@ def simulate(
 
     if list_:
         for name, description in list_scenarios().items():
-            out.print(f"[bold]{name}[/]  {description}", highlight=False)
+            console.print(f"[bold]{name}[/]  {description}", highlight=False)
         return
     if scenario is None or out_dir is None:
         raise UndertowError("simulate needs a SCENARIO and --out DIR (or --list)")
@@ -291,8 +291,8 @@ def evaluate_trajectory(
     table.add_column("RMSE", justify="right")
     for key, value in result.rmse.items():
         table.add_row(key, f"{value:.4f}")
-    out.print(table)
-    out.print(
+    console.print(table)
+    console.print(
         f"NEES (pose, 6 dof): mean {result.nees_mean:.2f}, "
         f"{100 * result.nees_fraction_in_95:.0f} % inside the 95 % bound; {result.samples} samples"
     )
@@ -377,8 +377,57 @@ def evaluate_map_command(
         _print_json(result.to_dict())
         return
     for key, value in result.to_dict().items():
-        out.print(f"{key:>28}: {value:.4f}" if isinstance(value, float) else f"{key:>28}: {value}")
+        console.print(
+            f"{key:>28}: {value:.4f}" if isinstance(value, float) else f"{key:>28}: {value}"
+        )
 
 
 def main() -> None:  # pragma: no cover - console entry point
     app()
+
+
+@app.command("characterize")
+@user_errors
+def characterize_command(
+    logs: Annotated[list[Path], typer.Argument(metavar="LOG...", help="Runs with a wave probe.")],
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Noise profile YAML for `undertow localize`.")
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    topics: TopicsOption = None,
+) -> None:
+    """Wave amplitude and frequency (wave probe) and the DVL noise per axis during the waves,
+    about the true motion (the paper's Table I), plus the barometer's wave-induced depth noise.
+    A calm run among the logs is the reference whose noise is subtracted.
+
+    Example: `undertow characterize runs/calm/log runs/a10/log runs/a05/log --out profile.yaml`
+    """
+    from rich.table import Table
+
+    from .characterize import characterize
+
+    result = characterize([_load_log(p, topics) for p in logs])
+    if out is not None:
+        result.profile.to_yaml(out)
+    if as_json:
+        _print_json({"runs": result.table(), "profile": result.profile.to_dict()})
+        return
+    table = Table(title="Wave characterization (DVL std in the DVL frame, m/s)")
+    for col in ("run", "a (m)", "f (Hz)", "vx", "vy", "vz", "extra vx", "depth std (m)"):
+        table.add_column(col, justify="right")
+    for row in result.table():
+        table.add_row(
+            row["source"],
+            _fmt(row["amplitude_m"]),
+            _fmt(row["frequency_hz"]),
+            *(_fmt(v) for v in row["dvl_std_mps"]),
+            _fmt(row["dvl_extra_std_mps"][0]),
+            _fmt(row["depth_std_m"]),
+        )
+    console.print(table)
+    if result.calm is None:
+        err.print("no calm run among the logs: the profile holds total, not extra, noise")
+
+
+def _fmt(value, digits: int = 3) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"

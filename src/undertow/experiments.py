@@ -1,0 +1,244 @@
+"""The paper's experiments end to end, for one seed (Monte Carlo over seeds: :mod:`undertow.study`).
+
+For a seed s, with every simulator parameter from the built-in scenarios (never tuned here):
+
+1. simulate the calm carriage run and the three wave conditions (and the rock survey);
+2. characterize the waves and the DVL noise (Table I) -> a noise profile of the EXTRA noise;
+3. calibrate on the calm run (with its ground truth): mu_b (DR drift) and the DVL scale factor;
+4. localize each wave run with the paper's four variants (baseline, be, an, proposed), the
+   measured wave condition and the characterized profile; the calibration's mu_b is used by the
+   bias-estimating variants (the paper's "standard sensor calibration"), the DVL scale factor is
+   NOT (the paper does not correct it); ``proposed+scale`` adds it (beyond the paper);
+5. map with CSM on the baseline trajectory and CSM, BKI (l = 0.15 m) and adaptive BKI on the
+   proposed one (Table IV); evaluate against the ground truth.
+
+Returns plain, JSON-serializable numbers; :func:`run_seed_with_artifacts` also returns the
+in-memory objects the figures need.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .characterize import characterize
+from .estimation.calibration import calibrate
+from .estimation.run import localize
+from .evaluation.cloud import evaluate_map
+from .evaluation.trajectory import trajectory_rmse
+from .mapping.config import MappingConfig
+from .mapping.run import map_log
+from .sim import load_scenario, simulate
+
+WAVE_CONDITIONS = ("wave-a0.10-f1.00", "wave-a0.10-f0.75", "wave-a0.05-f0.75")
+VARIANTS = ("baseline", "be", "an", "proposed")
+MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("adaptive", "proposed"))
+
+
+@dataclass(frozen=True)
+class StudySettings:
+    """What the study runs (defaults: the paper's experiments)."""
+
+    conditions: tuple[str, ...] = WAVE_CONDITIONS
+    calm: str = "calm"
+    rock_survey: str | None = "rock-survey"
+    bki_length_scale: float = 0.15
+
+
+@dataclass
+class Artifacts:
+    """In-memory results of one seed for figures and the report (not serialized)."""
+
+    simulations: dict = field(default_factory=dict)
+    trajectories: dict = field(default_factory=dict)  # (condition, variant) -> Trajectory
+    maps: dict = field(default_factory=dict)  # (condition, "method/variant") -> OccupancyMap
+
+
+def run_seed(seed: int, settings: StudySettings | None = None) -> dict:
+    """The whole study for one seed; plain numbers only (a Dask task)."""
+    return run_seed_with_artifacts(seed, settings)[0]
+
+
+def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
+    """(results, artifacts) of the whole study for one seed."""
+    settings = settings or StudySettings()
+    art = Artifacts()
+    names = [settings.calm, *settings.conditions]
+    for name in names:
+        art.simulations[name] = simulate(load_scenario(name), seed=seed)
+    logs = {name: art.simulations[name].log for name in names}
+    char = characterize([logs[n] for n in names], name=f"simulated (seed {seed})")
+    table1 = {name: row for name, row in zip(names, char.table(), strict=True)}
+    calibration = calibrate(logs[settings.calm])
+    results = {
+        "seed": seed,
+        "table1": {n: _table1_row(table1[n]) for n in names},
+        "calibration": _plain(calibration.to_dict()),
+        "localization": {},
+        "mapping": {},
+    }
+    for name in settings.conditions:
+        log = logs[name]
+        row = table1[name]
+        wave = (row["amplitude_m"], row["frequency_hz"])
+        loc = {}
+        for variant in (*VARIANTS, "proposed+scale"):
+            base = variant.split("+")[0]
+            params = {} if variant.endswith("+scale") else {"dvl_scale_factor": 1.0}
+            traj = localize(
+                log, base, profile=char.profile, wave=wave, calibration=calibration, **params
+            )
+            art.trajectories[(name, variant)] = traj
+            loc[variant] = _trajectory_metrics(traj, log.ground_truth)
+        results["localization"][name] = loc
+        results["mapping"][name] = _mapping(name, log, art, settings)
+    if settings.rock_survey:
+        results["rock_survey"] = _rock_survey(settings.rock_survey, seed, calibration, art)
+    results["claims"] = evaluate_claims(results)
+    return results, art
+
+
+def _trajectory_metrics(traj, ground_truth) -> dict:
+    errors = trajectory_rmse(traj, ground_truth)
+    std = np.sqrt(np.einsum("nii->ni", traj.P[:, :9, :9]))
+    return {
+        "rmse": errors.rmse,
+        "nees_mean": errors.nees_mean,
+        "nees_fraction_in_95": errors.nees_fraction_in_95,
+        "mean_std": {
+            "x_m": float(std[:, 0].mean()),
+            "y_m": float(std[:, 1].mean()),
+            "yaw_rad": float(std[:, 5].mean()),
+            "vx_mps": float(std[:, 6].mean()),
+        },
+    }
+
+
+def _mapping(name: str, log, art: Artifacts, settings: StudySettings) -> dict:
+    out = {}
+    cloud = art.simulations[name].floor_cloud
+    for method, variant in MAP_RUNS:
+        cfg = MappingConfig(method=method, length_scale=settings.bki_length_scale)
+        result = map_log(log, art.trajectories[(name, variant)], cfg)
+        key = f"{method}/{variant}"
+        art.maps[(name, key)] = result.map
+        evaluation = evaluate_map(result.map.points(0.5), cloud, resolution=result.map.resolution)
+        out[key] = _plain(evaluation.to_dict())
+    return out
+
+
+def _rock_survey(name: str, seed: int, calibration, art: Artifacts) -> dict:
+    """The free-vehicle survey over the rock: localize (proposed), map (adaptive and BKI), and
+    evaluate the map over the rock's footprint (plus a margin)."""
+    sim = simulate(load_scenario(name), seed=seed)
+    art.simulations[name] = sim
+    wave = (sim.scenario.wave.amplitude_m, sim.scenario.wave.frequency_hz)
+    traj = localize(sim.log, "proposed", wave=wave, calibration=calibration, extrapolate=True)
+    art.trajectories[(name, "proposed")] = traj
+    rock = sim.scenario.tank.rock
+    margin = 0.5
+    lo = np.array([rock.center_x_m - rock.length_m / 2, rock.center_y_m - rock.width_m / 2])
+    hi = np.array([rock.center_x_m + rock.length_m / 2, rock.center_y_m + rock.width_m / 2])
+    near = np.all((sim.floor_cloud[:, :2] > lo - margin) & (sim.floor_cloud[:, :2] < hi + margin), 1)
+    out = {"trajectory": _trajectory_metrics(traj, sim.log.ground_truth)}
+    for method in ("adaptive", "bki"):
+        result = map_log(sim.log, traj, MappingConfig(method=method))
+        art.maps[(name, f"{method}/proposed")] = result.map
+        pts = result.map.points(0.5)
+        inside = np.all((pts[:, :2] > lo - margin) & (pts[:, :2] < hi + margin), axis=1)
+        evaluation = evaluate_map(pts[inside], sim.floor_cloud[near], resolution=0.1)
+        out[method] = _plain(evaluation.to_dict())
+    return out
+
+
+def _table1_row(row: dict) -> dict:
+    keep = ("amplitude_m", "frequency_hz", "dvl_std_mps", "dvl_extra_std_mps", "depth_std_m")
+    return _plain({k: row[k] for k in keep})
+
+
+#: The paper's qualitative claims, as predicates over one condition's results.
+CLAIMS = {
+    "bias_estimation_reduces_yaw_error": (
+        "bias estimation removes the heading drift (yaw RMSE: be < baseline)",
+        lambda c: c["localization"]["be"]["rmse"]["yaw_rad"]
+        < c["localization"]["baseline"]["rmse"]["yaw_rad"],
+    ),
+    "bias_estimation_reduces_y_error": (
+        "bias estimation removes the y error (y RMSE: be < baseline)",
+        lambda c: c["localization"]["be"]["rmse"]["y_m"]
+        < c["localization"]["baseline"]["rmse"]["y_m"],
+    ),
+    "added_noise_reduces_velocity_error": (
+        "added noise improves the velocity error (vx RMSE: an < baseline)",
+        lambda c: c["localization"]["an"]["rmse"]["vx_mps"]
+        < c["localization"]["baseline"]["rmse"]["vx_mps"],
+    ),
+    "added_noise_widens_covariance": (
+        "added noise widens the covariance in waves (mean vx std: an > baseline)",
+        lambda c: c["localization"]["an"]["mean_std"]["vx_mps"]
+        > c["localization"]["baseline"]["mean_std"]["vx_mps"],
+    ),
+    "x_error_not_removed_by_filter": (
+        "the x error (DVL along-track offset) stays: proposed within 10 % of baseline",
+        lambda c: abs(
+            c["localization"]["proposed"]["rmse"]["x_m"]
+            - c["localization"]["baseline"]["rmse"]["x_m"]
+        )
+        < 0.1 * c["localization"]["baseline"]["rmse"]["x_m"],
+    ),
+    "proposed_filter_improves_csm_map": (
+        "the proposed filter improves the CSM map (C2C: csm/proposed < csm/baseline)",
+        lambda c: c["mapping"]["csm/proposed"]["c2c_mean_m"]
+        < c["mapping"]["csm/baseline"]["c2c_mean_m"],
+    ),
+    "adaptive_bki_most_accurate": (
+        "adaptive BKI is the most accurate map (lowest C2C of csm, bki, adaptive)",
+        lambda c: c["mapping"]["adaptive/proposed"]["c2c_mean_m"]
+        < min(c["mapping"]["bki/proposed"]["c2c_mean_m"], c["mapping"]["csm/proposed"]["c2c_mean_m"]),
+    ),
+    "bki_denser_than_csm": (
+        "both BKI maps are denser than CSM (occupied cells)",
+        lambda c: min(
+            c["mapping"]["bki/proposed"]["occupied_cells"],
+            c["mapping"]["adaptive/proposed"]["occupied_cells"],
+        )
+        > c["mapping"]["csm/proposed"]["occupied_cells"],
+    ),
+    "adaptive_fewer_cells_than_bki": (
+        "adaptive BKI has fewer occupied cells than BKI",
+        lambda c: c["mapping"]["adaptive/proposed"]["occupied_cells"]
+        < c["mapping"]["bki/proposed"]["occupied_cells"],
+    ),
+    "scale_calibration_removes_x_error": (
+        "beyond the paper: calibrating the DVL scale factor removes most of the x error",
+        lambda c: c["localization"]["proposed+scale"]["rmse"]["x_m"]
+        < 0.5 * c["localization"]["proposed"]["rmse"]["x_m"],
+    ),
+}
+
+
+def condition_view(results: dict, condition: str) -> dict:
+    """One condition's localization and mapping results (what claim predicates read)."""
+    return {
+        "localization": results["localization"][condition],
+        "mapping": results["mapping"][condition],
+    }
+
+
+def evaluate_claims(results: dict) -> dict:
+    """{claim: {condition: bool}} for one seed."""
+    return {
+        key: {c: bool(pred(condition_view(results, c))) for c in results["localization"]}
+        for key, (_, pred) in CLAIMS.items()
+    }
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
