@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ._plain import to_plain
 from .characterize import characterize
 from .estimation.calibration import calibrate
 from .estimation.run import localize
@@ -74,7 +75,7 @@ def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
     results = {
         "seed": seed,
         "table1": {n: _table1_row(table1[n]) for n in names},
-        "calibration": _plain(calibration.to_dict()),
+        "calibration": to_plain(calibration.to_dict()),
         "localization": {},
         "mapping": {},
     }
@@ -124,7 +125,7 @@ def _mapping(name: str, log, art: Artifacts, settings: StudySettings) -> dict:
         key = f"{method}/{variant}"
         art.maps[(name, key)] = result.map
         evaluation = evaluate_map(result.map.points(0.5), cloud, resolution=result.map.resolution)
-        out[key] = _plain(evaluation.to_dict())
+        out[key] = to_plain(evaluation.to_dict())
     return out
 
 
@@ -140,7 +141,9 @@ def _rock_survey(name: str, seed: int, calibration, art: Artifacts) -> dict:
     margin = 0.5
     lo = np.array([rock.center_x_m - rock.length_m / 2, rock.center_y_m - rock.width_m / 2])
     hi = np.array([rock.center_x_m + rock.length_m / 2, rock.center_y_m + rock.width_m / 2])
-    near = np.all((sim.floor_cloud[:, :2] > lo - margin) & (sim.floor_cloud[:, :2] < hi + margin), 1)
+    near = np.all(
+        (sim.floor_cloud[:, :2] > lo - margin) & (sim.floor_cloud[:, :2] < hi + margin), 1
+    )
     out = {"trajectory": _trajectory_metrics(traj, sim.log.ground_truth)}
     for method in ("adaptive", "bki"):
         result = map_log(sim.log, traj, MappingConfig(method=method))
@@ -148,72 +151,93 @@ def _rock_survey(name: str, seed: int, calibration, art: Artifacts) -> dict:
         pts = result.map.points(0.5)
         inside = np.all((pts[:, :2] > lo - margin) & (pts[:, :2] < hi + margin), axis=1)
         evaluation = evaluate_map(pts[inside], sim.floor_cloud[near], resolution=0.1)
-        out[method] = _plain(evaluation.to_dict())
+        out[method] = to_plain(evaluation.to_dict())
     return out
 
 
 def _table1_row(row: dict) -> dict:
     keep = ("amplitude_m", "frequency_hz", "dvl_std_mps", "dvl_extra_std_mps", "depth_std_m")
-    return _plain({k: row[k] for k in keep})
+    return to_plain({k: row[k] for k in keep})
 
 
 #: The paper's qualitative claims, as predicates over one condition's results.
 CLAIMS = {
     "bias_estimation_reduces_yaw_error": (
         "bias estimation removes the heading drift (yaw RMSE: be < baseline)",
-        lambda c: c["localization"]["be"]["rmse"]["yaw_rad"]
-        < c["localization"]["baseline"]["rmse"]["yaw_rad"],
+        lambda c: (
+            c["localization"]["be"]["rmse"]["yaw_rad"]
+            < c["localization"]["baseline"]["rmse"]["yaw_rad"]
+        ),
     ),
     "bias_estimation_reduces_y_error": (
         "bias estimation removes the y error (y RMSE: be < baseline)",
-        lambda c: c["localization"]["be"]["rmse"]["y_m"]
-        < c["localization"]["baseline"]["rmse"]["y_m"],
+        lambda c: (
+            c["localization"]["be"]["rmse"]["y_m"] < c["localization"]["baseline"]["rmse"]["y_m"]
+        ),
     ),
     "added_noise_reduces_velocity_error": (
         "added noise improves the velocity error (vx RMSE: an < baseline)",
-        lambda c: c["localization"]["an"]["rmse"]["vx_mps"]
-        < c["localization"]["baseline"]["rmse"]["vx_mps"],
+        lambda c: (
+            c["localization"]["an"]["rmse"]["vx_mps"]
+            < c["localization"]["baseline"]["rmse"]["vx_mps"]
+        ),
     ),
     "added_noise_widens_covariance": (
         "added noise widens the covariance in waves (mean vx std: an > baseline)",
-        lambda c: c["localization"]["an"]["mean_std"]["vx_mps"]
-        > c["localization"]["baseline"]["mean_std"]["vx_mps"],
+        lambda c: (
+            c["localization"]["an"]["mean_std"]["vx_mps"]
+            > c["localization"]["baseline"]["mean_std"]["vx_mps"]
+        ),
     ),
     "x_error_not_removed_by_filter": (
         "the x error (DVL along-track offset) stays: proposed within 10 % of baseline",
-        lambda c: abs(
-            c["localization"]["proposed"]["rmse"]["x_m"]
-            - c["localization"]["baseline"]["rmse"]["x_m"]
-        )
-        < 0.1 * c["localization"]["baseline"]["rmse"]["x_m"],
+        lambda c: (
+            abs(
+                c["localization"]["proposed"]["rmse"]["x_m"]
+                - c["localization"]["baseline"]["rmse"]["x_m"]
+            )
+            < 0.1 * c["localization"]["baseline"]["rmse"]["x_m"]
+        ),
     ),
     "proposed_filter_improves_csm_map": (
         "the proposed filter improves the CSM map (C2C: csm/proposed < csm/baseline)",
-        lambda c: c["mapping"]["csm/proposed"]["c2c_mean_m"]
-        < c["mapping"]["csm/baseline"]["c2c_mean_m"],
+        lambda c: (
+            c["mapping"]["csm/proposed"]["c2c_mean_m"] < c["mapping"]["csm/baseline"]["c2c_mean_m"]
+        ),
     ),
     "adaptive_bki_most_accurate": (
         "adaptive BKI is the most accurate map (lowest C2C of csm, bki, adaptive)",
-        lambda c: c["mapping"]["adaptive/proposed"]["c2c_mean_m"]
-        < min(c["mapping"]["bki/proposed"]["c2c_mean_m"], c["mapping"]["csm/proposed"]["c2c_mean_m"]),
+        lambda c: (
+            c["mapping"]["adaptive/proposed"]["c2c_mean_m"]
+            < min(
+                c["mapping"]["bki/proposed"]["c2c_mean_m"],
+                c["mapping"]["csm/proposed"]["c2c_mean_m"],
+            )
+        ),
     ),
     "bki_denser_than_csm": (
         "both BKI maps are denser than CSM (occupied cells)",
-        lambda c: min(
-            c["mapping"]["bki/proposed"]["occupied_cells"],
-            c["mapping"]["adaptive/proposed"]["occupied_cells"],
-        )
-        > c["mapping"]["csm/proposed"]["occupied_cells"],
+        lambda c: (
+            min(
+                c["mapping"]["bki/proposed"]["occupied_cells"],
+                c["mapping"]["adaptive/proposed"]["occupied_cells"],
+            )
+            > c["mapping"]["csm/proposed"]["occupied_cells"]
+        ),
     ),
     "adaptive_fewer_cells_than_bki": (
         "adaptive BKI has fewer occupied cells than BKI",
-        lambda c: c["mapping"]["adaptive/proposed"]["occupied_cells"]
-        < c["mapping"]["bki/proposed"]["occupied_cells"],
+        lambda c: (
+            c["mapping"]["adaptive/proposed"]["occupied_cells"]
+            < c["mapping"]["bki/proposed"]["occupied_cells"]
+        ),
     ),
     "scale_calibration_removes_x_error": (
         "beyond the paper: calibrating the DVL scale factor removes most of the x error",
-        lambda c: c["localization"]["proposed+scale"]["rmse"]["x_m"]
-        < 0.5 * c["localization"]["proposed"]["rmse"]["x_m"],
+        lambda c: (
+            c["localization"]["proposed+scale"]["rmse"]["x_m"]
+            < 0.5 * c["localization"]["proposed"]["rmse"]["x_m"]
+        ),
     ),
 }
 
@@ -232,13 +256,3 @@ def evaluate_claims(results: dict) -> dict:
         key: {c: bool(pred(condition_view(results, c))) for c in results["localization"]}
         for key, (_, pred) in CLAIMS.items()
     }
-
-
-def _plain(value):
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.generic):
-        return value.item()
-    return value

@@ -15,10 +15,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from .._atomic import atomic_path
+from .._plain import to_plain
 from ..errors import ConfigError
 from ..io.tum import write_tum
 from ..log import Log
@@ -80,18 +80,5 @@ def save_trajectory(trajectory: Trajectory, out_dir: str | Path) -> Path:
     write_tum(out / "trajectory.tum", trajectory.t, trajectory.position, trajectory.orientation)
     trajectory.save_npz(out / "trajectory.npz")
     with atomic_path(out / "config.yaml") as tmp:
-        tmp.write_text(yaml.safe_dump(_plain(trajectory.metadata), sort_keys=False))
+        tmp.write_text(yaml.safe_dump(to_plain(trajectory.metadata), sort_keys=False))
     return out
-
-
-def _plain(value):
-    """YAML-safe copy: numpy scalars/arrays to Python, tuples to lists."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value

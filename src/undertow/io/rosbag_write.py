@@ -22,6 +22,7 @@ import yaml
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from .._atomic import atomic_path
+from .._plain import to_plain
 from ..errors import UndertowError
 from ..log import Log
 from ..rotations import rpy_to_matrix, rpy_to_quaternion
@@ -64,18 +65,6 @@ class _Builder:
         return self.T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov)
 
 
-def _plain(value):
-    """JSON/YAML-safe copy of metadata (arrays and other objects are left out)."""
-    if isinstance(value, dict):
-        return {str(k): v for k, v in ((k, _plain(v)) for k, v in value.items()) if v is not None}
-    if isinstance(value, list | tuple):
-        items = [_plain(v) for v in value]
-        return items if all(v is not None for v in items) else None
-    if isinstance(value, np.generic):
-        return value.item()
-    return value if isinstance(value, str | int | float | bool) else None
-
-
 def _decimate(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
     if rate_hz is None or t.size < 2:
         return np.arange(t.size)
@@ -114,8 +103,8 @@ def write_log(
         sidecar = {
             "source": log.source,
             "flavor": flavor,
-            "mounting": _plain(log.mounting.to_dict()),
-            "metadata": _plain(log.metadata) or {},
+            "mounting": to_plain(drop_unknown=True, value=log.mounting.to_dict()),
+            "metadata": to_plain(drop_unknown=True, value=log.metadata) or {},
         }
         (bag / SIDECAR).write_text(yaml.safe_dump(sidecar, sort_keys=False), encoding="utf-8")
     return path

@@ -12,18 +12,25 @@ AXES = ("x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_mps", "vy_m
 
 #: Table I: std. dev. of DVL velocities during waves, (vx, vy, vz) m/s, by (amplitude, frequency).
 TABLE_I = {
-    "wave-a0.10-f1.00": {"amplitude_m": 0.10, "frequency_hz": 1.00, "dvl_std_mps": (0.025, 0.010, 0.003)},
-    "wave-a0.10-f0.75": {"amplitude_m": 0.10, "frequency_hz": 0.75, "dvl_std_mps": (0.040, 0.010, 0.003)},
-    "wave-a0.05-f0.75": {"amplitude_m": 0.05, "frequency_hz": 0.75, "dvl_std_mps": (0.011, 0.010, 0.003)},
+    "wave-a0.10-f1.00": {
+        "amplitude_m": 0.10, "frequency_hz": 1.00, "dvl_std_mps": (0.025, 0.010, 0.003)
+    },
+    "wave-a0.10-f0.75": {
+        "amplitude_m": 0.10, "frequency_hz": 0.75, "dvl_std_mps": (0.040, 0.010, 0.003)
+    },
+    "wave-a0.05-f0.75": {
+        "amplitude_m": 0.05, "frequency_hz": 0.75, "dvl_std_mps": (0.011, 0.010, 0.003)
+    },
 }  # fmt: skip
 
 #: Tables II and III: RMSE along the trajectory (the ablation omits v_z).
 TABLE_II_III = {
-    "baseline": dict(zip(AXES, (0.862, 0.297, 0.004, 0.003, 0.003, 0.015, 0.023, 0.007, 0.003))),
-    "be": dict(zip(AXES[:8], (0.857, 0.015, 0.004, 0.003, 0.003, 0.003, 0.023, 0.007))),
-    "an": dict(zip(AXES[:8], (0.865, 0.293, 0.004, 0.003, 0.003, 0.015, 0.020, 0.005))),
-    "proposed": dict(zip(AXES, (0.869, 0.012, 0.004, 0.003, 0.003, 0.003, 0.020, 0.005, 0.003))),
+    "baseline": (0.862, 0.297, 0.004, 0.003, 0.003, 0.015, 0.023, 0.007, 0.003),
+    "be": (0.857, 0.015, 0.004, 0.003, 0.003, 0.003, 0.023, 0.007),
+    "an": (0.865, 0.293, 0.004, 0.003, 0.003, 0.015, 0.020, 0.005),
+    "proposed": (0.869, 0.012, 0.004, 0.003, 0.003, 0.003, 0.020, 0.005, 0.003),
 }
+TABLE_II_III = {k: dict(zip(AXES[: len(v)], v, strict=True)) for k, v in TABLE_II_III.items()}
 
 #: Table IV: average cloud-to-cloud distance (m) and number of occupied cells.
 TABLE_IV = {
