@@ -8,14 +8,13 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e ".[test]"
+	$(BIN)/pip install -q -e ".[test,dask]"
 	touch $(STAMP)
 
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/undertow simulate calm --out out/calm --seed 0 --overwrite
-	$(BIN)/undertow info out/calm/log
+	$(BIN)/undertow demo --out results
 
 test: $(STAMP)
 	$(BIN)/pytest
@@ -28,4 +27,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py $(ONLY)
 
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) results

@@ -46,3 +46,32 @@ def test_quadrature_subtraction_of_calm_noise():
     calm = RunCharacterization("c", None, (0.006, 0.006, 0.002), 100, None, "gt")
     wavy = RunCharacterization("w", None, (0.010, 0.006, 0.001), 100, None, "gt")
     np.testing.assert_allclose(wave_noise(wavy, calm), [0.008, 0.0, 0.0], atol=1e-12)
+
+
+def test_recovers_the_simulators_waves_and_noise():
+    """Characterize a simulated carriage run: wave amplitude and frequency within a few percent
+    of the scenario, DVL sigmas within sampling error of the configured ones (base beam noise
+    through the A50 geometry plus the wave term kappa U(d) / sqrt2, U from linear theory)."""
+    from scipy.optimize import brentq
+
+    from undertow.sim import load_scenario, simulate
+
+    scenario = load_scenario("wave-a0.10-f0.75")
+    log = simulate(scenario, seed=5).log
+    run = characterize_run(log)
+    a, f, h = scenario.wave.amplitude_m, scenario.wave.frequency_hz, scenario.water.depth_m
+    assert run.wave.amplitude_m == pytest.approx(a, rel=0.03)
+    assert run.wave.frequency_hz == pytest.approx(f, rel=0.01)
+
+    g, omega = scenario.water.gravity_m_s2, 2 * np.pi * f
+    k = brentq(lambda k: g * k * np.tanh(k * h) - omega**2, 1e-6, 100.0)
+    d = scenario.motion.carriage.depth_m + log.mounting.dvl.translation[2]
+    U = a * omega * np.cosh(k * (h - d)) / np.sinh(k * h)
+    kappa = scenario.dvl.wave_noise_coefficient
+    sigma_b, tilt = scenario.dvl.beam_velocity_sigma, np.deg2rad(scenario.dvl.beam_tilt_deg)
+    base = np.array([1 / (np.sqrt(2) * np.sin(tilt))] * 2 + [1 / (2 * np.cos(tilt))]) * sigma_b
+    yaw = log.mounting.dvl.rotation[2]  # waves along world x, seen in the DVL frame
+    wave_x = kappa[0] * U / np.sqrt(2)
+    expected = np.sqrt(base**2 + np.array([np.cos(yaw), np.sin(yaw), 0.0]) ** 2 * wave_x**2)
+    n = run.dvl_samples
+    np.testing.assert_allclose(run.dvl_std_mps, expected, rtol=4 / np.sqrt(2 * (n - 1)))

@@ -21,6 +21,7 @@ import os
 import sys
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -73,7 +74,7 @@ def run_batch(
     unique = sorted({_as_seed(s) for s in seeds})
     args = tuple(args)
     mode = "local" if scheduler is None else scheduler
-    if mode not in NAMED_SCHEDULERS and "://" not in mode and ":" not in mode:
+    if not isinstance(mode, str) or (mode not in NAMED_SCHEDULERS and ":" not in mode):
         raise ConfigError(
             f"unknown scheduler {scheduler!r}: use 'local', 'threads', 'sync' or an address "
             "tcp://host:port"
@@ -151,13 +152,15 @@ def _run_distributed(fn, seeds: list[int], args: tuple, record, mode: str, timeo
 
     if mode == "local":
         workers = min(os.cpu_count() or 1, len(seeds))
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-        )
+        with warnings.catch_warnings():  # the health-check HTTP server falls back from 8787
+            warnings.filterwarnings("ignore", message="Port .* is already in use")
+            cluster = LocalCluster(
+                n_workers=workers,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
         with cluster, Client(cluster) as client:
             _gather(client, fn, seeds, args, record, as_completed)
         return f"local ({workers} worker processes)", workers

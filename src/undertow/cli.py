@@ -382,6 +382,63 @@ def evaluate_map_command(
         )
 
 
+@app.command()
+@user_errors
+def reproduce(
+    out_dir: Annotated[Path, typer.Option("--out", help="Results folder.")] = Path("results"),
+    seeds: Annotated[int, typer.Option(help="Number of independent seeds (Monte Carlo).")] = 1,
+    first_seed: Annotated[int, typer.Option(help="Seeds are first_seed, first_seed+1, ...")] = 0,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Dask scheduler for seeds after the first: local (default: a local cluster), "
+            "threads, sync, or the address of a running scheduler (tcp://host:8786)."
+        ),
+    ] = None,
+    rock_survey: Annotated[bool, typer.Option(help="Also run the rock survey.")] = True,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """The paper's experiments end to end: simulate, characterize, localize (4 variants), map
+    (CSM, BKI, adaptive BKI), evaluate; tables with the paper's values, figures, report.html.
+
+    Example: `undertow reproduce --seeds 10 --out results_mc`
+    """
+    from .experiments import StudySettings
+    from .study import run_study
+
+    if seeds < 1:
+        raise UndertowError("--seeds must be at least 1")
+    settings = StudySettings(rock_survey="rock-survey" if rock_survey else None)
+    with _progress(quiet) as progress:
+        task = progress.add_task("starting", total=None)
+        result = run_study(
+            out_dir,
+            seeds=list(range(first_seed, first_seed + seeds)),
+            scheduler=scheduler,
+            settings=settings,
+            progress=lambda msg: progress.update(task, description=msg),
+        )
+    if not quiet:
+        from rich.markdown import Markdown
+
+        console.print(Markdown(result.markdown))
+        for seed, message in result.failures.items():
+            err.print(f"[red]seed {seed} failed:[/] {message}", highlight=False)
+        err.print(
+            f"results in {out_dir}/ (tables.md, tables.json, figures/, runs/); report: "
+            f"{result.report} ({result.wall_s:.0f} s)"
+        )
+
+
+@app.command()
+@user_errors
+def demo(
+    out_dir: Annotated[Path, typer.Option("--out", help="Results folder.")] = Path("results"),
+) -> None:
+    """The main job with its defaults: `undertow reproduce --seeds 1 --out results`."""
+    reproduce(out_dir=out_dir, seeds=1, first_seed=0, scheduler=None, rock_survey=True, quiet=False)
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 

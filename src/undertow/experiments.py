@@ -156,8 +156,11 @@ def _rock_survey(name: str, seed: int, calibration, art: Artifacts) -> dict:
 
 
 def _table1_row(row: dict) -> dict:
-    keep = ("amplitude_m", "frequency_hz", "dvl_std_mps", "dvl_extra_std_mps", "depth_std_m")
-    return to_plain({k: row[k] for k in keep})
+    """Scalars, with per-axis values as {vx, vy, vz} (aggregation works on named leaves)."""
+    out = {k: row[k] for k in ("amplitude_m", "frequency_hz", "depth_std_m")}
+    for key in ("dvl_std_mps", "dvl_extra_std_mps"):
+        out[key] = dict(zip(("vx", "vy", "vz"), row[key], strict=True))
+    return to_plain(out)
 
 
 #: The paper's qualitative claims, as predicates over one condition's results.

@@ -151,6 +151,8 @@ def plot_disturbance(path, log: Log) -> Path:
     axes[2].plot(t_dvl, v_dvl[:, 0], color="tab:red", lw=0.8, label="DVL x velocity (body)")
     axes[2].set(ylabel="x velocity (m/s)", xlabel="time (s)")
     for ax in axes:
+        lo, hi = ax.get_ylim()
+        ax.set_ylim(lo, hi + 0.3 * (hi - lo))  # headroom for the legend
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right")
     return save_figure(fig, path)

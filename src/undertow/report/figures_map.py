@@ -20,8 +20,12 @@ _GT_POINTS = 30_000
 
 
 def _distance_scale(*distances: np.ndarray) -> float:
+    """Colour-scale top: max(95th percentile, 2 x median), so the typical point sits at most
+    mid-scale (a grid map's half-cell offsets would otherwise all be "red")."""
     d = np.concatenate([np.ravel(x) for x in distances]) if distances else np.zeros(0)
-    return max(float(np.percentile(d, 95)), 1e-3) if d.size else 1.0
+    if not d.size:
+        return 1.0
+    return max(float(np.percentile(d, 95)), 2.0 * float(np.median(d)), 1e-3)
 
 
 def _cell_boxes(ax, x, z, res, values, cmap, vmin, vmax):
@@ -36,22 +40,22 @@ def _cell_boxes(ax, x, z, res, values, cmap, vmin, vmax):
     return boxes
 
 
-def plot_map_distance(path, map_points, ground_truth_cloud) -> Path:
+def plot_map_distance(path, map_points, ground_truth_cloud, vmax: float | None = None) -> Path:
     """Paper Fig. 4: map points (occupied cell centres) coloured by distance to the ground-truth
     cloud (blue low, red high; colour bar in m) over the subsampled ground truth (grey); side
-    view (x-z, depth down) and top view (x-y)."""
+    view (x-z, depth down) and top view (x-y). ``vmax`` (m) fixes the top of the colour scale."""
     mp = cloud("map_points", map_points)
     gt = cloud("ground_truth_cloud", ground_truth_cloud)
     if len(gt) == 0:
         raise DataError("plot_map_distance: empty ground-truth cloud")
     dist = cKDTree(gt).query(mp, k=1)[0] if len(mp) else np.zeros(0)
-    vmax = _distance_scale(dist)
+    vmax = _distance_scale(dist) if vmax is None else float(vmax)
     gts = subsample(gt, _GT_POINTS)
     fig, axes = new_figure(11, 7, nrows=2, sharex=True)
     order = np.argsort(dist)  # far points drawn last, on top
     sc = None
     for ax, j, name in ((axes[0], 2, "depth z (m, down)"), (axes[1], 1, "y (m)")):
-        ax.scatter(gts[:, 0], gts[:, j], s=0.3, c="0.55", alpha=0.5, lw=0,
+        ax.scatter(gts[:, 0], gts[:, j], s=1.0, c="0.45", alpha=0.5, lw=0,
                    label="ground-truth scan (subsampled)", rasterized=True)  # fmt: skip
         sc = ax.scatter(mp[order, 0], mp[order, j], s=5, c=dist[order], cmap=DISTANCE_CMAP,
                         vmin=0.0, vmax=vmax, lw=0, label=f"map points ({len(mp)})")  # fmt: skip
@@ -99,10 +103,10 @@ def plot_map_slice(
         band = band[(band[:, 0] >= min(x_range)) & (band[:, 0] <= max(x_range))]
     band = subsample(band, _GT_POINTS)
     for ax, (name, (c, d, res)) in zip(axes, slices.items(), strict=True):
-        ax.scatter(band[:, 0], band[:, 2], s=0.5, c="0.55", lw=0, label="ground truth",
-                   rasterized=True)  # fmt: skip
+        ax.scatter(band[:, 0], band[:, 2], s=2, c="0.45", lw=0, label="ground truth",
+                   rasterized=True, zorder=3)  # fmt: skip
         boxes = _cell_boxes(ax, c[:, 0], c[:, 2], res, d, DISTANCE_CMAP, 0.0, vmax)
-        ax.plot([], [], "s", color="tab:blue", label=f"occupied cells ({len(c)})")
+        ax.plot([], [], "s", color="0.7", label=f"occupied cells ({len(c)}), colour = distance")
         ax.set(ylabel="depth z (m, down)", title=f"{name}: slice {y0:.2f} <= y <= {y1:.2f} m")
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
@@ -158,7 +162,7 @@ def plot_rock_map(path, occupancy_map: OccupancyMap, rock, floor_depth: float,
                             ec="red", lw=2, label="true rock outline"))  # fmt: skip
     top.set(xlabel="x (m)", ylabel="y (m)", title="Top view: shallowest occupied cell",
             aspect="equal")  # fmt: skip
-    top.legend(loc="upper right", fontsize=8)
+    top.legend(loc="upper center", bbox_to_anchor=(0.5, -0.26), fontsize=8)
     strip = occ.select(np.abs(c[:, 1] - cy) <= res) if len(c) else occ
     sc = strip.centres
     lo_x, hi_x = cx - 2.5 * length, cx + 2.5 * length

@@ -76,6 +76,8 @@ def table1_markdown(t: dict) -> str:
     for c in t["conditions"]:
         sim, ref = t["table1"][c], paper.TABLE_I.get(c, {})
         std, extra = sim["dvl_std_mps"], sim["dvl_extra_std_mps"]
+        std = [std[a] for a in ("vx", "vy", "vz")]
+        extra = [extra[a] for a in ("vx", "vy", "vz")]
         ref_std = ref.get("dvl_std_mps", (None,) * 3)
         rows.append(
             [
