@@ -1,4 +1,4 @@
-"""Report figures: one function per figure of the paper, each drawing one PNG and returning its path.
+"""Report figures: one function per paper figure, each drawing one PNG and returning its path.
 
 Figures are drawn on a bare :class:`matplotlib.figure.Figure` with the Agg canvas (no pyplot,
 no global state) and written atomically (temp file, then rename). Depth is z DOWN, as in the

@@ -33,7 +33,8 @@ def _cell_boxes(ax, x, z, res, values, cmap, vmin, vmax):
     from matplotlib.collections import PolyCollection
 
     h = res / 2.0
-    verts = [((a - h, b - h), (a + h, b - h), (a + h, b + h), (a - h, b + h)) for a, b in zip(x, z)]
+    corners = np.array([(-h, -h), (h, -h), (h, h), (-h, h)])
+    verts = np.stack([np.asarray(x, float), np.asarray(z, float)], axis=1)[:, None, :] + corners
     boxes = PolyCollection(verts, array=np.asarray(values), cmap=cmap, edgecolors="none")
     boxes.set_clim(vmin, vmax)
     ax.add_collection(boxes)
