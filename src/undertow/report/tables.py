@@ -143,6 +143,23 @@ def table4_markdown(t: dict, condition: str) -> str:
     return _md(header, rows)
 
 
+def rock_survey_markdown(r: dict) -> str:
+    rmse = r["trajectory"]["rmse"]
+    lines = [
+        "Proposed filter RMSE: "
+        + ", ".join(
+            f"{AXIS_LABELS[a]} {cell(rmse[a], 4)}" for a in ("x_m", "y_m", "z_m", "yaw_rad")
+        )
+        + ". Maps evaluated over the rock's footprint plus 0.5 m:",
+        "",
+    ]
+    rows = [
+        [name, cell(r[key]["c2c_mean_m"], 4), cell(r[key]["occupied_cells"], 0)]
+        for name, key in (("Adaptive BKI", "adaptive"), ("BKI (l = 0.15 m)", "bki"))
+    ]
+    return "\n".join(lines) + _md(["mapping", "C2C sim (m)", "cells sim"], rows)
+
+
 def claims_markdown(t: dict) -> str:
     rows = []
     for entry in t["claims"].values():
@@ -177,6 +194,11 @@ def render_markdown(t: dict) -> str:
             localization_markdown(t, c, ("be", "an", "proposed")),
             f"## Table IV: mapping ({c})",
             table4_markdown(t, c),
+        ]
+    if t.get("rock_survey"):
+        parts += [
+            "## Rock survey (free vehicle in waves; the paper shows it only as a figure)",
+            rock_survey_markdown(t["rock_survey"]),
         ]
     parts += ["## The paper's claims in simulation", claims_markdown(t)]
     return "\n\n".join(parts) + "\n"
