@@ -157,7 +157,7 @@ def rock_survey_markdown(r: dict) -> str:
         [name, cell(r[key]["c2c_mean_m"], 4), cell(r[key]["occupied_cells"], 0)]
         for name, key in (("Adaptive BKI", "adaptive"), ("BKI (l = 0.15 m)", "bki"))
     ]
-    return "\n".join(lines) + _md(["mapping", "C2C sim (m)", "cells sim"], rows)
+    return "\n".join(lines) + "\n" + _md(["mapping", "C2C sim (m)", "cells sim"], rows)
 
 
 def claims_markdown(t: dict) -> str:
