@@ -1,8 +1,8 @@
 """State estimation: the paper's 18-state UKF, wave noise profiles, smoother, calibration."""
 
 from .calibration import Calibration, calibrate
-from .smoother import smooth
 from .localize import Localizer, LocalizerConfig
 from .noise import NoiseProfile
+from .smoother import smooth
 
 __all__ = ["Calibration", "Localizer", "LocalizerConfig", "NoiseProfile", "calibrate", "smooth"]
