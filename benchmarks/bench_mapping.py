@@ -184,7 +184,7 @@ def bench_survey(n_pings: int, area: float, batch: int = 10_000) -> dict:
     }  # fmt: skip
 
 
-def main(pings: int = 20_000, area: float = 30.0, survey_pings: int = 100_000,
+def main(pings: int = 20_000, area: float = 30.0, survey_pings: int = 1_000_000,
          survey_area: float = 100.0, survey: bool = True) -> dict:  # fmt: skip
     result = {"per_ping": bench_per_ping(pings, area), "cpu_count": os.cpu_count()}
     if survey:
@@ -196,7 +196,7 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--pings", type=int, default=20_000)
     ap.add_argument("--area", type=float, default=30.0)
-    ap.add_argument("--survey-pings", type=int, default=100_000)
+    ap.add_argument("--survey-pings", type=int, default=1_000_000)
     ap.add_argument("--survey-area", type=float, default=100.0)
     ap.add_argument("--no-survey", action="store_true")
     a = ap.parse_args()

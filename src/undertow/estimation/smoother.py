@@ -33,9 +33,8 @@ from . import model
 from .localize import LocalizerConfig
 from .ukf import (
     _cholesky_repair,
+    _gain,
     _residuals,
-    _solve_lower,
-    _solve_upper_t,
     _symmetrize,
     _weighted_outer,
     _weights,
@@ -69,13 +68,7 @@ def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, 
     status = _cholesky_repair(P_pred, L)
     if status < 0:
         return -1
-    for i in range(n):  # G_i^T = (P^-)^-1 C_i^T  (P^- symmetric)
-        for a in range(n):
-            row[a] = C[i, a]
-        _solve_lower(L, row)
-        _solve_upper_t(L, row)
-        for a in range(n):
-            G[i, a] = row[a]
+    _gain(C, L, G, row)  # G = C (P^-)^-1
     for a in range(n):
         v = xs_next[a] - m_pred[a]
         d[a] = _wrap(v) if angle_mask[a] else v

@@ -235,6 +235,20 @@ def _solve_upper_t(L, b):
 
 
 @njit(cache=True)
+def _gain(C, L, out, row):
+    """out = C A^{-1} for symmetric positive definite A = L L^T (the Kalman gain K = C S^{-1}
+    and the RTS gain G = C (P^-)^{-1}), solved row by row: out_i^T = A^{-1} C_i^T."""
+    n, m = C.shape
+    for i in range(n):
+        for a in range(m):
+            row[a] = C[i, a]
+        _solve_lower(L, row)
+        _solve_upper_t(L, row)
+        for a in range(m):
+            out[i, a] = row[a]
+
+
+@njit(cache=True)
 def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate):
     """Unscented measurement update with additive noise R, in place on (x, P).
 
@@ -274,14 +288,7 @@ def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate):
         return 1, nis
     _solve_upper_t(Ls, w)  # w = S^-1 y
     K = np.empty((n, m))
-    row = np.empty(m)
-    for i in range(n):  # K_i = S^-1 C_i (S symmetric)
-        for a in range(m):
-            row[a] = C[i, a]
-        _solve_lower(Ls, row)
-        _solve_upper_t(Ls, row)
-        for a in range(m):
-            K[i, a] = row[a]
+    _gain(C, Ls, K, np.empty(m))  # K = C S^-1
     for i in range(n):
         s = 0.0
         for a in range(m):
