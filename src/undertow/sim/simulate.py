@@ -30,11 +30,14 @@ RNG_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe"
 
 @dataclass(frozen=True, eq=False)
 class SimulationResult:
-    """A simulated log (with ground truth), the floor cloud (M, 3) and the scenario used."""
+    """A simulated log (with ground truth), the floor cloud (M, 3) and the scenario used;
+    ``gyro_bias`` (N, 3) is the IMU's true gyro bias at the IMU's sample times (rad/s), a hidden
+    state no sensor reports, kept for checking estimators."""
 
     log: Log
     floor_cloud: np.ndarray
     scenario: Scenario
+    gyro_bias: np.ndarray | None = None
 
 
 def build_wave(s: Scenario) -> LinearWave:
@@ -82,7 +85,7 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
     T = motion.duration
     g = s.water.gravity_m_s2
 
-    imu, _ = simulate_imu(motion, s.imu, mounting.imu, g, T, rngs["imu"])
+    imu, gyro_bias = simulate_imu(motion, s.imu, mounting.imu, g, T, rngs["imu"])
     dvl = simulate_dvl(
         motion, wave, tank, s.dvl, mounting.dvl, s.water.sound_speed_m_s, T, rngs["dvl"]
     )
@@ -119,7 +122,8 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
             "surface_pressure_pa": s.water.surface_pressure_pa,
         },
     )  # fmt: skip
-    return SimulationResult(log=log, floor_cloud=floor_cloud(s, tank, kin.position), scenario=s)
+    cloud = floor_cloud(s, tank, kin.position)
+    return SimulationResult(log=log, floor_cloud=cloud, scenario=s, gyro_bias=gyro_bias)
 
 
 def floor_cloud(s: Scenario, tank: Tank, positions: np.ndarray) -> np.ndarray:
