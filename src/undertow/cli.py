@@ -139,11 +139,13 @@ def simulate(
         err.print(f"wrote {out_dir}/log, ground_truth.tum, ground_truth.ply, scenario.yaml")
 
 
-def _load_log(path: Path, topics: Path | None):
+def _load_log(path: Path, topics: Path | None, settings=None):
+    """Read a log; topic names from --topics, else the settings file's, else the defaults."""
     from .io import read_log
     from .io.topics import TopicMap
 
-    return read_log(path, topics=TopicMap.from_yaml(topics) if topics else None)
+    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics if settings else None
+    return read_log(path, topics=topic_map)
 
 
 def _triple(text: str | None, name: str):
@@ -161,6 +163,10 @@ def _triple(text: str | None, name: str):
 TopicsOption = Annotated[
     Path | None, typer.Option(help="YAML topic map overriding the BlueROV2 defaults.")
 ]
+ConfigOption = Annotated[
+    Path | None,
+    typer.Option(help="Settings YAML with topics / localizer / mapping sections (see README)."),
+]
 
 
 @app.command()
@@ -169,8 +175,9 @@ def localize(
     log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
     variant: Annotated[
-        str, typer.Option(help="baseline | be (bias estimation) | an (added noise) | proposed")
-    ] = "proposed",
+        str | None,
+        typer.Option(help="baseline | be (bias estimation) | an (added noise) | proposed"),
+    ] = None,
     profile: Annotated[
         Path | None, typer.Option(help="Wave noise profile YAML (default: the paper's Table I).")
     ] = None,
@@ -193,6 +200,7 @@ def localize(
     output_rate: Annotated[
         float | None, typer.Option(help="Output rate, Hz (default: every measurement).")
     ] = None,
+    config: ConfigOption = None,
     topics: TopicsOption = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -207,12 +215,17 @@ def localize(
     if (wave_amplitude is None) != (wave_frequency is None):
         raise UndertowError("give both --wave-amplitude and --wave-frequency (or --wave NAME)")
     condition = (wave_amplitude, wave_frequency) if wave_amplitude is not None else wave
-    params = {}
+    from .config import Settings
+
+    settings = Settings.from_yaml(config)
+    params = settings.localizer_params()
+    variant = variant or params.pop("variant", "proposed")
+    params.pop("variant", None)
     if output_rate is not None:
         params["output_rate_hz"] = output_rate
     with _progress(quiet) as progress:
         progress.add_task(f"localizing ({variant})", total=None)
-        log = _load_log(log_path, topics)
+        log = _load_log(log_path, topics, settings)
         trajectory = run_localize(
             log,
             variant=variant,
@@ -306,11 +319,13 @@ def map_command(
         Path, typer.Option(help="Localization folder or trajectory.npz (with covariances).")
     ],
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
-    method: Annotated[str, typer.Option(help="adaptive | bki | csm")] = "adaptive",
-    resolution: Annotated[float, typer.Option(help="Grid size, m.")] = 0.1,
-    length_scale: Annotated[float, typer.Option(help="Length scale of bki, m.")] = 0.15,
+    method: Annotated[str | None, typer.Option(help="adaptive (default) | bki | csm")] = None,
+    resolution: Annotated[float | None, typer.Option(help="Grid size, m (0.1).")] = None,
+    length_scale: Annotated[
+        float | None, typer.Option(help="Isotropic length scale of bki, m (0.15).")
+    ] = None,
     prior: Annotated[Path | None, typer.Option(help="Seed from a saved map.npz.")] = None,
-    config: Annotated[Path | None, typer.Option(help="Mapping config YAML.")] = None,
+    config: ConfigOption = None,
     topics: TopicsOption = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
@@ -320,23 +335,18 @@ def map_command(
     Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --method adaptive
     --out runs/a10/map`
     """
-    import yaml
-
+    from .config import Settings
     from .mapping.config import MappingConfig
     from .mapping.run import map_log, save_map
     from .trajectory import Trajectory
 
-    settings = {}
-    if config is not None:
-        try:
-            settings = yaml.safe_load(config.read_text()) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise UndertowError(f"{config}: cannot read mapping config ({exc})") from exc
-    settings.update(method=method, resolution=resolution, length_scale=length_scale)
-    cfg = MappingConfig.from_dict(settings)
+    settings = Settings.from_yaml(config)
+    options = {"method": method, "resolution": resolution, "length_scale": length_scale}
+    given = {k: v for k, v in options.items() if v is not None}  # options win over the file
+    cfg = MappingConfig.from_dict({**settings.mapping.model_dump(), **given})
     with _progress(quiet) as progress:
-        progress.add_task(f"mapping ({method})", total=None)
-        log = _load_log(log_path, topics)
+        progress.add_task(f"mapping ({cfg.method})", total=None)
+        log = _load_log(log_path, topics, settings)
         result = map_log(log, Trajectory.load_npz(trajectory), cfg, prior=prior)
         save_map(result, out_dir)
     if not quiet:
