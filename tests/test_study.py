@@ -55,3 +55,13 @@ def test_seed_results_do_not_depend_on_where_they_run(study):
     here = run_seed(1, SMALL)
     there = json.loads((study.out_dir / "seeds/seed_1.json").read_text())
     assert json.loads(json.dumps(here)) == there
+
+
+def test_a_seed_on_a_process_cluster_equals_the_same_seed_on_threads(study):
+    """The issue's check: local threads (the study above) vs a LocalCluster of processes."""
+    from undertow.batch import run_batch
+
+    batch = run_batch(run_seed, [1], scheduler="local", args=(SMALL,))
+    assert not batch.failures, batch.failures
+    there = json.loads((study.out_dir / "seeds/seed_1.json").read_text())
+    assert json.loads(json.dumps(batch.results[1])) == there
