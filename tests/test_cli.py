@@ -97,3 +97,18 @@ def test_bad_variant_and_missing_trajectory_are_one_line(tmp_path):
     )
     assert r.exit_code == 1 and "nope.npz" in r.output
     assert not (tmp_path / "x").exists() and not (tmp_path / "m").exists()
+
+
+def test_simulate_list_names_every_builtin_with_its_description():
+    from undertow.sim import list_scenarios
+
+    result = runner.invoke(app, ["simulate", "--list"])
+    assert result.exit_code == 0, result.output
+    for name in list_scenarios():
+        assert name in result.output
+    assert "36.6 m" in result.output
+
+
+def test_unknown_scenario_lists_the_builtins():
+    result = runner.invoke(app, ["simulate", "nope", "--out", "/tmp/never"])
+    assert result.exit_code == 1 and "wave-a0.10-f1.00" in result.output

@@ -125,8 +125,8 @@ def simulate(
     from .sim import simulate as run_simulation
 
     if list_:
-        for name, description in list_scenarios().items():
-            console.print(f"[bold]{name}[/]  {description}", highlight=False)
+        for name in list_scenarios():
+            console.print(f"[bold]{name}[/]  {load_scenario(name).description}", highlight=False)
         return
     if scenario is None or out_dir is None:
         raise UndertowError("simulate needs a SCENARIO and --out DIR (or --list)")

@@ -184,7 +184,7 @@ class NoiseProfile:
         if not extrapolate:
             raise ConfigError(
                 f"wave condition {name} is outside the characterized conditions of profile "
-                f"{self.name or '?'} (pass extrapolate=True to use the nearest)"
+                f"{self.name or '?'} (extrapolate=True, or --extrapolate, uses the nearest)"
             )
         i = int(np.argmin(np.sum((nodes - q) ** 2, axis=1)))
         return self._result(name, a, f, values[i, :3], values[i, 3:], "nearest")
