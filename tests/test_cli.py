@@ -112,3 +112,31 @@ def test_simulate_list_names_every_builtin_with_its_description():
 def test_unknown_scenario_lists_the_builtins():
     result = runner.invoke(app, ["simulate", "nope", "--out", "/tmp/never"])
     assert result.exit_code == 1 and "wave-a0.10-f1.00" in result.output
+
+
+def test_characterize_writes_a_profile_that_localize_reads(tmp_path):
+    for name in ("calm", "wave-a0.10-f1.00"):
+        r = runner.invoke(
+            app, ["simulate", name, "--out", str(tmp_path / name), "-q", "--seed", "2"]
+        )
+        assert r.exit_code == 0, r.output
+    profile = tmp_path / "profile.yaml"
+    r = runner.invoke(
+        app,
+        ["characterize", str(tmp_path / "calm" / "log"), str(tmp_path / "wave-a0.10-f1.00" / "log"),
+         "--out", str(profile), "--json"],
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.stdout)["runs"]
+    assert abs(rows[1]["amplitude_m"] - 0.10) < 0.005 and abs(rows[1]["frequency_hz"] - 1.0) < 0.01
+    r = runner.invoke(
+        app,
+        ["localize", str(tmp_path / "wave-a0.10-f1.00" / "log"), "--profile", str(profile),
+         "--wave-amplitude", "0.1", "--wave-frequency", "1.0", "--smooth",
+         "--out", str(tmp_path / "est"), "-q"],
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    used = __import__("yaml").safe_load((tmp_path / "est" / "config.yaml").read_text())
+    assert used["smoothed"] is True
+    # the extra vx noise comes from the characterized profile (interpolated near its node)
+    assert abs(used["wave_noise"]["dvl_std"][0] - rows[1]["dvl_extra_std_mps"][0]) < 2e-3

@@ -53,3 +53,24 @@ def test_yaml_round_trip(tmp_path):
     (tmp_path / "bad.yaml").write_text("conditions: [{amplitude_m: 0.1}]")
     with pytest.raises(ConfigError):
         NoiseProfile.from_yaml(tmp_path / "bad.yaml")
+
+
+def test_measured_condition_answers_to_its_canonical_name():
+    from undertow.estimation.noise import NoiseProfile
+
+    profile = NoiseProfile.from_dict(
+        {
+            "conditions": [
+                {"name": "calm", "amplitude_m": 0.0, "frequency_hz": None, "dvl_std": [0, 0, 0]},
+                {"amplitude_m": 0.0999, "frequency_hz": 1.0003, "dvl_std": [0.02, 0.001, 0.0]},
+            ]
+        }
+    )
+    assert profile.noise((0.1, 1.0)).how == "node"
+    np.testing.assert_allclose(profile.noise("wave-a0.10-f1.00").dvl_std, [0.02, 0.001, 0.0])
+    # one frequency + calm: linear in amplitude along that frequency (exact at half amplitude)
+    half = profile.noise((0.0999 / 2, 1.0003))
+    assert half.how == "interpolated"
+    np.testing.assert_allclose(half.dvl_std, [0.01, 0.0005, 0.0], atol=1e-12)
+    with pytest.raises(ConfigError, match="outside"):
+        profile.noise((0.05, 0.8))

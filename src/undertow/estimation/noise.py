@@ -9,7 +9,10 @@ Between characterized conditions the std devs are interpolated linearly over a D
 triangulation of the (a, f) nodes (scipy ``LinearNDInterpolator``; each axis scaled by the span
 of the nodes first so that metres and hertz weigh alike). A ``calm`` condition (amplitude 0,
 ``frequency_hz: null``) holds at every frequency: it adds a node at a = 0 for each frequency of
-the other conditions, and any a = 0 query returns it. A query outside the convex hull of the
+the other conditions, and any a = 0 query returns it. A condition also answers to its canonical
+name (``wave-a0.10-f1.00``: a and f to 0.01), so a profile characterized at the measured
+a = 0.0999 m serves a query for 0.10 m. When all nodes share one frequency (one characterized
+wave plus calm) the interpolation is linear in amplitude at that frequency. A query outside the
 nodes raises :class:`ConfigError` unless ``extrapolate=True``, which returns the nearest node.
 """
 
@@ -62,6 +65,27 @@ class WaveNoise:
             "dr_std": [float(v) for v in self.dr_std],
             "how": self.how,
         }
+
+
+def _same_condition(c: WaveCondition, name: str, a: float, f: float | None) -> bool:
+    """A characterized condition answers a query with its (a, f) or its canonical name (a and f
+    to the 0.01 of the name, the precision conditions are characterized and named at)."""
+    if c.amplitude_m <= 0 or f is None:
+        return False
+    exact = abs(c.amplitude_m - a) < 1e-9 and abs(c.frequency_hz - f) < 1e-9
+    return exact or wave_name(c.amplitude_m, c.frequency_hz) == name
+
+
+def _along_amplitude(nodes: np.ndarray, values: np.ndarray, q: np.ndarray):
+    """Linear interpolation in amplitude when every node has the query's frequency (a profile
+    characterized at one frequency, where a triangulation does not exist); else None."""
+    if not np.allclose(nodes[:, 1], q[1], atol=1e-9):
+        return None
+    order = np.argsort(nodes[:, 0])
+    a_nodes = nodes[order, 0]
+    if not a_nodes[0] <= q[0] <= a_nodes[-1]:
+        return None
+    return np.array([np.interp(q[0], a_nodes, values[order, j]) for j in range(values.shape[1])])
 
 
 def wave_name(amplitude_m: float, frequency_hz: float) -> str:
@@ -169,8 +193,7 @@ class NoiseProfile:
         """Extra noise for ``wave`` ("calm", "wave-a0.10-f1.00" or (a, f)); see module doc."""
         name, a, f = parse_wave(wave)
         for c in self.conditions:
-            same = c.amplitude_m > 0 and f is not None and abs(c.amplitude_m - a) < 1e-9
-            if (a == 0 and c.amplitude_m == 0) or (same and abs(c.frequency_hz - f) < 1e-9):
+            if (a == 0 and c.amplitude_m == 0) or (a > 0 and _same_condition(c, name, a, f)):
                 return self._result(name, a, f, c.dvl_std, c.dr_std, "calm" if a == 0 else "node")
         if a == 0:
             return self._result(name, a, f, (0.0,) * 3, (0.0,) * 3, "calm")
@@ -179,6 +202,8 @@ class NoiseProfile:
         v = None
         if len(nodes) >= 3:
             v = self._interp(nodes, values)(q[None, :])[0]
+        if v is None or not np.all(np.isfinite(v)):
+            v = _along_amplitude(nodes, values, q)
         if v is not None and np.all(np.isfinite(v)):
             return self._result(name, a, f, v[:3], v[3:], "interpolated")
         if not extrapolate:

@@ -49,8 +49,9 @@ class LogSummary:
         from rich.table import Table
 
         table = Table(title=f"{self.source or 'log'}: {self.duration_s:.1f} s")
-        for col in ("stream", "messages", "rate Hz", "span s", "invalid", "missing values"):
-            table.add_column(col, justify="left" if col == "stream" else "right")
+        table.add_column("stream", no_wrap=True)
+        for col in ("messages", "rate Hz", "span s", "invalid", "missing values"):
+            table.add_column(col, justify="right")
         for s in self.streams:
             detail = ", ".join(f"{k} {v}" for k, v in s.missing_detail.items() if v)
             table.add_row(
