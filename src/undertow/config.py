@@ -17,8 +17,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field
 
+from ._validate import validate
 from .errors import ConfigError
 from .estimation.localize import LocalizerConfig
 from .io.topics import TopicMap
@@ -45,12 +46,7 @@ class Settings(BaseModel):
             raise ConfigError(f"{path}: cannot read settings ({exc})") from exc
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: settings must be a mapping with topics/localizer/mapping")
-        try:
-            return cls.model_validate(data)
-        except ValidationError as exc:
-            first = exc.errors()[0]
-            where = ".".join(str(p) for p in first["loc"])
-            raise ConfigError(f"{path}: {where}: {first['msg']}") from None
+        return validate(cls, data, f"{path}: ")
 
     def localizer_params(self) -> dict:
         """The localizer fields the file set explicitly (keyword arguments of Localizer)."""

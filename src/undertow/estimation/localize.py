@@ -13,8 +13,9 @@ from __future__ import annotations
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field
 
+from .._validate import validate
 from ..errors import ConfigError
 from ..log import P_ATM, Log
 from ..rotations import matrix_to_rpy, rpy_to_matrix
@@ -88,12 +89,7 @@ class Localizer:
 
     def __init__(self, variant: str = "proposed", profile=None, wave=None,
                  extrapolate: bool = False, **params) -> None:  # fmt: skip
-        try:
-            self.config = LocalizerConfig(variant=variant, **params)
-        except ValidationError as exc:
-            err = exc.errors()[0]
-            where = ".".join(str(p) for p in err["loc"])
-            raise ConfigError(f"Localizer: {where}: {err['msg']}") from None
+        self.config = validate(LocalizerConfig, {"variant": variant, **params}, "Localizer: ")
         if isinstance(profile, NoiseProfile) or profile is None:
             self.profile = profile or NoiseProfile.paper()
         else:

@@ -11,8 +11,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import yaml
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, field_validator
 
+from .._validate import validate
 from ..errors import ConfigError
 
 STREAM_FIELDS = (
@@ -75,9 +76,4 @@ class TopicMap(BaseModel):
             data = data["topics"]
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: topic map must be a mapping of stream name to topic(s)")
-        try:
-            return cls.model_validate(data)
-        except ValidationError as exc:
-            err = exc.errors()[0]
-            where = ".".join(str(p) for p in err["loc"])
-            raise ConfigError(f"{path}: topic map field {where}: {err['msg']}") from exc
+        return validate(cls, data, f"{path}: topic map field ")

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from ..errors import ConfigError
+from .._validate import validate
 from .mappers import L_MAX, L_MIN, Mapper, make_mapper
 from .samples import Samples, build_samples
 
@@ -53,12 +53,7 @@ class MappingConfig(BaseModel):
     @classmethod
     def from_dict(cls, data: dict) -> MappingConfig:
         """Validate a dict; errors become one-line :class:`ConfigError`."""
-        try:
-            return cls.model_validate(data)
-        except ValidationError as exc:
-            first = exc.errors()[0]
-            where = ".".join(str(p) for p in first["loc"]) or "mapping"
-            raise ConfigError(f"mapping.{where}: {first['msg']}") from None
+        return validate(cls, data, "mapping.")
 
 
 def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:

@@ -12,8 +12,9 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field
 
+from .._validate import validate
 from ..errors import ConfigError
 from .scenario_sensors import (
     BarometerModel,
@@ -199,9 +200,4 @@ def _raw(name_or_path: str | Path, depth: int = 0) -> tuple[dict, str]:
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """A built-in scenario by name, or a YAML file (fields left out keep their defaults)."""
     data, label = _raw(name_or_path)
-    try:
-        return Scenario.model_validate(data)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        field = ".".join(str(p) for p in err["loc"]) or "(top level)"
-        raise ConfigError(f"{label}: field {field}: {err['msg']}") from exc
+    return validate(Scenario, data, f"{label}: field ")
