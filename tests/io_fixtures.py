@@ -91,11 +91,11 @@ def full_log(n: int = 40, seed: int = 0) -> Log:
     )
 
 
-def write_raw_bag(path, messages) -> None:
-    """Write (topic, msgtype, time_ns, message) tuples as a ROS 2 mcap bag (no undertow code
-    besides the registered message definitions)."""
+def write_raw_bag(path, messages, storage=StoragePlugin.MCAP) -> None:
+    """Write (topic, msgtype, time_ns, message) tuples as a ROS 2 bag, mcap or sqlite3 (no
+    undertow code besides the registered message definitions)."""
     store = dvl_typestore()
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+    with Writer(path, version=9, storage_plugin=storage) as writer:
         conns = {}
         for topic, msgtype, ns, msg in messages:
             if topic not in conns:

@@ -110,7 +110,12 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict) -> Log:
         metadata["dead_reckoning_source"] = "dvl_json position_local reports"
     mounting, source_meta = _sidecar(path, notes)
     if source_meta:
-        metadata["recorded"] = source_meta
+        # the writer's metadata (e.g. a simulated run's wave condition and water density) comes
+        # back at the top level, as it was; the reader's own keys win
+        recorded = dict(source_meta)
+        for key, value in (recorded.pop("metadata", None) or {}).items():
+            metadata.setdefault(key, value)
+        metadata["recorded"] = recorded
     log = Log(
         imu=rows.imu(),
         dvl=dvl,
