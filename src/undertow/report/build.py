@@ -106,10 +106,21 @@ def adaptive_lengths():
 def report_notes(tables: dict) -> list[str]:
     """What holds and what does not, read from the claim fractions (never typed in)."""
     notes = []
+    for entry in tables.get("table1_claims", {}).values():
+        f = entry["all"]
+        if f["n"]:
+            verdict = "holds" if f["holds"] == f["n"] else "does not hold"
+            note = f"Table I: {entry['claim']}: {verdict} ({f['holds']}/{f['n']} seeds)."
+            if f["holds"] < f["n"]:
+                note += f" Why: {entry['why_not'] or 'not explained yet'}."
+            notes.append(note)
     for entry in tables["claims"].values():
         counts = [entry[c] for c in tables["conditions"] if entry[c]["n"]]
         holds = sum(c["holds"] for c in counts)
         total = sum(c["n"] for c in counts)
         verdict = "holds" if holds == total else "does not hold" if holds == 0 else "holds partly"
-        notes.append(f"{entry['claim']}: {verdict} ({holds}/{total} seed-conditions).")
+        note = f"{entry['claim']}: {verdict} ({holds}/{total} seed-conditions)."
+        if holds < total:
+            note += f" Why: {entry.get('why_not') or 'not explained yet'}."
+        notes.append(note)
     return notes
