@@ -23,7 +23,7 @@ import numpy as np
 from .._atomic import atomic_path
 from ..errors import DataError, ReaderError
 from .kernels import _OFFSET as _CHUNK_LIMIT
-from .kernels import CHUNK, _add_mass, _rehash, _scatter
+from .kernels import CHUNK, _add_mass, _max_abs, _rehash, _scatter
 
 
 class ChunkedGrid:
@@ -76,7 +76,7 @@ class ChunkedGrid:
     def _check_extent(self, points: np.ndarray) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range."""
         limit = (_CHUNK_LIMIT - 2) * CHUNK * self.resolution
-        if points.size and np.abs(points).max() >= limit:
+        if points.size and not _max_abs(points) < limit:
             raise DataError(f"map coordinates beyond +-{limit:.0f} m: shift the origin closer")
 
     def add_mass(self, cells, d_alpha, d_beta) -> None:

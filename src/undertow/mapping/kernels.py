@@ -49,6 +49,18 @@ def product_kernel(delta, length_scales, sigma0: float = 1.0) -> np.ndarray:
     return sigma0 * np.prod(sparse_kernel(delta, length_scales), axis=-1)
 
 
+@njit(cache=True)
+def _max_abs(points) -> float:
+    """max |p_ij| over all coordinates (NaN propagates), without a temporary array."""
+    m = 0.0
+    for i in range(points.shape[0]):
+        for j in range(points.shape[1]):
+            a = abs(points[i, j])
+            if not a <= m:
+                m = a
+    return m
+
+
 @njit(cache=True, inline="always")
 def _k1(d, l):
     """Unit-sigma_0 sparse kernel of ``eq:kernel`` at distance d >= 0."""
