@@ -48,3 +48,42 @@ def test_cli_reports_a_bad_settings_file_in_one_line(tmp_path):
     )
     assert result.exit_code == 1 and "localizer.variant" in result.output
     assert "Traceback" not in result.output
+
+
+def test_mounting_override_keeps_fields_it_does_not_name(tmp_path):
+    from undertow.log import Mounting
+
+    m = Mounting().updated({"dvl": {"rotation": [0, 0, 0.1]}})
+    assert m.dvl.rotation == (0.0, 0.0, 0.1)
+    assert m.dvl.translation == Mounting().dvl.translation  # the BlueROV2 lever arm stays
+    path = tmp_path / "bad.yaml"
+    path.write_text("mounting: {gps: {rotation: [0, 0, 0]}}\n")
+    with pytest.raises(ConfigError, match="bad.yaml: mounting.gps: unknown sensor"):
+        Settings.from_yaml(path)
+
+
+def test_imu_logged_in_ros_flu_is_fixed_by_a_mounting_rotation(tmp_path):
+    """REP-103 IMUs (e.g. mavros) report rates in forward-left-up: p, -q, -r of our FRD body.
+    Declaring the IMU frame rolled by pi gives the same estimate as the FRD log."""
+    import numpy as np
+
+    from undertow.estimation.run import localize
+    from undertow.evaluation.trajectory import trajectory_rmse
+    from undertow.log import Imu
+    from undertow.sim import load_scenario, simulate
+
+    log = simulate(load_scenario("rock-survey"), seed=4).log  # turns: yaw rates matter
+    w = log.imu.angular_velocity * np.array([1.0, -1.0, -1.0])
+    flu = log.replace(imu=Imu(t=log.imu.t, angular_velocity=w))
+    path = tmp_path / "s.yaml"
+    path.write_text("mounting: {imu: {rotation: [3.141592653589793, 0, 0]}}\n")
+    fixed = Settings.from_yaml(path).apply_mounting(flu)
+    reference = localize(log, "proposed")
+    corrected = localize(fixed, "proposed")
+    # the same estimate; the gyro bias is a state of the IMU frame, so its y and z flip sign
+    np.testing.assert_allclose(corrected.x[:, :15], reference.x[:, :15], atol=1e-9)
+    flip = np.array([1.0, -1.0, -1.0])
+    np.testing.assert_allclose(corrected.x[:, 15:] * flip, reference.x[:, 15:], atol=1e-9)
+    gt = log.ground_truth
+    wrong = trajectory_rmse(localize(flu, "proposed"), gt).rmse
+    assert wrong["yaw_rad"] > 5 * trajectory_rmse(reference, gt).rmse["yaw_rad"]

@@ -145,7 +145,8 @@ def _load_log(path: Path, topics: Path | None, settings=None):
     from .io.topics import TopicMap
 
     topic_map = TopicMap.from_yaml(topics) if topics else settings.topics if settings else None
-    return read_log(path, topics=topic_map)
+    log = read_log(path, topics=topic_map)
+    return settings.apply_mounting(log) if settings else log
 
 
 def _triple(text: str | None, name: str):
@@ -253,6 +254,7 @@ def calibrate(
     out: Annotated[Path, typer.Option("--out", help="Calibration YAML to write.")] = Path(
         "calibration.yaml"
     ),
+    config: ConfigOption = None,
     topics: TopicsOption = None,
 ) -> None:
     """Estimate the DR drift mu_b, the IMU gyro bias and the DVL scale factor from a run with
@@ -260,9 +262,10 @@ def calibrate(
 
     Example: `undertow calibrate runs/calm/log runs/calm/ground_truth.tum --out calm_cal.yaml`
     """
+    from .config import Settings
     from .estimation.calibration import calibrate as run_calibration
 
-    log = _load_log(log_path, topics)
+    log = _load_log(log_path, topics, Settings.from_yaml(config))
     if ground_truth is not None:
         log = log.replace(ground_truth=_read_ground_truth(ground_truth))
     result = run_calibration(log)
@@ -461,6 +464,7 @@ def characterize_command(
         Path | None, typer.Option("--out", help="Noise profile YAML for `undertow localize`.")
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    config: ConfigOption = None,
     topics: TopicsOption = None,
 ) -> None:
     """Wave amplitude and frequency (wave probe) and the DVL noise per axis during the waves,
@@ -472,8 +476,10 @@ def characterize_command(
     from rich.table import Table
 
     from .characterize import characterize
+    from .config import Settings
 
-    result = characterize([_load_log(p, topics) for p in logs])
+    settings = Settings.from_yaml(config)
+    result = characterize([_load_log(p, topics, settings) for p in logs])
     if out is not None:
         result.profile.to_yaml(out)
     if as_json:

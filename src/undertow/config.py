@@ -1,4 +1,4 @@
-"""One settings file for every stage: ``topics``, ``localizer`` and ``mapping`` sections.
+"""One settings file for every stage: ``topics``, ``mounting``, ``localizer``, ``mapping``.
 
 Each section is the stage's own pydantic model (:class:`~undertow.io.topics.TopicMap`,
 :class:`~undertow.estimation.localize.LocalizerConfig`,
@@ -6,6 +6,7 @@ Each section is the stage's own pydantic model (:class:`~undertow.io.topics.Topi
 no file) runs, and a file sets only what differs::
 
     topics: {imu: [/mavros/imu/data]}
+    mounting: {imu: {rotation: [3.141592653589793, 0, 0]}}   # IMU in ROS FLU, body is FRD
     localizer: {variant: proposed, dvl_velocity_std_m_s: [0.02, 0.02, 0.01]}
     mapping: {method: adaptive, resolution: 0.05}
 
@@ -23,6 +24,7 @@ from ._validate import validate
 from .errors import ConfigError
 from .estimation.localize import LocalizerConfig
 from .io.topics import TopicMap
+from .log import Log
 from .mapping.config import MappingConfig
 
 
@@ -32,6 +34,9 @@ class Settings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     topics: TopicMap = Field(default_factory=TopicMap)
+    #: sensor mounting overrides applied to every log read (e.g. an IMU logged in ROS's FLU
+    #: convention: ``imu: {rotation: [3.141592653589793, 0, 0]}``); see Mounting.updated
+    mounting: dict = Field(default_factory=dict)
     localizer: LocalizerConfig = Field(default_factory=LocalizerConfig)
     mapping: MappingConfig = Field(default_factory=MappingConfig)
 
@@ -46,7 +51,18 @@ class Settings(BaseModel):
             raise ConfigError(f"{path}: cannot read settings ({exc})") from exc
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: settings must be a mapping with topics/localizer/mapping")
-        return validate(cls, data, f"{path}: ")
+        settings = validate(cls, data, f"{path}: ")
+        try:
+            Log().mounting.updated(settings.mounting)  # check it now, not at first use
+        except ConfigError as exc:
+            raise ConfigError(f"{path}: {exc}") from None
+        return settings
+
+    def apply_mounting(self, log: Log) -> Log:
+        """``log`` with this file's mounting overrides (unchanged when there are none)."""
+        if not self.mounting:
+            return log
+        return log.replace(mounting=log.mounting.updated(self.mounting))
 
     def localizer_params(self) -> dict:
         """The localizer fields the file set explicitly (keyword arguments of Localizer)."""

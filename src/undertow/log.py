@@ -332,9 +332,28 @@ class Mounting:
 
     @classmethod
     def from_dict(cls, data: dict) -> Mounting:
-        return cls(
-            **{k: SensorMount(**{kk: tuple(vv) for kk, vv in v.items()}) for k, v in data.items()}
-        )
+        return cls().updated(data)
+
+    def updated(self, changes: dict) -> Mounting:
+        """A copy with the given sensors' fields replaced, e.g. ``{"imu": {"rotation": [pi, 0,
+        0]}}``; fields not named keep their value. Unknown sensors or fields raise ConfigError."""
+        from .errors import ConfigError
+
+        mounts = dataclasses.asdict(self)
+        for sensor, fields in (changes or {}).items():
+            if sensor not in mounts or not isinstance(fields, dict):
+                raise ConfigError(f"mounting.{sensor}: unknown sensor (use {', '.join(mounts)})")
+            for name, value in fields.items():
+                try:
+                    vector = tuple(float(v) for v in value)
+                except (TypeError, ValueError):
+                    vector = ()
+                if name not in ("translation", "rotation") or len(vector) != 3:
+                    raise ConfigError(
+                        f"mounting.{sensor}.{name}: expected translation or rotation, 3 numbers"
+                    )
+                mounts[sensor][name] = vector
+        return Mounting(**{k: SensorMount(**v) for k, v in mounts.items()})
 
 
 STREAM_NAMES = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe", "ground_truth")
