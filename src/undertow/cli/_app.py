@@ -1,0 +1,120 @@
+"""The `undertow` typer app and what its commands share: one-line user errors, progress bars,
+JSON output, reading a log with the topic map and settings file."""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+import warnings
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from ..errors import UndertowError
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    rich_markup_mode="markdown",
+    help=(
+        "undertow: uncertainty-aware acoustic localization and seafloor mapping for underwater "
+        "robots in waves.\n\n"
+        "Examples:\n\n"
+        "    undertow simulate wave-a0.10-f1.00 --out runs/a10f100 --seed 1\n\n"
+        "    undertow info runs/a10f100/log\n\n"
+        "    undertow info recording.bag --json\n\n"
+    ),
+)
+evaluate_app = typer.Typer(no_args_is_help=True, help="Evaluate results against ground truth.")
+app.add_typer(evaluate_app, name="evaluate")
+
+console = Console()
+err = Console(stderr=True)
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    err.print(f"[yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+
+
+@app.callback()
+def _setup() -> None:
+    """Library warnings (bad rows dropped, units fixed) become one line each on stderr."""
+    warnings.showwarning = _one_line_warning
+
+
+def user_errors(fn):
+    """Turn UndertowError into one clear line and exit code 1."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except UndertowError as exc:
+            err.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            raise typer.Exit(1) from None
+
+    return wrapper
+
+
+def _progress(quiet: bool):
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    return Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TimeElapsedColumn(),
+        console=err,
+        disable=quiet,
+        transient=True,
+    )
+
+
+def _print_json(data) -> None:
+    sys.stdout.write(json.dumps(data, indent=2, default=float) + "\n")
+
+
+def _load_log(path: Path, topics: Path | None, settings=None):
+    """Read a log; topic names from --topics, else the settings file's, else the defaults."""
+    from ..io import read_log
+    from ..io.topics import TopicMap
+
+    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics if settings else None
+    log = read_log(path, topics=topic_map)
+    return settings.apply_mounting(log) if settings else log
+
+
+def _triple(text: str | None, name: str):
+    if text is None:
+        return None
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3:
+        raise UndertowError(f"{name}: expected three comma-separated numbers, got {text!r}")
+    return values
+
+
+TopicsOption = Annotated[
+    Path | None, typer.Option(help="YAML topic map overriding the BlueROV2 defaults.")
+]
+ConfigOption = Annotated[
+    Path | None,
+    typer.Option(help="Settings YAML with topics / localizer / mapping sections (see README)."),
+]
+
+
+def _read_ground_truth(path: Path):
+    from ..io.tum import read_tum
+    from ..log import GroundTruth
+
+    t, position, rpy = read_tum(path)
+    return GroundTruth(t=t, position=position, orientation=rpy)
+
+
+def _fmt(value, digits: int = 3) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"

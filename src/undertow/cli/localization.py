@@ -1,0 +1,160 @@
+"""Localization commands: localize, calibrate, evaluate trajectory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import UndertowError
+from ._app import (
+    ConfigOption,
+    TopicsOption,
+    _load_log,
+    _print_json,
+    _progress,
+    _read_ground_truth,
+    _triple,
+    app,
+    console,
+    err,
+    evaluate_app,
+    user_errors,
+)
+
+
+@app.command()
+@user_errors
+def localize(
+    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
+    out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
+    variant: Annotated[
+        str | None,
+        typer.Option(help="baseline | be (bias estimation) | an (added noise) | proposed"),
+    ] = None,
+    profile: Annotated[
+        Path | None, typer.Option(help="Wave noise profile YAML (default: the paper's Table I).")
+    ] = None,
+    wave: Annotated[
+        str | None, typer.Option(help="Wave condition by name, e.g. calm or wave-a0.10-f1.00.")
+    ] = None,
+    wave_amplitude: Annotated[float | None, typer.Option(help="Wave amplitude, m.")] = None,
+    wave_frequency: Annotated[float | None, typer.Option(help="Wave frequency, Hz.")] = None,
+    extrapolate: Annotated[
+        bool, typer.Option(help="Allow wave conditions outside the characterized ones.")
+    ] = False,
+    calibration: Annotated[
+        Path | None, typer.Option(help="Calibration YAML from `undertow calibrate`.")
+    ] = None,
+    initial_position: Annotated[
+        str | None,
+        typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
+    ] = None,
+    smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
+    output_rate: Annotated[
+        float | None, typer.Option(help="Output rate, Hz (default: every measurement).")
+    ] = None,
+    config: ConfigOption = None,
+    topics: TopicsOption = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """Localize a log with the paper's 18-state UKF; writes trajectory.tum/.npz and config.yaml.
+
+    Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
+    --calibration calm_cal.yaml --out runs/a10/proposed`
+    """
+    from ..estimation.run import localize as run_localize
+    from ..estimation.run import save_trajectory
+
+    if (wave_amplitude is None) != (wave_frequency is None):
+        raise UndertowError("give both --wave-amplitude and --wave-frequency (or --wave NAME)")
+    condition = (wave_amplitude, wave_frequency) if wave_amplitude is not None else wave
+    from ..config import Settings
+
+    settings = Settings.from_yaml(config)
+    params = settings.localizer_params()
+    variant = variant or params.pop("variant", "proposed")
+    params.pop("variant", None)
+    if output_rate is not None:
+        params["output_rate_hz"] = output_rate
+    with _progress(quiet) as progress:
+        progress.add_task(f"localizing ({variant})", total=None)
+        log = _load_log(log_path, topics, settings)
+        trajectory = run_localize(
+            log,
+            variant=variant,
+            profile=profile,
+            wave=condition,
+            calibration=calibration,
+            initial_position=_triple(initial_position, "--initial-position") or "auto",
+            extrapolate=extrapolate,
+            smooth=smooth,
+            **params,
+        )
+        save_trajectory(trajectory, out_dir)
+    if not quiet:
+        err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
+
+
+@app.command()
+@user_errors
+def calibrate(
+    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="A run with ground truth.")],
+    ground_truth: Annotated[
+        Path | None,
+        typer.Argument(help="Ground-truth TUM file (default: the log's ground_truth stream)."),
+    ] = None,
+    out: Annotated[Path, typer.Option("--out", help="Calibration YAML to write.")] = Path(
+        "calibration.yaml"
+    ),
+    config: ConfigOption = None,
+    topics: TopicsOption = None,
+) -> None:
+    """Estimate the DR drift mu_b, the IMU gyro bias and the DVL scale factor from a run with
+    ground truth, for later runs (`undertow localize --calibration`).
+
+    Example: `undertow calibrate runs/calm/log runs/calm/ground_truth.tum --out calm_cal.yaml`
+    """
+    from ..config import Settings
+    from ..estimation.calibration import calibrate as run_calibration
+
+    log = _load_log(log_path, topics, Settings.from_yaml(config))
+    if ground_truth is not None:
+        log = log.replace(ground_truth=_read_ground_truth(ground_truth))
+    result = run_calibration(log)
+    result.save_yaml(out)
+    _print_json(result.to_dict())
+
+
+@evaluate_app.command("trajectory")
+@user_errors
+def evaluate_trajectory(
+    estimate: Annotated[Path, typer.Argument(help="Localization folder or trajectory.npz.")],
+    ground_truth: Annotated[Path, typer.Argument(help="Ground-truth TUM file (e.g. 2000 Hz).")],
+    align: Annotated[str, typer.Option(help="none | origin (first poses made equal).")] = "none",
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+) -> None:
+    """Per-axis RMSE (x, y, z, roll, pitch, yaw, vx, vy, vz; the paper's Table II) and NEES.
+
+    Example: `undertow evaluate trajectory runs/a10/proposed runs/a10/ground_truth.tum --json`
+    """
+    from rich.table import Table
+
+    from ..evaluation.trajectory import trajectory_rmse
+    from ..trajectory import Trajectory
+
+    result = trajectory_rmse(Trajectory.load_npz(estimate), _read_ground_truth(ground_truth), align)
+    if as_json:
+        _print_json(result.to_dict())
+        return
+    table = Table(title=f"RMSE of {estimate} (align {align})")
+    table.add_column("axis")
+    table.add_column("RMSE", justify="right")
+    for key, value in result.rmse.items():
+        table.add_row(key, f"{value:.4f}")
+    console.print(table)
+    console.print(
+        f"NEES (pose, 6 dof): mean {result.nees_mean:.2f}, "
+        f"{100 * result.nees_fraction_in_95:.0f} % inside the 95 % bound; {result.samples} samples"
+    )

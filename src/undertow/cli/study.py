@@ -1,0 +1,125 @@
+"""The study: characterize, reproduce, demo."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import UndertowError
+from ._app import (
+    ConfigOption,
+    TopicsOption,
+    _fmt,
+    _load_log,
+    _print_json,
+    _progress,
+    app,
+    console,
+    err,
+    user_errors,
+)
+
+
+@app.command("characterize")
+@user_errors
+def characterize_command(
+    logs: Annotated[list[Path], typer.Argument(metavar="LOG...", help="Runs with a wave probe.")],
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Noise profile YAML for `undertow localize`.")
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    config: ConfigOption = None,
+    topics: TopicsOption = None,
+) -> None:
+    """Wave amplitude and frequency (wave probe) and the DVL noise per axis during the waves,
+    about the true motion (the paper's Table I), plus the barometer's wave-induced depth noise.
+    A calm run among the logs is the reference whose noise is subtracted.
+
+    Example: `undertow characterize runs/calm/log runs/a10/log runs/a05/log --out profile.yaml`
+    """
+    from rich.table import Table
+
+    from ..characterize import characterize
+    from ..config import Settings
+
+    settings = Settings.from_yaml(config)
+    result = characterize([_load_log(p, topics, settings) for p in logs])
+    if out is not None:
+        result.profile.to_yaml(out)
+    if as_json:
+        _print_json({"runs": result.table(), "profile": result.profile.to_dict()})
+        return
+    table = Table(title="Wave characterization (DVL std in the DVL frame, m/s)")
+    for col in ("run", "a (m)", "f (Hz)", "vx", "vy", "vz", "extra vx", "depth std (m)"):
+        table.add_column(col, justify="right")
+    for row in result.table():
+        table.add_row(
+            row["source"],
+            _fmt(row["amplitude_m"]),
+            _fmt(row["frequency_hz"]),
+            *(_fmt(v) for v in row["dvl_std_mps"]),
+            _fmt(row["dvl_extra_std_mps"][0]),
+            _fmt(row["depth_std_m"]),
+        )
+    console.print(table)
+    if result.calm is None:
+        err.print("no calm run among the logs: the profile holds total, not extra, noise")
+
+
+@app.command()
+@user_errors
+def reproduce(
+    out_dir: Annotated[Path, typer.Option("--out", help="Results folder.")] = Path("results"),
+    seeds: Annotated[int, typer.Option(help="Number of independent seeds (Monte Carlo).")] = 1,
+    first_seed: Annotated[int, typer.Option(help="Seeds are first_seed, first_seed+1, ...")] = 0,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="Dask scheduler for seeds after the first: local (default: a local cluster), "
+            "threads, sync, or the address of a running scheduler (tcp://host:8786)."
+        ),
+    ] = None,
+    rock_survey: Annotated[bool, typer.Option(help="Also run the rock survey.")] = True,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+) -> None:
+    """The paper's experiments end to end: simulate, characterize, localize (4 variants), map
+    (CSM, BKI, adaptive BKI), evaluate; tables with the paper's values, figures, report.html.
+
+    Example: `undertow reproduce --seeds 10 --out results_mc`
+    """
+    from ..experiments import StudySettings
+    from ..study import run_study
+
+    if seeds < 1:
+        raise UndertowError("--seeds must be at least 1")
+    settings = StudySettings(rock_survey="rock-survey" if rock_survey else None)
+    with _progress(quiet) as progress:
+        task = progress.add_task("starting", total=None)
+        result = run_study(
+            out_dir,
+            seeds=list(range(first_seed, first_seed + seeds)),
+            scheduler=scheduler,
+            settings=settings,
+            progress=lambda msg: progress.update(task, description=msg),
+        )
+    if not quiet:
+        from rich.markdown import Markdown
+
+        console.print(Markdown(result.markdown))
+        for seed, message in result.failures.items():
+            err.print(f"[red]seed {seed} failed:[/] {message}", highlight=False)
+        err.print(
+            f"results in {out_dir}/ (tables.md, tables.json, figures/, runs/); report: "
+            f"{result.report} ({result.wall_s:.0f} s)"
+        )
+
+
+@app.command()
+@user_errors
+def demo(
+    out_dir: Annotated[Path, typer.Option("--out", help="Results folder.")] = Path("results"),
+) -> None:
+    """The main job with its defaults: `undertow reproduce --seeds 1 --out results`."""
+    reproduce(out_dir=out_dir, seeds=1, first_seed=0, scheduler=None, rock_survey=True, quiet=False)
