@@ -32,3 +32,37 @@ def test_directory_is_replaced_as_a_whole_with_umask_modes(tmp_path):
         os.umask(old)
     assert sorted(os.listdir(target)) == ["new"]
     assert (target.stat().st_mode & 0o777) == 0o755
+
+
+def test_a_file_write_never_replaces_a_directory(tmp_path):
+    """Writing a file where a run folder stands is a user mistake, not a reason to delete it."""
+    from undertow.errors import ConfigError
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "log.mcap").write_text("precious")
+    with pytest.raises(ConfigError, match="is a directory"):
+        with atomic_path(run) as tmp:
+            tmp.write_text("calibration")
+    assert (run / "log.mcap").read_text() == "precious"
+
+
+def test_output_folder_refuses_a_file_and_a_non_empty_folder_unless_overwrite(tmp_path):
+    from undertow._atomic import output_folder
+    from undertow.errors import ConfigError
+
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(ConfigError, match="existing file"):
+        with output_folder(afile):
+            pass
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "old").write_text("x")
+    with pytest.raises(ConfigError, match="--overwrite"):
+        with output_folder(full):
+            pass
+    assert (full / "old").exists()
+    with output_folder(full, overwrite=True) as tmp:
+        (tmp / "new").write_text("y")
+    assert sorted(os.listdir(full)) == ["new"]

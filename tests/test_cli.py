@@ -140,3 +140,34 @@ def test_characterize_writes_a_profile_that_localize_reads(tmp_path):
     assert used["smoothed"] is True
     # the extra vx noise comes from the characterized profile (interpolated near its node)
     assert abs(used["wave_noise"]["dvl_std"][0] - rows[1]["dvl_extra_std_mps"][0]) < 2e-3
+
+
+def _one_error_line(result) -> str:
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert result.exit_code == 1 and "Traceback" not in result.output, result.output
+    assert len(lines) == 1, result.output
+    return lines[0]
+
+
+def test_outputs_never_clobber_a_folder_or_a_file(tmp_path):
+    """calibrate/characterize --out on a run folder, localize --out on a non-empty folder or a
+    file, simulate --out under a path that cannot exist: one line each, nothing touched."""
+    run = tmp_path / "run"
+    assert runner.invoke(app, ["simulate", "calm", "--out", str(run), "-q"]).exit_code == 0
+    before = sorted(p.name for p in run.iterdir())
+    gt = str(run / "ground_truth.tum")
+    line = _one_error_line(
+        runner.invoke(app, ["calibrate", str(run / "log"), gt, "--out", str(run)])
+    )
+    assert "is a directory" in line
+    line = _one_error_line(
+        runner.invoke(app, ["characterize", str(run / "log"), "--out", str(run)])
+    )
+    assert "is a directory" in line
+    line = _one_error_line(runner.invoke(app, ["localize", str(run / "log"), "--out", str(run)]))
+    assert "--overwrite" in line
+    line = _one_error_line(runner.invoke(app, ["localize", str(run / "log"), "--out", gt]))
+    assert "existing file" in line
+    assert sorted(p.name for p in run.iterdir()) == before
+    blocked = str(run / "ground_truth.ply" / "sub")
+    _one_error_line(runner.invoke(app, ["simulate", "calm", "--out", blocked, "-q"]))

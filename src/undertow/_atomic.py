@@ -13,6 +13,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from .errors import ConfigError
+
 
 def _umask() -> int:
     mask = os.umask(0)
@@ -21,13 +23,20 @@ def _umask() -> int:
 
 
 @contextmanager
-def atomic_path(path: str | Path, directory: bool = False) -> Iterator[Path]:
+def atomic_path(
+    path: str | Path, directory: bool = False, replaces_directory: bool = False
+) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success it replaces ``path``.
 
     With ``directory=True`` the temporary path is an (empty) directory and an existing
-    directory at ``path`` is replaced as a whole. On an exception nothing at ``path`` changes.
+    directory at ``path`` is replaced as a whole. A file write never replaces a directory: an
+    existing directory at ``path`` is an error, unless ``replaces_directory`` says the caller
+    writes a folder itself (a ROS 2 bag) and has checked it may go. On an exception nothing at
+    ``path`` changes.
     """
     path = Path(path)
+    if path.is_dir() and not (directory or replaces_directory):
+        raise ConfigError(f"{path}: is a directory; give a file name to write")
     path.parent.mkdir(parents=True, exist_ok=True)
     holder = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     tmp = holder / path.name
@@ -42,3 +51,23 @@ def atomic_path(path: str | Path, directory: bool = False) -> Iterator[Path]:
         os.replace(tmp, path)
     finally:
         shutil.rmtree(holder, ignore_errors=True)
+
+
+def check_output_folder(path: str | Path, overwrite: bool = False) -> Path:
+    """Refuse an output folder that is a file, or that holds files unless ``overwrite``.
+
+    Called before long work so that a wrong ``--out`` fails at once, not after it."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"{path}: output folder is an existing file")
+    if path.is_dir() and any(path.iterdir()) and not overwrite:
+        raise ConfigError(f"{path}: output folder exists and is not empty (use --overwrite)")
+    return path
+
+
+@contextmanager
+def output_folder(path: str | Path, overwrite: bool = False) -> Iterator[Path]:
+    """A result folder written all at once: yields an empty temporary folder that replaces
+    ``path`` on success (an existing folder only with ``overwrite``)."""
+    with atomic_path(check_output_folder(path, overwrite), directory=True) as tmp:
+        yield tmp

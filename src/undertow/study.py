@@ -111,7 +111,7 @@ def _write_runs(root: Path, art: Artifacts) -> None:
     for name, sim in art.simulations.items():
         write_simulation(sim, root / name / "sim", overwrite=True)
     for (name, variant), trajectory in art.trajectories.items():
-        save_trajectory(trajectory, root / name / "localization" / variant)
+        save_trajectory(trajectory, root / name / "localization" / variant, overwrite=True)
     for (name, key), occupancy in art.maps.items():
         folder = root / name / "maps" / key.replace("/", "_")
         folder.mkdir(parents=True, exist_ok=True)

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import sys
 import warnings
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 from rich.console import Console
 
@@ -55,6 +57,9 @@ def user_errors(fn):
         except UndertowError as exc:
             err.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
             raise typer.Exit(1) from None
+        except OSError as exc:  # a path the user gave: missing folder, permissions, disk full
+            err.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            raise typer.Exit(1) from None
 
     return wrapper
 
@@ -73,8 +78,25 @@ def _progress(quiet: bool):
     )
 
 
+def _json_safe(value):
+    """JSON has no NaN or infinity: an undefined number (e.g. the distance of an empty map)
+    becomes null, so the output parses with any JSON reader."""
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    return value
+
+
 def _print_json(data) -> None:
-    sys.stdout.write(json.dumps(data, indent=2, default=float) + "\n")
+    text = json.dumps(_json_safe(data), indent=2, allow_nan=False, default=float)
+    sys.stdout.write(text + "\n")
 
 
 def _load_log(path: Path, topics: Path | None, settings=None):
@@ -101,6 +123,9 @@ def _triple(text: str | None, name: str):
 
 TopicsOption = Annotated[
     Path | None, typer.Option(help="YAML topic map overriding the BlueROV2 defaults.")
+]
+OverwriteOption = Annotated[
+    bool, typer.Option("--overwrite", help="Replace a non-empty output folder.")
 ]
 ConfigOption = Annotated[
     Path | None,

@@ -7,9 +7,11 @@ from typing import Annotated
 
 import typer
 
+from .._atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
+    OverwriteOption,
     TopicsOption,
     _load_log,
     _print_json,
@@ -57,6 +59,7 @@ def localize(
     ] = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
+    overwrite: OverwriteOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """Localize a log with the paper's 18-state UKF; writes trajectory.tum/.npz and config.yaml.
@@ -67,6 +70,7 @@ def localize(
     from ..estimation.run import localize as run_localize
     from ..estimation.run import save_trajectory
 
+    check_output_folder(out_dir, overwrite)
     if (wave_amplitude is None) != (wave_frequency is None):
         raise UndertowError("give both --wave-amplitude and --wave-frequency (or --wave NAME)")
     condition = (wave_amplitude, wave_frequency) if wave_amplitude is not None else wave
@@ -92,7 +96,7 @@ def localize(
             smooth=smooth,
             **params,
         )
-        save_trajectory(trajectory, out_dir)
+        save_trajectory(trajectory, out_dir, overwrite)
     if not quiet:
         err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
 

@@ -7,8 +7,10 @@ from typing import Annotated
 
 import typer
 
+from .._atomic import check_output_folder
 from ._app import (
     ConfigOption,
+    OverwriteOption,
     TopicsOption,
     _load_log,
     _print_json,
@@ -37,6 +39,7 @@ def map_command(
     prior: Annotated[Path | None, typer.Option(help="Seed from a saved map.npz.")] = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
+    overwrite: OverwriteOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
 ) -> None:
     """Occupancy map of the seafloor from DVL beams and sonar ranges; writes map.npz, map.ply
@@ -50,6 +53,7 @@ def map_command(
     from ..mapping.run import map_log, save_map
     from ..trajectory import Trajectory
 
+    check_output_folder(out_dir, overwrite)
     settings = Settings.from_yaml(config)
     options = {"method": method, "resolution": resolution, "length_scale": length_scale}
     given = {k: v for k, v in options.items() if v is not None}  # options win over the file
@@ -58,7 +62,7 @@ def map_command(
         progress.add_task(f"mapping ({cfg.method})", total=None)
         log = _load_log(log_path, topics, settings)
         result = map_log(log, Trajectory.load_npz(trajectory), cfg, prior=prior)
-        save_map(result, out_dir)
+        save_map(result, out_dir, overwrite)
     if not quiet:
         err.print(
             f"wrote {out_dir}/map.npz, map.ply ({result.metadata['occupied_cells']} occupied "

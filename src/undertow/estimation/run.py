@@ -17,7 +17,7 @@ from pathlib import Path
 
 import yaml
 
-from .._atomic import atomic_path
+from .._atomic import output_folder
 from .._plain import to_plain
 from ..errors import ConfigError
 from ..io.tum import write_tum
@@ -73,12 +73,13 @@ def localize(
     return trajectory
 
 
-def save_trajectory(trajectory: Trajectory, out_dir: str | Path) -> Path:
-    """Write ``trajectory.tum`` (evo), ``trajectory.npz`` (t, x, P) and ``config.yaml``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_tum(out / "trajectory.tum", trajectory.t, trajectory.position, trajectory.orientation)
-    trajectory.save_npz(out / "trajectory.npz")
-    with atomic_path(out / "config.yaml") as tmp:
-        tmp.write_text(yaml.safe_dump(to_plain(trajectory.metadata), sort_keys=False))
-    return out
+def save_trajectory(trajectory: Trajectory, out_dir: str | Path, overwrite: bool = False) -> Path:
+    """Write ``trajectory.tum`` (evo), ``trajectory.npz`` (t, x, P) and ``config.yaml``, all
+    at once (a non-empty folder is replaced only with ``overwrite``)."""
+    with output_folder(out_dir, overwrite) as out:
+        write_tum(out / "trajectory.tum", trajectory.t, trajectory.position, trajectory.orientation)
+        trajectory.save_npz(out / "trajectory.npz")
+        (out / "config.yaml").write_text(
+            yaml.safe_dump(to_plain(trajectory.metadata), sort_keys=False)
+        )
+    return Path(out_dir)

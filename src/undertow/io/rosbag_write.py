@@ -91,7 +91,7 @@ def write_log(
     b = _Builder()
     records = list(_messages(log, flavor, b, ground_truth_rate_hz))
     records.sort(key=lambda r: r[1])
-    with atomic_path(path) as bag:
+    with atomic_path(path, replaces_directory=True) as bag:
         with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
             conns = {}
             for stream, msgtype in sorted({(r[0], r[2]) for r in records}):

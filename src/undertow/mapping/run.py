@@ -7,7 +7,7 @@ from pathlib import Path
 
 import yaml
 
-from .._atomic import atomic_path
+from .._atomic import output_folder
 from ..log import Log
 from ..trajectory import Trajectory
 from .config import MappingConfig, mapper_from_config, samples_from_config
@@ -49,14 +49,13 @@ def map_log(
     return MappingResult(occupancy, config, metadata)
 
 
-def save_map(result: MappingResult, out_dir: str | Path) -> Path:
+def save_map(result: MappingResult, out_dir: str | Path, overwrite: bool = False) -> Path:
     """Write ``map.npz``, ``map.ply`` (occupied cell centres with mean and variance) and
-    ``config.yaml`` (mapping config and what went into the map)."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    result.map.save(out / "map.npz")
-    write_map_ply(out / "map.ply", result.map, threshold=result.config.occupied_threshold)
-    doc = {"mapping": result.config.model_dump(mode="json"), "result": result.metadata}
-    with atomic_path(out / "config.yaml") as tmp:
-        tmp.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return out
+    ``config.yaml`` (mapping config and what went into the map), all at once (a non-empty
+    folder is replaced only with ``overwrite``)."""
+    with output_folder(out_dir, overwrite) as out:
+        result.map.save(out / "map.npz")
+        write_map_ply(out / "map.ply", result.map, threshold=result.config.occupied_threshold)
+        doc = {"mapping": result.config.model_dump(mode="json"), "result": result.metadata}
+        (out / "config.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    return Path(out_dir)

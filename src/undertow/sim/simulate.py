@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .._atomic import atomic_path
+from .._atomic import output_folder
 from ..errors import ConfigError
 from ..log import GroundTruth, Log
 from ..rotations import wrap_angle
@@ -149,9 +149,7 @@ def write_simulation(result: SimulationResult, out_dir, overwrite: bool = False)
     from ..io.tum import write_tum
 
     out = Path(out_dir)
-    if out.exists() and any(out.iterdir()) and not overwrite:
-        raise ConfigError(f"{out}: output folder exists and is not empty (use overwrite)")
-    with atomic_path(out, directory=True) as tmp:
+    with output_folder(out, overwrite) as tmp:
         gt = result.log.ground_truth
         write_log(result.log, tmp / "log", flavor="driver", overwrite=False)
         write_tum(tmp / "ground_truth.tum", gt.t, gt.position, gt.orientation)
