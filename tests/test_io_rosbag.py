@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 from undertow.errors import ReaderError, UndertowError
 from undertow.io import TopicMap, read_log, write_log
 from undertow.io.msgdefs import dvl_typestore
-from undertow.log import Log, Pressure
+from undertow.log import Log, Mounting, Pressure, SensorMount
 
 REAL = REAL_DATA
 BAG = REAL / "a50_ros1_circle.bag"
@@ -197,7 +199,8 @@ def test_json_topic_alone_gives_dvl_and_custom_topic_map(tmp_path):
     write_raw_bag(tmp_path / "j", msgs)
     cfg = tmp_path / "topics.yaml"
     cfg.write_text("dvl_json: /a50/raw\npressure: [/baro]\n")
-    log = read_log(tmp_path / "j", TopicMap.from_yaml(cfg))
+    with pytest.warns(UserWarning, match=r"j: pressure: no topic of the topic map \(/baro\)"):
+        log = read_log(tmp_path / "j", TopicMap.from_yaml(cfg))
     assert len(log.dvl) == 20
     np.testing.assert_array_equal(log.dvl.t, 10.0 + np.arange(20))
     assert log.dvl.velocity[0, 0] == json.loads(lines[0])["vx"]
@@ -241,3 +244,142 @@ def test_ros2_sqlite3_bag_as_ros2_bag_record_writes_it(tmp_path):
     assert len(log.pressure) == 20
     np.testing.assert_allclose(log.pressure.t - log.pressure.t[0], 0.1 * np.arange(20), atol=1e-6)
     np.testing.assert_allclose(log.pressure.depth(1000.0, g=9.81), np.arange(20) / 10, atol=1e-9)
+
+
+# -- user-given topics that are not in the bag -----------------------------------------------
+
+
+def test_user_topic_missing_from_the_real_bag_warns_once_naming_stream_topics_and_file(tmp_path):
+    cfg = tmp_path / "topics.yaml"
+    cfg.write_text("imu: [/mavros/imu/data, /my_imu]\ndvl: /dvl/data\n")
+    with pytest.warns(UserWarning) as record:
+        log = read_log(BAG, TopicMap.from_yaml(cfg))
+    lines = [str(w.message) for w in record if "topic map" in str(w.message)]
+    assert len(lines) == 1 and "\n" not in lines[0]
+    assert re.search(r"a50_ros1_circle\.bag: imu: .*/mavros/imu/data, /my_imu", lines[0])
+    assert "/dvl/data" in lines[0]  # the topics the bag does have
+    assert len(log.dvl) == 378 and lines[0] in log.metadata["warnings"]
+
+
+def test_absent_default_topics_stay_silent():
+    """The real bag has no IMU, pressure or sonar: with the defaults (also written out in full,
+    as config.yaml does) that is a legal DVL-only log, no warning about topics."""
+    for topics in (None, TopicMap.model_validate(TopicMap().model_dump())):
+        with warnings.catch_warnings(record=True) as record:
+            warnings.simplefilter("always")
+            log = read_log(BAG, topics)
+        assert not [w for w in record if "topic map" in str(w.message)]
+        assert log.imu is None and len(log.dvl) == 378
+
+
+# -- the mounting inside the bag: /tf_static ---------------------------------------------------
+
+MOUNTING = Mounting(
+    imu=SensorMount((0.01, -0.02, 0.03), (np.pi, 0.0, 0.0)),  # a REP-103 IMU, roll pi
+    dvl=SensorMount((0.2, 0.01, 0.3), (0.02, -0.03, 0.785)),
+    sonar=SensorMount((0.15, 0.1, 0.31), (0.0, 0.4, 0.0)),
+    barometer=SensorMount((-0.1, 0.0, 0.05), (0.0, 0.0, 0.0)),
+)
+
+
+def _same_rotation(a, b):
+    from scipy.spatial.transform import Rotation
+
+    ra = Rotation.from_euler("ZYX", np.asarray(a)[::-1])
+    rb = Rotation.from_euler("ZYX", np.asarray(b)[::-1])
+    return (ra.inv() * rb).magnitude() < 1e-12
+
+
+def test_mounting_survives_a_bare_copy_of_the_bag_through_tf_static(tmp_path):
+    log = full_log(n=10).replace(mounting=MOUNTING)
+    path = write_log(log, tmp_path / "bag")
+    (path / "undertow.yaml").unlink()  # what a copy of the bag without the sidecar loses
+    back = read_log(path)
+    assert back.metadata["mounting_source"] == "/tf_static"
+    for sensor in ("imu", "dvl", "sonar", "barometer"):
+        got, want = getattr(back.mounting, sensor), getattr(MOUNTING, sensor)
+        np.testing.assert_allclose(got.translation, want.translation, rtol=0, atol=1e-15)
+        assert _same_rotation(got.rotation, want.rotation), sensor
+    np.testing.assert_allclose(back.mounting.dvl.rotation, MOUNTING.dvl.rotation, atol=1e-12)
+    # a lone .mcap in a folder without metadata.yaml: read as that file, mounting kept
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    shutil.copy(next(path.glob("*.mcap")), lone / "log.mcap")
+    again = read_log(lone)
+    assert (
+        len(again.dvl) == 10 and again.mounting.sonar.translation == back.mounting.sonar.translation
+    )
+
+
+def test_tf_static_is_standard_ros_seen_by_plain_rosbags(tmp_path):
+    """Parent base_link, one child per sensor, translation = lever arm, rotation = the
+    quaternion of R_sensor^body (scipy's intrinsic Z-Y-X Euler angles, yaw-pitch-roll), child
+    frame = the frame_id of that sensor's messages; latched (transient local) QoS."""
+    from scipy.spatial.transform import Rotation
+
+    log = full_log(n=5).replace(mounting=MOUNTING)
+    path = write_log(log, tmp_path / "bag", flavor="standard")
+    humble = get_typestore(Stores.ROS2_HUMBLE)
+    with AnyReader([path], default_typestore=humble) as reader:
+        conns = {c.topic: c for c in reader.connections}
+        assert conns["/tf_static"].msgtype == "tf2_msgs/msg/TFMessage"
+        qos = conns["/tf_static"].ext.offered_qos_profiles[0]
+        assert qos.durability.name == "TRANSIENT_LOCAL"
+        msgs = [
+            reader.deserialize(r, c.msgtype) for c, _, r in reader.messages([conns["/tf_static"]])
+        ]
+        frames = {}
+        for topic in ("/dvl/data", "/imu/data", "/ping_sonar/range", "/fluid_pressure"):
+            c, _, raw = next(reader.messages([conns[topic]]))
+            frames[topic] = reader.deserialize(raw, c.msgtype).header.frame_id
+    assert len(msgs) == 1
+    tfs = {tf.child_frame_id: tf for tf in msgs[0].transforms}
+    assert set(tfs) == {"imu_link", "dvl_link", "sonar_link", "pressure_link"}
+    assert {tf.header.frame_id for tf in tfs.values()} == {"base_link"}
+    assert frames == {
+        "/dvl/data": "dvl_link", "/imu/data": "imu_link",
+        "/ping_sonar/range": "sonar_link", "/fluid_pressure": "pressure_link",
+    }  # fmt: skip
+    for child, sensor in (("imu_link", "imu"), ("dvl_link", "dvl"), ("sonar_link", "sonar")):
+        tf, want = tfs[child].transform, getattr(MOUNTING, sensor)
+        got = [tf.translation.x, tf.translation.y, tf.translation.z]
+        np.testing.assert_allclose(got, want.translation, rtol=0, atol=0)
+        q = np.array([tf.rotation.x, tf.rotation.y, tf.rotation.z, tf.rotation.w])
+        ref = Rotation.from_euler("ZYX", want.rotation[::-1]).as_quat()  # x y z w
+        assert min(np.abs(q - ref).max(), np.abs(q + ref).max()) < 1e-12, child
+        # the rotation takes sensor-frame vectors to the body frame: the sonar's axis (+z)
+        if sensor == "sonar":
+            axis = Rotation.from_quat(q).apply([0.0, 0.0, 1.0])
+            np.testing.assert_allclose(axis, [np.sin(0.4), 0.0, np.cos(0.4)], atol=1e-12)
+
+
+def test_sidecar_wins_over_tf_static_and_frame_names_come_from_the_topic_map(tmp_path):
+    import yaml
+
+    topics = TopicMap(base_frame="base_frd", frames={"dvl": ["a50"], "sonar": "ping"})
+    path = write_log(full_log(n=5).replace(mounting=MOUNTING), tmp_path / "bag", topics=topics)
+    side = path / "undertow.yaml"
+    data = yaml.safe_load(side.read_text())
+    data["mounting"]["dvl"]["translation"] = [9.0, 9.0, 9.0]
+    side.write_text(yaml.safe_dump(data))
+    back = read_log(path, topics)
+    assert back.metadata["mounting_source"] == "undertow.yaml"
+    assert back.mounting.dvl.translation == (9.0, 9.0, 9.0)
+    side.unlink()
+    back = read_log(path, topics)
+    assert back.mounting.dvl.translation == MOUNTING.dvl.translation
+    assert back.mounting.sonar.translation == MOUNTING.sonar.translation
+    # with the default map a50 / ping mean nothing and imu_link hangs off base_frd, not
+    # base_link: said in a warning, defaults kept
+    with pytest.warns(UserWarning, match=r"parent is not base_link .*: 2 \(first: base_frd"):
+        assert read_log(path).mounting.dvl == Mounting().dvl
+
+
+def test_folder_of_storage_files_without_metadata(tmp_path):
+    path = write_log(full_log(n=5), tmp_path / "bag")
+    two = tmp_path / "two"
+    two.mkdir()
+    for name in ("a.mcap", "b.mcap"):
+        shutil.copy(next(path.glob("*.mcap")), two / name)
+    with pytest.raises(ReaderError, match=r"two: no metadata\.yaml and 2 storage files"):
+        read_log(two)

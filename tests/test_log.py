@@ -71,3 +71,23 @@ def test_time_span_over_streams():
     )
     assert log.time_span == (0.5, 5.0)
     assert Log().time_span[0] != Log().time_span[0]  # NaN for an empty log
+
+
+def test_depth_default_density_is_the_simulators_water():
+    """One default for both: a simulated barometer (noise off, calm water, at the body origin)
+    converted with Pressure.depth()'s defaults gives the true depth (hydrostatics, p = p_atm +
+    rho g d). With 997 instead of the simulator's 998 it would be 0.5 mm off at 0.5 m."""
+    from undertow.log import FRESH_WATER_DENSITY
+    from undertow.sim import Scenario, simulate
+
+    s = Scenario(
+        motion={"carriage": {"run_length_m": 1.0, "hold_before_s": 0.5, "hold_after_s": 0.5}},
+        barometer={"noise_sigma_pa": 0.0},
+        ground_truth={"rate_hz": 100.0},
+        floor_cloud={"spacing_m": 0.2},
+    )
+    assert s.water.density_kg_m3 == FRESH_WATER_DENSITY
+    log = simulate(s).log
+    assert s.mounting.barometer.translation == (0.0, 0.0, 0.0)
+    true_depth = np.interp(log.pressure.t, log.ground_truth.t, log.ground_truth.position[:, 2])
+    np.testing.assert_allclose(log.pressure.depth(), true_depth, rtol=0, atol=1e-9)

@@ -26,6 +26,10 @@ from .errors import DataError, MissingStreamError
 
 G0 = 9.80665  # standard gravity, m/s^2
 P_ATM = 101_325.0  # standard atmosphere, Pa
+#: Default water density (kg/m^3) of every depth conversion and of the simulator: fresh water at
+#: the basin's temperature, about 20 C (998.2 kg/m^3; 999.1 at 15 C; NOTES.md section 1 gives
+#: 997-1000 for fresh water, about 1025 for sea water). Pass 1025 for a sea-water log.
+FRESH_WATER_DENSITY = 998.0
 
 
 def _as_array(value, dtype, name: str, stream: str) -> np.ndarray:
@@ -222,9 +226,13 @@ class Pressure(_Stream):
     pressure: np.ndarray
 
     def depth(
-        self, water_density: float = 997.0, surface_pressure: float = P_ATM, g: float = G0
+        self,
+        water_density: float = FRESH_WATER_DENSITY,
+        surface_pressure: float = P_ATM,
+        g: float = G0,
     ) -> np.ndarray:
-        """Depth below the surface (m, positive down): d = (p - p_atm) / (rho g)."""
+        """Depth below the surface (m, positive down): d = (p - p_atm) / (rho g); the default
+        density is :data:`FRESH_WATER_DENSITY` (the simulator's too), use 1025 for sea water."""
         return (self.pressure - surface_pressure) / (water_density * g)
 
     def invalid_count(self) -> int:

@@ -50,7 +50,13 @@ def simulate(
         str | None, typer.Argument(help="Built-in scenario name or a scenario YAML file.")
     ] = None,
     out_dir: Annotated[Path | None, typer.Option("--out", help="Output directory.")] = None,
-    seed: Annotated[int, typer.Option(help="Random seed (runs are deterministic per seed).")] = 0,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            help="Random seed, >= 0 (runs are deterministic per seed). Default: the scenario"
+            " file's own seed (a written scenario.yaml reproduces its run), else 0."
+        ),
+    ] = None,
     list_: Annotated[bool, typer.Option("--list", help="List the built-in scenarios.")] = False,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing output directory.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
@@ -58,6 +64,8 @@ def simulate(
     """Simulate a wave-tank run: ROS 2 bag, ground truth (TUM, 2000 Hz), floor scan (PLY).
 
     Example: `undertow simulate wave-a0.10-f0.75 --out runs/a10f075 --seed 3`
+
+    Re-run it exactly: `undertow simulate runs/a10f075/scenario.yaml --out runs/again`
     """
     from ..sim import list_scenarios, load_scenario, write_simulation
     from ..sim import simulate as run_simulation
@@ -68,7 +76,10 @@ def simulate(
         return
     if scenario is None or out_dir is None:
         raise UndertowError("simulate needs a SCENARIO and --out DIR (or --list)")
+    if seed is not None and seed < 0:
+        raise UndertowError(f"--seed {seed}: must be a non-negative integer")
     spec = load_scenario(scenario)
+    seed = spec.seed if seed is None else seed  # given wins; else the scenario's own (default 0)
     with _progress(quiet) as progress:
         progress.add_task(f"simulating {spec.name} (seed {seed})", total=None)
         result = run_simulation(spec, seed=seed)

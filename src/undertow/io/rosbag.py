@@ -4,13 +4,18 @@ Topics come from a :class:`~undertow.io.topics.TopicMap` (first candidate found 
 topic is decoded by message type. The raw A50 JSON topic (``/dvl/json_data``) fills what the
 driver message lacks (covariance; ``time_of_validity`` kept in
 ``metadata['dvl_time_of_validity_s']``) and stands in for a missing DVL or dead-reckoning topic
-(times: bag record time, i.e. receive time). A sidecar ``undertow.yaml`` written by
-:func:`undertow.io.rosbag_write.write_log` restores mounting and metadata. rosbags errors become
-one-line :class:`~undertow.errors.ReaderError`.
+(times: bag record time, i.e. receive time). The sensor mounting comes from, in this order: a
+sidecar ``undertow.yaml`` next to the bag (written by :func:`undertow.io.rosbag_write.write_log`,
+it also restores metadata), the bag's ``/tf_static`` (transforms from the topic map's base frame
+to its sensor frames, body forward-right-down; see :mod:`undertow.io.topics`), else the BlueROV2
+defaults; ``metadata['mounting_source']`` says which. A user-given topic that is not in the bag
+gives one warning line. A directory without ``metadata.yaml`` holding a single ``.mcap``/``.db3``
+is read as that file. rosbags errors become one-line :class:`~undertow.errors.ReaderError`.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,8 +23,9 @@ import numpy as np
 import yaml
 from rosbags.highlevel import AnyReader
 
-from ..errors import ReaderError
+from ..errors import ReaderError, UndertowError
 from ..log import Dvl, Log, Mounting
+from ..rotations import quaternion_to_rpy
 from ._collect import DvlRows, Notes
 from .a50_json import add_velocity_report, dead_reckoning_from_rows
 from .msgdefs import dvl_typestore
@@ -27,6 +33,7 @@ from .rosbag_streams import ACCEPTED, Rows
 from .topics import TopicMap
 
 SIDECAR = "undertow.yaml"
+STORAGE_SUFFIXES = (".mcap", ".db3")
 
 
 def _one_line(exc: BaseException) -> str:
@@ -35,11 +42,39 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _bag_paths(path: Path) -> list[Path]:
-    if path.is_dir() or path.suffix == ".bag":
+    if path.suffix == ".bag":
         return [path]
+    if path.is_dir():
+        if (path / "metadata.yaml").exists():
+            return [path]
+        files = sorted(p for p in path.iterdir() if p.suffix in STORAGE_SUFFIXES)
+        if len(files) == 1:  # a bag directory whose metadata.yaml was not copied
+            return files
+        if not files:
+            raise ReaderError(
+                f"{path}: directory is not a ROS 2 bag (no metadata.yaml, .mcap or .db3 file)"
+            )
+        names = ", ".join(p.name for p in files)
+        raise ReaderError(
+            f"{path}: no metadata.yaml and {len(files)} storage files ({names}); give one file"
+        )
     if (path.parent / "metadata.yaml").exists():
         return [path.parent]
     return [path]
+
+
+def _warn_unmatched(topics: TopicMap, available: dict, path: Path) -> list[str]:
+    """One warning line per user-given stream of which no topic is in the bag."""
+    listing = sorted(available)
+    shown = ", ".join(listing[:8]) + (f", ... ({len(listing)} in all)" if len(listing) > 8 else "")
+    lines = [
+        f"{path}: {stream}: no topic of the topic map ({', '.join(candidates)}) is in the bag;"
+        f" stream not read (topics in the bag: {shown or 'none'})"
+        for stream, candidates in topics.unmatched_user_topics(available).items()
+    ]
+    for line in lines:
+        warnings.warn(line, stacklevel=3)
+    return lines
 
 
 def read_rosbag(path, topics: TopicMap | None = None) -> Log:
@@ -52,13 +87,15 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
     topics = topics or TopicMap()
     notes = Notes(str(path))
     rows = Rows(notes)
+    paths = _bag_paths(path)
     try:
-        reader = AnyReader(_bag_paths(path), default_typestore=dvl_typestore())
+        reader = AnyReader(paths, default_typestore=dvl_typestore())
         reader.open()
     except Exception as exc:  # rosbags raises many types for corrupt input
         raise ReaderError(f"{path}: cannot open bag ({_one_line(exc)})") from exc
     try:
         available = {c.topic: c.msgtype for c in reader.connections}
+        unmatched = _warn_unmatched(topics, available, path)
         mapped = topics.resolve(available)
         used = {}
         for stream, topic in mapped.items():
@@ -72,11 +109,11 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
         _read_messages(reader, conns, used, rows, notes, path)
     finally:
         reader.close()
-    log = _assemble(rows, notes, path, used)
+    log = _assemble(rows, notes, path, used, topics)
     if not log.streams():
         listing = ", ".join(f"{t} ({m})" for t, m in sorted(available.items())) or "none"
         raise ReaderError(f"{path}: no known measurement stream; topics in the bag: {listing}")
-    log.metadata["warnings"] = notes.finish()
+    log.metadata["warnings"] = unmatched + notes.finish()
     return log
 
 
@@ -99,7 +136,7 @@ def _read_messages(reader, conns, used, rows: Rows, notes: Notes, path: Path) ->
         rows.add(used[conn.topic], conn.msgtype, msg, record_ns)
 
 
-def _assemble(rows: Rows, notes: Notes, path: Path, used: dict) -> Log:
+def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap) -> Log:
     metadata: dict = {"format": "rosbag", "topics": {s: t for t, s in used.items()}}
     dvl = _dvl(rows, notes, metadata)
     dead_reckoning = None
@@ -109,6 +146,13 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict) -> Log:
         dead_reckoning = dead_reckoning_from_rows(rows.json_position, notes)
         metadata["dead_reckoning_source"] = "dvl_json position_local reports"
     mounting, source_meta = _sidecar(path, notes)
+    if mounting is not None:
+        metadata["mounting_source"] = SIDECAR
+    elif (mounting := _tf_mounting(rows.transforms, topics, notes)) is not None:
+        metadata["mounting_source"] = _used_topic(used, "tf_static")
+    else:
+        mounting = Mounting()
+        metadata["mounting_source"] = "default (BlueROV2)"
     if source_meta:
         # the writer's metadata (e.g. a simulated run's wave condition and water density) comes
         # back at the top level, as it was; the reader's own keys win
@@ -178,16 +222,49 @@ def _merge_json(dvl: Dvl, order: np.ndarray, rows: Rows, metadata: dict) -> Dvl:
     return replace(dvl, covariance=cov)
 
 
-def _sidecar(path: Path, notes: Notes) -> tuple[Mounting, dict]:
+def _used_topic(used: dict, stream: str) -> str:
+    """The topic read for ``stream`` (``used`` maps topic -> stream)."""
+    return next(t for t, s in used.items() if s == stream)
+
+
+def _tf_mounting(transforms: list, topics: TopicMap, notes: Notes) -> Mounting | None:
+    """Mounting from /tf_static transforms base_frame -> sensor frame (None if there is none).
+
+    A transform's translation is the sensor's lever arm in the base (body) frame and its rotation
+    the sensor frame's orientation in it, i.e. R_sensor^body, as ``SensorMount.rotation`` (roll,
+    pitch, yaw). The body frame is forward-right-down, as everywhere in undertow (a REP-103
+    forward-left-up base_link from another tool needs the settings' ``mounting`` overrides).
+    Sensors without a transform keep their default; the last transform of a frame wins.
+    """
+    base = topics.base_frame.lstrip("/")
+    changes: dict = {}
+    for parent, child, translation, quaternion in transforms:
+        sensor = topics.frames.sensor_of(child)
+        if sensor is None:
+            continue
+        if parent.lstrip("/") != base:
+            notes.add(
+                f"tf_static: sensor frames whose parent is not {base} (ignored; tf chains are"
+                " not followed)",
+                detail=f"{parent} -> {child}",
+            )
+            continue
+        rpy = quaternion_to_rpy(np.asarray(quaternion, dtype=np.float64))
+        changes[sensor] = {"translation": translation, "rotation": tuple(float(a) for a in rpy)}
+    return Mounting().updated(changes) if changes else None
+
+
+def _sidecar(path: Path, notes: Notes) -> tuple[Mounting | None, dict]:
+    """(mounting or None if the sidecar has none, the sidecar's other fields)."""
     file = path / SIDECAR if path.is_dir() else path.parent / SIDECAR
     if not file.exists():
-        return Mounting(), {}
+        return None, {}
     try:
         data = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
-        mounting = Mounting.from_dict(data["mounting"]) if "mounting" in data else Mounting()
-    except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError) as exc:
-        notes.add(f"{SIDECAR} unreadable, default mounting used ({_one_line(exc)})")
-        return Mounting(), {}
+        mounting = Mounting.from_dict(data["mounting"]) if "mounting" in data else None
+    except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError, UndertowError) as exc:
+        notes.add(f"{SIDECAR} unreadable, its mounting and metadata ignored ({_one_line(exc)})")
+        return None, {}
     return mounting, {k: v for k, v in data.items() if k != "mounting"}
 
 

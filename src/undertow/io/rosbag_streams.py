@@ -19,6 +19,7 @@ from ._collect import DvlRows, Notes, count_nan_rows, time_order
 from .a50_json import add_velocity_report, is_position_report, is_velocity_report, position_row
 from .msgdefs import A50_DVL, MARINE_DVL
 
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 ACCEPTED = {
     "dvl": (A50_DVL, MARINE_DVL),
     "dead_reckoning": ("geometry_msgs/msg/PoseWithCovarianceStamped",),
@@ -28,6 +29,7 @@ ACCEPTED = {
     "sonar": ("sensor_msgs/msg/Range",),
     "wave_probe": ("geometry_msgs/msg/PointStamped",),
     "ground_truth": ("nav_msgs/msg/Odometry",),
+    "tf_static": (TF_MESSAGE,),
 }
 HPA_THRESHOLD = 20_000.0  # an absolute pressure below this (Pa) is a log in hPa/mbar
 
@@ -66,11 +68,24 @@ class Rows:
         self.rows: dict[str, list] = {k: [] for k in ACCEPTED}
         self.sonar_limits: tuple | None = None
         self.probe_x: float | None = None
+        #: (parent frame, child frame, translation, quaternion x y z w) of /tf_static
+        self.transforms: list[tuple] = []
 
     def add(self, stream: str, msgtype: str, msg, record_ns: int) -> None:
         notes = self.notes
         if stream == "dvl_json":
             self._add_json(msg.data, record_ns)
+        elif stream == "tf_static":
+            for tf in msg.transforms:
+                r = tf.transform
+                self.transforms.append(
+                    (
+                        tf.header.frame_id,
+                        tf.child_frame_id,
+                        _xyz(r.translation),
+                        _quat(r.rotation),
+                    )
+                )
         elif msgtype == A50_DVL:
             beams = [(b.id, b.velocity, b.distance, b.valid) for b in msg.beams]
             self.dvl.append(

@@ -6,9 +6,11 @@ topic; ``flavor="standard"`` writes ``marine_acoustic_msgs/msg/Dvl`` (unknown co
 ``velocity_mode`` 0 for an invalid velocity, invalid beam range NaN; no fom). Other streams use
 standard types: Imu, FluidPressure, Range, PoseWithCovarianceStamped (dead reckoning, std^2 on
 the position diagonal), PointStamped (wave probe: x = probe x, z = elevation up), Odometry
-(ground truth, twist in the body frame as ROS requires). Mounting, source and plain metadata go
-to a sidecar ``undertow.yaml``. The bag is written in a temp dir next to the target, then
-renamed (nothing half-written is left at ``path``).
+(ground truth, twist in the body frame as ROS requires). The sensor mounting is in the bag
+itself as ``/tf_static`` (see :func:`tf_static_message`), so a bare copy of the ``.mcap`` keeps it
+and ROS tools and Foxglove see the sensor frames; it is also, with source and plain metadata, in a
+sidecar ``undertow.yaml``. The bag is written in a temp dir next to the target, then renamed
+(nothing half-written is left at ``path``).
 """
 
 from __future__ import annotations
@@ -19,6 +21,14 @@ from typing import Literal
 
 import numpy as np
 import yaml
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from .._atomic import atomic_path
@@ -29,7 +39,15 @@ from ..rotations import rpy_to_matrix, rpy_to_quaternion
 from .a50_json import velocity_report_line
 from .msgdefs import A50_BEAM, A50_DVL, MARINE_DVL, dvl_typestore
 from .rosbag import SIDECAR
-from .topics import TopicMap
+from .rosbag_streams import TF_MESSAGE
+from .topics import SENSOR_NAMES, TopicMap
+
+_ZERO = QosTime(0, 0)  # rmw default (infinite) deadline, lifespan, lease
+#: /tf_static as tf2's static broadcaster offers it: latched (transient local), depth 1, reliable
+TF_STATIC_QOS = Qos(
+    QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
+    _ZERO, _ZERO, QosLiveliness.AUTOMATIC, _ZERO, False,
+)  # fmt: skip
 
 
 class _Builder:
@@ -56,6 +74,15 @@ class _Builder:
     def quat(self, q):
         return self.T["geometry_msgs/msg/Quaternion"](
             x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])
+        )
+
+    def transform(self, t: float, parent: str, child: str, translation, rpy):
+        h, _ = self.header(t, parent)
+        tf = self.T["geometry_msgs/msg/Transform"](
+            translation=self.vec(translation), rotation=self.quat(rpy_to_quaternion(rpy))
+        )
+        return self.T["geometry_msgs/msg/TransformStamped"](
+            header=h, child_frame_id=child, transform=tf
         )
 
     def pose_cov(self, position, rpy, cov):
@@ -89,14 +116,16 @@ def write_log(
         raise UndertowError(f"{path}: already exists (pass overwrite=True to replace it)")
     topics = topics or TopicMap()
     b = _Builder()
-    records = list(_messages(log, flavor, b, ground_truth_rate_hz))
+    records = list(_messages(log, flavor, b, ground_truth_rate_hz, topics))
+    records.append(tf_static_record(log, b, topics))
     records.sort(key=lambda r: r[1])
     with atomic_path(path, replaces_directory=True) as bag:
         with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
             conns = {}
             for stream, msgtype in sorted({(r[0], r[2]) for r in records}):
+                qos = (TF_STATIC_QOS,) if stream == "tf_static" else ()
                 conns[stream] = writer.add_connection(
-                    topics.first(stream), msgtype, typestore=b.store
+                    topics.first(stream), msgtype, typestore=b.store, offered_qos_profiles=qos
                 )
             for stream, ns, msgtype, msg in records:
                 writer.write(conns[stream], ns, b.store.serialize_cdr(msg, msgtype))
@@ -110,11 +139,41 @@ def write_log(
     return path
 
 
-def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None):
+def tf_static_record(log: Log, b: _Builder, topics: TopicMap):
+    """The mounting as one ``tf2_msgs/msg/TFMessage`` on ``/tf_static``, at the log's start.
+
+    One ``geometry_msgs/TransformStamped`` per sensor (imu, dvl, sonar, barometer): parent
+    ``topics.base_frame`` (``base_link``), child the sensor's frame (``topics.frames``:
+    ``imu_link``, ``dvl_link``, ``sonar_link``, ``pressure_link``, the frame_id of that sensor's
+    messages), translation = lever arm (m), rotation = quaternion of the mounting's roll, pitch,
+    yaw, i.e. R_sensor^body (a vector in the sensor frame to the body frame), as tf defines a
+    parent-to-child transform. The body frame keeps undertow's convention, forward-right-down
+    (x forward, y right, z down), not ROS REP-103's forward-left-up; sensor frames are the
+    sensors' own (A50: x forward, y right, z down).
+    """
+    start = log.time_span[0]
+    t = start if math.isfinite(start) else 0.0
+    mounts = log.mounting.to_dict()
+    transforms = [
+        b.transform(
+            t,
+            topics.base_frame,
+            getattr(topics.frames, sensor)[0],
+            mounts[sensor]["translation"],
+            np.asarray(mounts[sensor]["rotation"], dtype=np.float64),
+        )
+        for sensor in SENSOR_NAMES
+    ]
+    _, ns = b.header(t, topics.base_frame)
+    return "tf_static", ns, TF_MESSAGE, b.T[TF_MESSAGE](transforms=transforms)
+
+
+def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None, topics: TopicMap):
     """(stream, record time ns, msgtype, message) for every message of ``log``."""
     T = b.T
+    frame = {sensor: getattr(topics.frames, sensor)[0] for sensor in SENSOR_NAMES}
     if log.dvl is not None:
-        yield from (_dvl_driver if flavor == "driver" else _dvl_standard)(log, b)
+        yield from (_dvl_driver if flavor == "driver" else _dvl_standard)(log, b, frame["dvl"])
     if (s := log.imu) is not None:
         n = len(s)
         acc = s.linear_acceleration if s.linear_acceleration is not None else np.zeros((n, 3))
@@ -122,7 +181,7 @@ def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None):
         qcov = np.zeros(9) if s.orientation is not None else np.array([-1.0] + [0.0] * 8)
         acov = np.zeros(9) if s.linear_acceleration is not None else np.array([-1.0] + [0.0] * 8)
         for i in range(n):
-            h, ns = b.header(s.t[i], "imu_link")
+            h, ns = b.header(s.t[i], frame["imu"])
             yield (
                 "imu",
                 ns,
@@ -139,7 +198,7 @@ def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None):
             )
     if (s := log.pressure) is not None:
         for i in range(len(s)):
-            h, ns = b.header(s.t[i], "barometer_link")
+            h, ns = b.header(s.t[i], frame["barometer"])
             yield (
                 "pressure",
                 ns,
@@ -150,7 +209,7 @@ def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None):
             )
     if (s := log.sonar) is not None:
         for i in range(len(s)):
-            h, ns = b.header(s.t[i], "sonar_link")
+            h, ns = b.header(s.t[i], frame["sonar"])
             yield (
                 "sonar",
                 ns,
@@ -214,7 +273,7 @@ def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None):
             )
 
 
-def _dvl_driver(log: Log, b: _Builder):
+def _dvl_driver(log: Log, b: _Builder, frame: str):
     d = log.dvl
     time_ms = np.concatenate([[0.0], np.diff(d.t) * 1e3])
     tov = np.asarray(log.metadata.get("dvl_time_of_validity_s", d.t), dtype=np.float64)
@@ -222,7 +281,7 @@ def _dvl_driver(log: Log, b: _Builder):
     beam_t, dvl_t = b.T[A50_BEAM], b.T[A50_DVL]
     string_t = b.T["std_msgs/msg/String"]
     for i in range(len(d)):
-        h, ns = b.header(d.t[i], "dvl_link")
+        h, ns = b.header(d.t[i], frame)
         beams = [
             beam_t(
                 id=int(d.beam_id[i, k]),
@@ -255,12 +314,12 @@ def _dvl_driver(log: Log, b: _Builder):
         yield "dvl_json", ns, "std_msgs/msg/String", string_t(data=line)
 
 
-def _dvl_standard(log: Log, b: _Builder):
+def _dvl_standard(log: Log, b: _Builder, frame: str):
     d = log.dvl
     dvl_t = b.T[MARINE_DVL]
     minus = np.full(4, -1.0, np.float32)
     for i in range(len(d)):
-        h, ns = b.header(d.t[i], "dvl_link")
+        h, ns = b.header(d.t[i], frame)
         v = d.velocity[i]
         cov = np.where(np.isnan(d.covariance[i]), -1.0, d.covariance[i]).reshape(9)
         rng = np.where(d.beam_valid[i], d.beam_range[i], np.nan)

@@ -1,9 +1,16 @@
-"""Which ROS topic holds which measurement stream: :class:`TopicMap`.
+"""Which ROS topic holds which stream, which tf frame is which sensor: :class:`TopicMap`.
 
-Each field is a list of candidate topic names; the first one present in a bag wins, so common
-alternatives of BlueROV2 logs (``/BlueROV/pressure2_fluid``, ``/vectornav/IMU``,
+Each stream field is a list of candidate topic names; the first one present in a bag wins, so
+common alternatives of BlueROV2 logs (``/BlueROV/pressure2_fluid``, ``/vectornav/IMU``,
 ``/ping_sonar/data``) work without a file. The DVL topic is decoded by message type
 (``waterlinked_a50_ros_driver/msg/DVL`` or ``marine_acoustic_msgs/msg/Dvl``), never by name.
+A candidate list the user changed (not the default) that matches no topic of a bag is reported
+by the reader (one warning line); absent defaults stay silent (a DVL-only log is legal).
+
+Sensor mounting as ROS sees it: ``tf_static`` (``tf2_msgs/msg/TFMessage``) holds one transform
+per sensor from ``base_frame`` to the sensor's frame; ``frames`` names those frames (candidates,
+first used by the writer, all recognized by the reader). Only direct children of ``base_frame``
+are read (no chains of transforms).
 """
 
 from __future__ import annotations
@@ -28,8 +35,40 @@ STREAM_FIELDS = (
 )
 
 
+SENSOR_NAMES = ("imu", "dvl", "sonar", "barometer")  # as in log.Mounting
+
+
+def _as_list(value):
+    return [value] if isinstance(value, str) else value
+
+
+class SensorFrames(BaseModel):
+    """tf frame ids of the sensors (children of the base frame), candidates per sensor."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    imu: list[str] = ["imu_link"]
+    dvl: list[str] = ["dvl_link"]
+    sonar: list[str] = ["sonar_link"]
+    barometer: list[str] = ["pressure_link"]
+
+    @field_validator(*SENSOR_NAMES, mode="before")
+    @classmethod
+    def _one_or_many(cls, value):
+        return _as_list(value)
+
+    def sensor_of(self, frame_id: str) -> str | None:
+        """The sensor whose frame is ``frame_id`` (a leading '/' of ROS 1 ignored), or None."""
+        frame_id = frame_id.lstrip("/")
+        for sensor in SENSOR_NAMES:
+            if frame_id in (f.lstrip("/") for f in getattr(self, sensor)):
+                return sensor
+        return None
+
+
 class TopicMap(BaseModel):
-    """Candidate topic names per stream (first found wins); a single string is accepted."""
+    """Candidate topic names per stream (first found wins); a single string is accepted.
+    ``tf_static``, ``base_frame`` and ``frames``: where the sensor mounting is in a bag."""
 
     model_config = ConfigDict(extra="forbid")
 
@@ -41,26 +80,41 @@ class TopicMap(BaseModel):
     sonar: list[str] = ["/ping_sonar/range", "/ping_sonar/data", "/sonar/range"]
     wave_probe: list[str] = ["/wave_probe"]
     ground_truth: list[str] = ["/ground_truth/odom", "/ground_truth"]
+    tf_static: list[str] = ["/tf_static"]
+    base_frame: str = "base_link"
+    frames: SensorFrames = SensorFrames()
 
-    @field_validator(*STREAM_FIELDS, mode="before")
+    @field_validator(*STREAM_FIELDS, "tf_static", mode="before")
     @classmethod
     def _one_or_many(cls, value):
-        return [value] if isinstance(value, str) else value
+        return _as_list(value)
 
     def first(self, stream: str) -> str:
         """The preferred (first) topic name of ``stream`` (used by the writer)."""
         return getattr(self, stream)[0]
 
     def resolve(self, available) -> dict[str, str]:
-        """Map each stream to the first of its candidates found in ``available`` topic names."""
+        """Map each stream (and ``tf_static``) to the first of its candidates found in
+        ``available`` topic names."""
         available = set(available)
         found = {}
-        for stream in STREAM_FIELDS:
+        for stream in (*STREAM_FIELDS, "tf_static"):
             for topic in getattr(self, stream):
                 if topic in available:
                     found[stream] = topic
                     break
         return found
+
+    def unmatched_user_topics(self, available) -> dict[str, list[str]]:
+        """Streams whose candidate list differs from the default (the user named them) and of
+        which no topic is in ``available``: ``{stream: candidates}``."""
+        available = set(available)
+        return {
+            stream: getattr(self, stream)
+            for stream in (*STREAM_FIELDS, "tf_static")
+            if getattr(self, stream) != type(self).model_fields[stream].default
+            and not available.intersection(getattr(self, stream))
+        }
 
     @classmethod
     def from_yaml(cls, path) -> TopicMap:

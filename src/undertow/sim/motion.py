@@ -11,8 +11,16 @@ along +x over the run length L (triangular if L < V^2/A). The rigid strut is sha
 part of the Morison force along the wave heading e_beta, quasi-statically (strut natural
 frequency far above f):
 
-    delta(t) = F(t) / K,   F = rho C_M V_b du_w/dt + 1/2 rho C_D A_f (|u_r| u_r - |u_c| u_c),
+    delta(t) = F(t) / K,   F = rho C_M V_b du_w/dt + 1/2 rho C_D A_f (|u_r| u_r + |u_c| u_c),
     u_r = u_w - u_c,  u_c = carriage velocity along e_beta, u_w the orbital velocity there.
+
+The drag term is the Morison drag on the relative velocity, 1/2 rho C_D A_f |u_r| u_r, minus its
+calm-water value 1/2 rho C_D A_f |-u_c| (-u_c) (the steady towing drag, which the strut carries
+from the start of the run and which is no wave load): hence ``+ |u_c| u_c``. F = 0 in calm water;
+at rest (u_c = 0) F = rho C_M V_b U omega sin(theta) + 1/2 rho C_D A_f U^2 |cos theta| cos theta
+(inertia linear, drag quadratic in the amplitude); at cruise with |u_w| < |u_c| the drag term is
+1/2 rho C_D A_f (2 |u_c| u_w - sign(u_c) u_w^2), nearly linear, at the encounter frequency
+omega + k V (oncoming waves).
 
 Free vehicle: lawnmower passes (straight legs along x joined by half circles) at a commanded
 depth, followed at speed V with ramps, plus the orbital particle displacement xi(x, d, t) at the

@@ -2,7 +2,9 @@
 
 A scenario is a YAML file; any field left out takes the default below, and ``base: NAME`` starts
 from a built-in scenario (deep merge) so a user file can change a single field. The built-ins
-live in ``undertow/data/scenarios/*.yaml``. Sensor models are in ``scenario_sensors.py``.
+live in ``undertow/data/scenarios/*.yaml``. Sensor models are in ``scenario_sensors.py``; the
+cross-field checks that reject physically impossible scenarios (robot out of the water or below
+the floor, a run leaving the tank, a breaking wave, ...) in ``scenario_checks.py``.
 """
 
 from __future__ import annotations
@@ -12,10 +14,11 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from .._validate import validate
 from ..errors import ConfigError
+from ..log import FRESH_WATER_DENSITY
 from .scenario_sensors import (
     BarometerModel,
     DeadReckoningModel,
@@ -35,7 +38,11 @@ class _Model(BaseModel):
 
 class WaterModel(_Model):
     depth_m: float = Field(3.0, gt=0, description="still-water depth h; MHL basin ~3 m (NOTES 2)")
-    density_kg_m3: float = Field(998.0, gt=0, description="fresh water 15-20 C: 999.1-998.2")
+    density_kg_m3: float = Field(
+        FRESH_WATER_DENSITY,
+        gt=0,
+        description="fresh water at ~20 C (15-20 C: 999.1-998.2); log.FRESH_WATER_DENSITY",
+    )
     gravity_m_s2: float = Field(9.80665, gt=0, description="standard gravity")
     sound_speed_m_s: float = Field(
         1476.0,
@@ -127,7 +134,7 @@ class Scenario(_Model):
 
     name: str = "custom"
     description: str = ""
-    seed: int = 0
+    seed: int = Field(0, ge=0, description="random seed (numpy SeedSequence: non-negative)")
     water: WaterModel = WaterModel()
     wave: WaveModel = WaveModel()
     tank: TankModel = TankModel()
@@ -141,6 +148,13 @@ class Scenario(_Model):
     wave_probe: WaveProbeModel = WaveProbeModel()
     ground_truth: GroundTruthModel = GroundTruthModel()
     floor_cloud: FloorCloudModel = FloorCloudModel()
+
+    @model_validator(mode="after")
+    def _physically_possible(self) -> Scenario:
+        from .scenario_checks import check_scenario
+
+        check_scenario(self)
+        return self
 
     def to_yaml_dict(self) -> dict:
         """Plain dict of every field (defaults included), YAML-safe."""
@@ -168,11 +182,19 @@ def _deep_merge(base: dict, over: dict) -> dict:
 
 def _read_yaml(path, label: str) -> dict:
     try:
-        data = yaml.safe_load(path.read_text())
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{label}: not a scenario YAML file (binary content: byte {exc.object[exc.start]:#04x}"
+            f" at offset {exc.start} is not UTF-8 text)"
+        ) from None
     except (OSError, yaml.YAMLError) as exc:
         raise ConfigError(f"{label}: cannot read scenario YAML: {exc}".replace("\n", " ")) from exc
-    if data is None:
-        return {}
+    if data is None:  # an empty file (or only comments) is more likely a mistake than a request
+        raise ConfigError(
+            f"{label}: empty scenario file; name what to simulate, e.g. 'base: calm'"
+            f" (built-ins: {', '.join(list_scenarios())})"
+        )
     if not isinstance(data, dict):
         raise ConfigError(f"{label}: a scenario file must be a mapping of fields")
     return data
@@ -192,7 +214,13 @@ def _raw(name_or_path: str | Path, depth: int = 0) -> tuple[dict, str]:
     if base is not None:
         if depth > 8:
             raise ConfigError(f"{label}: field base: too deep a chain of base scenarios")
-        parent, _ = _raw(base, depth + 1)
+        try:
+            parent, _ = _raw(base, depth + 1)
+        except ConfigError as exc:  # name the user's file first: that is where base is set
+            message = str(exc)
+            if message.startswith(f"{label}: "):
+                raise
+            raise ConfigError(f"{label}: field base: {message}") from None
         data = _deep_merge(parent, data)
     return data, label
 

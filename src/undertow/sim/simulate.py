@@ -19,6 +19,7 @@ from ..log import GroundTruth, Log
 from ..rotations import wrap_angle
 from .motion import CarriageMotion, SurveyMotion, kinematics
 from .scenario import Scenario
+from .scenario_checks import floor_cloud_count
 from .sensors_dvl import simulate_dead_reckoning, simulate_dvl
 from .sensors_env import simulate_barometer, simulate_sonar, simulate_wave_probe
 from .sensors_imu import sample_times, simulate_imu
@@ -67,8 +68,13 @@ def build_motion(s: Scenario, wave: LinearWave):
 
 
 def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
-    """Simulate ``scenario`` with ``seed`` (default: the scenario's own seed)."""
-    s = scenario if seed is None else scenario.model_copy(update={"seed": int(seed)})
+    """Simulate ``scenario`` with ``seed`` (default: the scenario's own seed); a seed must be a
+    non-negative integer (numpy's SeedSequence), else ConfigError."""
+    if seed is not None:
+        if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+            raise ConfigError(f"seed {seed}: must be a non-negative integer")
+        scenario = scenario.model_copy(update={"seed": int(seed)})
+    s = scenario
     rngs = dict(
         zip(
             RNG_STREAMS,
@@ -129,14 +135,14 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
 def floor_cloud(s: Scenario, tank: Tank, positions: np.ndarray) -> np.ndarray:
     """Dense floor points over the robot's x-y extent plus the configured margin."""
     c = s.floor_cloud
-    lo = positions[:, :2].min(axis=0) - c.margin_m
-    hi = positions[:, :2].max(axis=0) + c.margin_m
-    count = np.prod(np.floor((hi - lo) / c.spacing_m) + 1)
-    if count > c.max_points:
+    lo, hi = positions[:, :2].min(axis=0), positions[:, :2].max(axis=0)
+    count = floor_cloud_count(s, lo[0], hi[0], lo[1], hi[1])
+    if count > c.max_points:  # the scenario's validator checks this first, from the path's box
         raise ConfigError(
-            f"scenario {s.name}: field floor_cloud.spacing_m: {c.spacing_m} m gives ~{int(count)}"
-            f" points, more than floor_cloud.max_points = {c.max_points}"
+            f"field floor_cloud.spacing_m: {c.spacing_m} m gives ~{count} points, more than"
+            f" floor_cloud.max_points = {c.max_points}"
         )
+    lo, hi = lo - c.margin_m, hi + c.margin_m
     return tank.floor_cloud(lo[0], hi[0], lo[1], hi[1], c.spacing_m)
 
 

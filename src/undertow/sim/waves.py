@@ -22,6 +22,8 @@ from functools import cached_property
 
 import numpy as np
 
+from ..log import FRESH_WATER_DENSITY
+
 
 def solve_wavenumber(omega: float, depth: float, g: float, tol: float = 1e-12) -> float:
     """Wavenumber k (rad/m) with omega^2 = g k tanh(k h), by Newton's method.
@@ -55,7 +57,7 @@ class LinearWave:
     h: float
     beta: float = np.pi
     phi_0: float = 0.0
-    rho: float = 998.0
+    rho: float = FRESH_WATER_DENSITY
     g: float = 9.80665
 
     @property
