@@ -1,6 +1,12 @@
 """Mapping benchmark: ms per ping for csm / bki / adaptive and OctoMap on the same rays, memory,
 and a scaled survey. Prints JSON; ``main() -> dict``.
 
+Like for like: OctoMap's insert time includes its ray casting (the free cells along each beam),
+so the headline for our mappers (``per_ping.headline``) includes building the training samples
+from the ranges (pose interpolation, mounting, free samples every 0.1 m: ``build_samples``) plus
+``integrate``; the kernel-only time (``integrate`` alone) is reported beside it. OctoMap is
+given world end points and origins computed outside its timing (it has no pose interpolation).
+
 A ping is one DVL report (4 beams) plus one sonar range, 1.5-2 m above an undulating floor,
 with free samples every ``free_resolution`` along each beam. The rays come from a synthetic
 lawnmower survey built here (no simulator needed); ranges are exact ray/floor intersections.
@@ -92,9 +98,12 @@ def _mapper(method):
 
 def bench_per_ping(n_pings: int, area: float, repeats: int = 3) -> dict:
     log, traj, rays = survey_batch(0, n_pings, n_pings, area)
-    t0 = time.perf_counter()
-    samples = build_samples(log, traj, free_resolution=0.1)
-    build_ms = (time.perf_counter() - t0) * 1e3 / n_pings
+    samples = build_samples(log, traj, free_resolution=0.1)  # numba compile / cache load
+    build_ms = float("inf")
+    for _ in range(repeats):  # best of `repeats`, as every figure here
+        t0 = time.perf_counter()
+        samples = build_samples(log, traj, free_resolution=0.1)
+        build_ms = min(build_ms, (time.perf_counter() - t0) * 1e3 / n_pings)
     pings = _per_ping(samples, n_pings)
     out = {"pings": n_pings, "area_m": area, "samples_per_ping": len(samples) / n_pings,
            "build_samples_ms_per_ping": build_ms, "mappers": {}}  # fmt: skip
@@ -122,11 +131,23 @@ def bench_per_ping(n_pings: int, area: float, repeats: int = 3) -> dict:
             "integrate_ms_per_ping_batched": batch,
             "integrate_ms_per_ping_streaming": stream,
             "build_plus_integrate_ms_per_ping_batched": batch + build_ms,
+            "build_plus_integrate_ms_per_ping_streaming": stream + build_ms,
             "grid_bytes": mapper.grid.nbytes, "chunks": mapper.grid.n_chunks,
             "tracemalloc_peak_bytes_integrate_and_readout": peak,
             "cells_with_mass": len(occ), "occupied_cells": int(np.sum(occ.mean > 0.5)),
         }  # fmt: skip
     out["octomap"] = _bench_octomap(rays, n_pings, repeats)
+    adaptive, octo = out["mappers"]["adaptive"], out["octomap"].get("insert_ms_per_ping")
+    headline = adaptive["build_plus_integrate_ms_per_ping_batched"]
+    out["headline"] = {
+        "adaptive_build_plus_integrate_ms_per_ping": headline,
+        "adaptive_integrate_only_ms_per_ping": adaptive["integrate_ms_per_ping_batched"],
+        "adaptive_build_plus_integrate_per_call_ms_per_ping": adaptive[
+            "build_plus_integrate_ms_per_ping_streaming"
+        ],
+        "octomap_insert_ms_per_ping": octo,
+        "adaptive_over_octomap": None if octo is None else headline / octo,
+    }
     return out
 
 

@@ -96,7 +96,8 @@ def test_save_load_round_trip(tmp_path):
     np.testing.assert_array_equal(back.beta, occ.beta)
     assert back.resolution == occ.resolution and back.alpha0 == occ.alpha0
     assert back.metadata["normalization"] == "fixed" and back.metadata["method"] == "adaptive"
-    assert not list(tmp_path.glob("sub/*.tmp"))
+    # atomic write: the folder holds the map and nothing else (no .map.npz.XXXX/ holder left)
+    assert sorted(p.name for p in (tmp_path / "sub").iterdir()) == ["map.npz"]
     with pytest.raises(ReaderError, match="no such map"):
         OccupancyMap.load(tmp_path / "missing.npz")
 
@@ -143,7 +144,7 @@ def test_ply_written_with_mean_and_variance(tmp_path):
     assert "format binary_little_endian 1.0" in lines
     names = [ln.split()[-1] for ln in lines if ln.startswith("property")]
     assert names[:3] == ["x", "y", "z"] and {"mean", "variance"} <= set(names)
-    assert not list(tmp_path.glob("*.tmp"))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.ply"]
     kinds = {"double": "<f8", "float": "<f4"}
     dtype = [(ln.split()[2], kinds[ln.split()[1]]) for ln in lines if ln.startswith("property")]
     rows = np.frombuffer(body, dtype=dtype)
@@ -151,3 +152,17 @@ def test_ply_written_with_mean_and_variance(tmp_path):
     assert len(rows) == len(k)
     np.testing.assert_allclose(rows["z"], k.centres[:, 2], rtol=1e-6)
     np.testing.assert_allclose(rows["mean"], k.mean, rtol=1e-6)
+
+
+def test_loading_another_kind_of_file_as_a_map_says_what_was_expected(tmp_path):
+    """A PLY, TUM or YAML file given as a map: one line naming the file, what it looks like and
+    what was expected (not numpy's message about pickled data)."""
+    ply = tmp_path / "ground_truth.ply"
+    ply.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n")
+    tum = tmp_path / "trajectory.tum"
+    tum.write_text("0 0 0 0 0 0 0 1\n")
+    for path, kind in ((ply, "a PLY point cloud"), (tum, "a TUM trajectory")):
+        with pytest.raises(ReaderError) as info:
+            OccupancyMap.load(path)
+        assert str(info.value) == f"{path}: {kind}, expected a map.npz written by `undertow " \
+            "map` (or its folder)"  # fmt: skip

@@ -1,10 +1,12 @@
 """Ranges -> training samples: hits on a known plane, free-sample spacing, dropped counts,
 pose interpolation (position, wrapped yaw, variance)."""
 
+import warnings
+
 import numpy as np
 import pytest
 
-from undertow.errors import ConfigError, MissingStreamError
+from undertow.errors import ConfigError, DataError, MissingStreamError
 from undertow.log import Dvl, Log, Mounting, SonarRange
 from undertow.mapping.samples import SENSOR_DVL, SENSOR_SONAR, build_samples
 from undertow.trajectory import Trajectory
@@ -77,7 +79,8 @@ def test_invalid_ranges_dropped_and_counted():
     ranges = np.array([[1.0, np.nan, 60.0, 1.0], [0.01, 1.0, 1.0, -1.0], [1.0, 1.0, 1.0, 1.0]])
     valid = np.array([[True, True, True, False], [True, True, True, True], [True] * 4])
     sonar_t, sonar_r = np.array([1.5, 1.6, 3.0]), np.array([0.1, 1.5, 1.5])
-    s = build_samples(_log([1.5, 1.5, 5.0], ranges, valid, sonar_t, sonar_r), traj)
+    with pytest.warns(UserWarning, match="5 of 9 valid ranges lie outside"):
+        s = build_samples(_log([1.5, 1.5, 5.0], ranges, valid, sonar_t, sonar_r), traj)
     assert s.dropped == {
         "dvl_invalid": 1, "dvl_nonfinite": 1, "dvl_out_of_range": 3,
         "dvl_outside_trajectory": 4, "sonar_invalid": 0, "sonar_nonfinite": 0,
@@ -104,3 +107,18 @@ def test_bad_configuration_and_missing_streams():
         build_samples(log, traj, free_resolution=0.0)
     with pytest.raises(MissingStreamError, match="range stream"):
         build_samples(log, traj, use_sonar=False)
+
+
+def test_a_trajectory_that_does_not_overlap_the_log_is_an_error_naming_both_spans():
+    """A trajectory shifted by 1e4 s (another log, another clock) would drop every range as
+    outside it and give an empty map: an error instead, naming both time spans."""
+    ranges, valid = np.ones((3, 4)), np.ones((3, 4), bool)
+    log = _log([1.0, 2.0, 3.0], ranges, valid, np.array([1.5]), np.array([1.5]))
+    shifted = _trajectory([1e4 + 1.0, 1e4 + 3.0], [[0, 0, 0]] * 2, [[0, 0, 0]] * 2)
+    with pytest.raises(DataError, match=r"trajectory 10001.000 .. 10003.000 s, ranges \(dvl, "
+                       r"sonar\) 1.000 .. 3.000 s"):  # fmt: skip
+        build_samples(log, shifted)
+    overlapping = _trajectory([1.0, 3.0], [[0, 0, 0]] * 2, [[0, 0, 0]] * 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a full overlap warns of nothing
+        assert build_samples(log, overlapping).n_hits == 13

@@ -73,12 +73,7 @@ def run_batch(
     """
     unique = sorted({_as_seed(s) for s in seeds})
     args = tuple(args)
-    mode = "local" if scheduler is None else scheduler
-    if not isinstance(mode, str) or (mode not in NAMED_SCHEDULERS and ":" not in mode):
-        raise ConfigError(
-            f"unknown scheduler {scheduler!r}: use 'local', 'threads', 'sync' or an address "
-            "tcp://host:port"
-        )
+    mode = check_scheduler(scheduler)
     if not callable(fn):
         raise ConfigError(f"run_batch needs a function, got {type(fn).__name__}")
     if mode not in ("threads", "sync"):
@@ -106,6 +101,46 @@ def run_batch(
     failures = {s: outcomes[s][1] for s in unique if not outcomes[s][0]}
     wall_s = time.perf_counter() - start
     return BatchResult(results, failures, label, wall_s, workers, tuple(unique))
+
+
+def check_scheduler(
+    scheduler: str | None, reach: bool = False, timeout_s: float = CONNECT_TIMEOUT_S
+) -> str:
+    """The scheduler mode for ``scheduler`` (None -> "local"), checked before any work.
+
+    Raises :class:`ConfigError` for a name that is neither one of :data:`NAMED_SCHEDULERS` nor
+    an address (``scheme://host:port`` or ``host:port``), for a missing Dask install (every mode
+    but "sync" needs it) and, with ``reach``, for a ``tcp://`` address where nothing listens
+    (a plain TCP connection within ``timeout_s``; whether it is a Dask scheduler is found out
+    when connecting to it)."""
+    mode = "local" if scheduler is None else scheduler
+    if not isinstance(mode, str) or (mode not in NAMED_SCHEDULERS and ":" not in mode):
+        raise ConfigError(
+            f"unknown scheduler {scheduler!r}: use 'local', 'threads', 'sync' or an address "
+            "tcp://host:port"
+        )
+    if mode != "sync":
+        _import_dask()
+    if reach and mode not in NAMED_SCHEDULERS:
+        _check_reachable(mode, timeout_s)
+    return mode
+
+
+def _check_reachable(address: str, timeout_s: float) -> None:
+    import socket
+
+    scheme, _, rest = address.rpartition("://")
+    if scheme not in ("", "tcp"):
+        return  # tls, ucx, inproc: left to Dask
+    host, _, port = rest.rstrip("/").rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]") or "localhost", int(port)), timeout_s):
+            pass
+    except ValueError:
+        raise ConfigError(f"scheduler address {address!r}: expected tcp://host:port") from None
+    except OSError as exc:
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        raise ConfigError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
 
 
 def _run_one(fn: Callable[..., Any], seed: int, args: tuple) -> tuple[bool, Any]:

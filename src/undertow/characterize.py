@@ -7,12 +7,27 @@ For each run:
 - Wave amplitude a: from the spectrum, a = sqrt(2 m_0) with m_0 the elevation variance (for a
   linear wave eta = a cos(theta), var(eta) = a^2 / 2); also by zero crossings, a = mean crest-to-
   trough height / 2 over the zero-up-crossing waves, which is robust to a slow drift.
-- DVL standard deviation per axis (DVL frame) during the wave segment, taken about the TRUE motion
-  (ground truth expressed in the DVL frame) restricted to the constant-speed phase (|acceleration|
-  below a threshold and speed above half the run's maximum), so neither the motion, the
-  acceleration phases nor a speed-proportional scale error inflate it. Without ground
-  truth the reference is a centred moving average over two wave periods.
-- The barometer's wave-induced depth noise (not in the paper): std of depth(p) - true depth.
+- Calm water: a probe whose amplitude is below :data:`CALM_AMPLITUDE_M`, or whose spectral peak
+  does not stand above the noise (peak below :data:`PEAK_TO_NOISE_MIN` times the median of the
+  periodogram), shows no wave; the run is calm and has no wave frequency (the peak of a flat
+  noise spectrum is a random bin, e.g. 13 Hz).
+- DVL standard deviation per axis (DVL frame) during the wave segment:
+  * with ground truth, about the TRUE motion (ground truth expressed in the DVL frame)
+    restricted to the constant-speed phase (smoothed |acceleration| below a threshold and speed
+    above half the run's maximum), so neither the motion, the acceleration phases nor a
+    speed-proportional scale error inflate it;
+  * without ground truth, about the DVL itself: the constant-speed segments are found from the
+    DVL (running median of the speed within 5 % of the cruise speed, the median speed of the
+    moving samples), and inside them each sample is compared with the centred running mean of n
+    samples over W = max(4 wave periods, 4 s). For white noise of variance s^2 the residual
+    x_i - mean_n has variance s^2 (1 - 1/n), so s^2 is estimated by mean(r^2) / (1 - 1/n). Real
+    motion at the wave frequency (e.g. a mount swaying in the waves) cannot be told from noise
+    without ground truth and counts as noise.
+- The barometer's wave-induced depth noise (not in the paper): std of depth(p) - true depth;
+  without ground truth, depth(p) about its centred running mean over W = max(10 wave periods,
+  10 s) with the same (1 - 1/n) correction. A linear wave adds rho g a K_p(d) cos(theta) to the
+  pressure, K_p(d) = cosh(k(h - d)) / cosh(k h), so the expected value is
+  sqrt((a K_p)^2 / 2 + (s_p / (rho g))^2) for a sensor noise s_p.
 
 ``wave_noise`` subtracts a calm run's sensor noise in quadrature when one is given, so the profile
 holds the EXTRA noise gamma the filter adds; otherwise it holds the total (and says so).
@@ -23,6 +38,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from scipy.ndimage import median_filter
 from scipy.signal import periodogram
 
 from .errors import DataError
@@ -31,12 +47,21 @@ from .evaluation.trajectory import ground_truth_velocity, interpolate_ground_tru
 from .log import Log, WaveProbe
 from .rotations import rpy_to_matrix
 
+CALM_AMPLITUDE_M = 0.01  # a probe showing less than this is calm water
+PEAK_TO_NOISE_MIN = 100.0  # a wave's spectral peak over the median periodogram level
+STEADY_SPEED_TOLERANCE = 0.05  # constant-speed segment: within 5 % of the cruise speed
+
 
 @dataclass(frozen=True)
 class WaveEstimate:
+    """Wave amplitude (spectral and zero-crossing) and peak frequency; ``calm`` when the probe
+    shows no wave, in which case ``frequency_hz`` is None."""
+
     amplitude_m: float
     amplitude_zero_crossing_m: float
-    frequency_hz: float
+    frequency_hz: float | None
+    calm: bool = False
+    peak_to_noise: float = float("inf")
 
 
 @dataclass(frozen=True)
@@ -50,6 +75,11 @@ class RunCharacterization:
     depth_std_m: float | None
     reference: str
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def calm(self) -> bool:
+        """No wave probe, or a probe that shows no wave."""
+        return self.wave is None or self.wave.calm
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -71,7 +101,12 @@ def estimate_waves(probe: WaveProbe) -> WaveEstimate:
         shift = 0.0
     f_peak = float(f[k] + shift * (f[1] - f[0]))
     amplitude = float(np.sqrt(2.0 * np.var(eta)))
-    return WaveEstimate(amplitude, _zero_crossing_amplitude(eta), f_peak)
+    floor = float(np.median(S[1:]))
+    ratio = float(S[k] / floor) if floor > 0 else float("inf")
+    calm = amplitude < CALM_AMPLITUDE_M or ratio < PEAK_TO_NOISE_MIN
+    return WaveEstimate(
+        amplitude, _zero_crossing_amplitude(eta), None if calm else f_peak, calm, ratio
+    )
 
 
 def _zero_crossing_amplitude(eta: np.ndarray) -> float:
@@ -91,56 +126,162 @@ def _moving_average(x: np.ndarray, n: int) -> np.ndarray:
     return np.stack([np.convolve(padded[:, i], kernel, "valid") for i in range(x.shape[1])], 1)
 
 
+def _odd_samples(seconds: float, rate_hz: float, minimum: int = 5) -> int:
+    """An odd number of samples >= ``minimum`` spanning about ``seconds``."""
+    n = int(round(seconds * rate_hz)) if np.isfinite(rate_hz) else minimum
+    return max(n, minimum) | 1
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of every run of True in ``mask``."""
+    edges = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
+
+
+def _residual_variance(x: np.ndarray, segments: list[tuple[int, int]], n: int):
+    """White-noise variance of ``x`` (N, k) about its centred running mean of ``n`` (odd)
+    samples, inside each segment (windows entirely inside it): mean(r^2) / (1 - 1/n), and the
+    number of residuals used."""
+    h = n // 2
+    sums, count = np.zeros(x.shape[1]), 0
+    for i0, i1 in segments:
+        if i1 - i0 < n:
+            continue
+        c = np.cumsum(np.vstack([np.zeros((1, x.shape[1])), x[i0:i1]]), axis=0)
+        mean = (c[n:] - c[:-n]) / n  # window [j, j + n) centred on j + h
+        r = x[i0 + h : i1 - h] - mean
+        sums += np.sum(r * r, axis=0)
+        count += r.shape[0]
+    if count == 0:
+        return np.full(x.shape[1], np.nan), 0
+    return sums / count / (1.0 - 1.0 / n), count
+
+
+def _steady_segments(speed: np.ndarray, n: int) -> list[tuple[int, int]]:
+    """Constant-speed segments found from the measured speed itself: the running median (n
+    samples) within :data:`STEADY_SPEED_TOLERANCE` of the cruise speed (median over the samples
+    moving faster than half the maximum), or the whole log when the robot never moves."""
+    smooth = median_filter(speed, size=n, mode="nearest")
+    moving = smooth > max(0.05, 0.5 * float(smooth.max()))
+    if moving.sum() < n:
+        return [(0, speed.size)]
+    cruise = float(np.median(smooth[moving]))
+    steady = np.abs(smooth - cruise) < STEADY_SPEED_TOLERANCE * cruise
+    return _runs(steady)
+
+
 def characterize_run(log: Log, max_accel_mps2: float = 0.02, water_density: float = 997.0):
     """Characterize one run (needs dvl; wave_probe, ground_truth, pressure used when present)."""
     log.require("dvl", stage="characterize")
     notes: list[str] = []
     wave = estimate_waves(log.wave_probe) if log.wave_probe is not None else None
     if wave is None:
-        notes.append("no wave_probe stream: wave amplitude and frequency unknown")
-    dvl = log.dvl
-    keep = dvl.valid & np.all(np.isfinite(dvl.velocity), axis=1)
-    gt = log.ground_truth
-    depth_std = None
-    if gt is not None:
-        keep &= (dvl.t >= gt.t[0]) & (dvl.t <= gt.t[-1])
-        v_world = ground_truth_velocity(gt)
-        accel = np.gradient(v_world, gt.t, axis=0)
-        steady_full = np.linalg.norm(_moving_average(accel, 0.5 * gt.rate_hz), axis=1)
-        steady = np.interp(dvl.t, gt.t, steady_full) < max_accel_mps2
-        # moving at cruise speed: a sound-speed scale error makes the offset speed-dependent,
-        # so mixing rest and cruise would inflate the std
-        speed = np.linalg.norm(v_world, axis=1)
-        cruising = np.interp(dvl.t, gt.t, speed) > max(0.05, 0.5 * float(speed.max()))
-        keep &= steady & cruising
-        _, rpy, vel = interpolate_ground_truth(gt, dvl.t[keep], v_world)
-        v_body = np.einsum("nji,nj->ni", rpy_to_matrix(rpy), vel)
-        reference = v_body @ log.mounting.dvl.rotation_matrix()
-        residual = dvl.velocity[keep] - reference
-        ref_name = "ground truth, constant-speed phase"
-        if log.pressure is not None:
-            p = log.pressure
-            inside = (p.t >= gt.t[0]) & (p.t <= gt.t[-1]) & np.isfinite(p.pressure)
-            true_depth = np.interp(p.t[inside], gt.t, gt.position[:, 2])
-            depth_std = float(np.std(p.depth(water_density)[inside] - true_depth, ddof=1))
+        notes.append("no wave_probe stream: wave amplitude and frequency unknown (taken as calm)")
+    elif wave.calm:
+        notes.append(
+            f"wave probe shows no wave (amplitude {wave.amplitude_m:.4f} m, spectral peak "
+            f"{wave.peak_to_noise:.0f}x the noise level): calm run"
+        )
+    period = 1.0 / wave.frequency_hz if wave is not None and not wave.calm else None
+    if log.ground_truth is not None:
+        std, count, reference = _dvl_about_truth(log, period, max_accel_mps2)
+        depth_std = _depth_about_truth(log, water_density)
     else:
-        period = 1.0 / wave.frequency_hz if wave else 2.0
-        v = dvl.velocity[keep]
-        residual = v - _moving_average(v, 2 * period * dvl.rate_hz)
-        ref_name = "moving average over two wave periods (no ground truth)"
-        notes.append("no ground_truth stream: DVL noise measured about a moving average")
-    if residual.shape[0] < 10:
+        std, count, reference = _dvl_about_itself(log, period)
+        depth_std = _depth_about_itself(log, period, water_density)
+        notes.append(f"no ground_truth stream: DVL noise measured about {reference}")
+    if count < 10:
         raise DataError(f"{log.source or 'log'}: fewer than 10 usable DVL samples to characterize")
-    std = tuple(float(s) for s in np.std(residual, axis=0, ddof=1))
     return RunCharacterization(
         source=log.source,
         wave=wave,
-        dvl_std_mps=std,
-        dvl_samples=int(residual.shape[0]),
+        dvl_std_mps=tuple(float(s) for s in std),
+        dvl_samples=int(count),
         depth_std_m=depth_std,
-        reference=ref_name,
+        reference=reference,
         notes=notes,
     )
+
+
+def _dvl_ok(log: Log) -> np.ndarray:
+    return log.dvl.valid & np.all(np.isfinite(log.dvl.velocity), axis=1)
+
+
+def _dvl_about_truth(log: Log, period: float | None, max_accel_mps2: float):
+    """DVL - ground truth in the DVL frame during the constant-speed phase."""
+    dvl, gt = log.dvl, log.ground_truth
+    keep = _dvl_ok(log) & (dvl.t >= gt.t[0]) & (dvl.t <= gt.t[-1])
+    v_world = ground_truth_velocity(gt)
+    accel = np.gradient(v_world, gt.t, axis=0)
+    # smoothed over two wave periods, so the wave-frequency sway of a mount is not "acceleration"
+    window_s = max(0.5, 2.0 * period) if period else 0.5
+    steady_full = np.linalg.norm(_moving_average(accel, window_s * gt.rate_hz), axis=1)
+    steady = np.interp(dvl.t, gt.t, steady_full) < max_accel_mps2
+    # moving at cruise speed: a sound-speed scale error makes the offset speed-dependent,
+    # so mixing rest and cruise would inflate the std
+    speed = np.linalg.norm(v_world, axis=1)
+    cruising = np.interp(dvl.t, gt.t, speed) > max(0.05, 0.5 * float(speed.max()))
+    keep &= steady & cruising
+    _, rpy, vel = interpolate_ground_truth(gt, dvl.t[keep], v_world)
+    v_body = np.einsum("nji,nj->ni", rpy_to_matrix(rpy), vel)
+    residual = dvl.velocity[keep] - v_body @ log.mounting.dvl.rotation_matrix()
+    if residual.shape[0] < 2:
+        return np.full(3, np.nan), residual.shape[0], "ground truth, constant-speed phase"
+    return np.std(residual, axis=0, ddof=1), residual.shape[0], "ground truth, constant-speed phase"
+
+
+def _dvl_about_itself(log: Log, period: float | None):
+    """DVL about its own running mean inside the constant-speed segments (module docstring)."""
+    dvl = log.dvl
+    ok = _dvl_ok(log)
+    v = dvl.velocity[ok]
+    rate = dvl.select(ok).rate_hz if ok.sum() > 1 else float("nan")
+    window_s = max(4.0 * period, 4.0) if period else 4.0
+    n = _odd_samples(window_s, rate)
+    if v.shape[0] < n:
+        return np.full(3, np.nan), 0, "its running mean"
+    t = dvl.t[ok]
+    gaps = np.flatnonzero(np.diff(t) > 1.5 / rate) + 1  # dropped reports split a segment
+    segments = [
+        (int(a), int(b))
+        for i0, i1 in _steady_segments(np.linalg.norm(v, axis=1), n)
+        for a, b in zip(
+            [i0, *gaps[(gaps > i0) & (gaps < i1)]],
+            [*gaps[(gaps > i0) & (gaps < i1)], i1],
+            strict=True,
+        )
+    ]
+    variance, count = _residual_variance(v, segments, n)
+    reference = (
+        f"its running mean over {n} samples ({window_s:.1f} s) in the constant-speed "
+        "segments found from the DVL (no ground truth)"
+    )
+    return np.sqrt(variance), count, reference
+
+
+def _depth_about_truth(log: Log, water_density: float) -> float | None:
+    p, gt = log.pressure, log.ground_truth
+    if p is None:
+        return None
+    inside = (p.t >= gt.t[0]) & (p.t <= gt.t[-1]) & np.isfinite(p.pressure)
+    if inside.sum() < 2:
+        return None
+    true_depth = np.interp(p.t[inside], gt.t, gt.position[:, 2])
+    return float(np.std(p.depth(water_density)[inside] - true_depth, ddof=1))
+
+
+def _depth_about_itself(log: Log, period: float | None, water_density: float) -> float | None:
+    p = log.pressure
+    if p is None:
+        return None
+    ok = np.isfinite(p.pressure)
+    if ok.sum() < 2:
+        return None
+    depth = p.depth(water_density)[ok][:, None]
+    window_s = max(10.0 * period, 10.0) if period else 10.0
+    n = _odd_samples(window_s, p.select(ok).rate_hz)
+    variance, count = _residual_variance(depth, _runs(np.ones(depth.shape[0], bool)), n)
+    return float(np.sqrt(variance[0])) if count >= 10 else None
 
 
 def wave_noise(run: RunCharacterization, calm: RunCharacterization | None) -> tuple[float, ...]:
@@ -151,9 +292,6 @@ def wave_noise(run: RunCharacterization, calm: RunCharacterization | None) -> tu
         float(np.sqrt(max(w**2 - c**2, 0.0)))
         for w, c in zip(run.dvl_std_mps, calm.dvl_std_mps, strict=True)
     )
-
-
-CALM_AMPLITUDE_M = 0.01  # a run whose probe shows less than this is the calm reference
 
 
 @dataclass(frozen=True)
@@ -172,6 +310,7 @@ class Characterization:
             rows.append(
                 {
                     "source": run.source,
+                    "calm": run.calm,
                     "amplitude_m": run.wave.amplitude_m if run.wave else None,
                     "amplitude_zero_crossing_m": (
                         run.wave.amplitude_zero_crossing_m if run.wave else None
@@ -181,15 +320,17 @@ class Characterization:
                     "dvl_extra_std_mps": list(extra),
                     "depth_std_m": run.depth_std_m,
                     "samples": run.dvl_samples,
+                    "reference": run.reference,
+                    "notes": list(run.notes),
                 }
             )
         return rows
 
 
 def characterize(logs: list[Log], name: str = "characterized") -> Characterization:
-    """Characterize every run; the calmest run below :data:`CALM_AMPLITUDE_M` (or without waves)
-    is the calm reference whose noise is subtracted in quadrature; the rest become profile
-    conditions at their MEASURED amplitude and frequency."""
+    """Characterize every run; the calmest calm run (no wave probe, or a probe showing no wave)
+    is the reference whose noise is subtracted in quadrature; the rest become profile conditions
+    at their MEASURED amplitude and frequency."""
     if not logs:
         raise DataError("characterize: no logs given")
     runs = [characterize_run(log) for log in logs]
@@ -197,11 +338,11 @@ def characterize(logs: list[Log], name: str = "characterized") -> Characterizati
     def amplitude(run):
         return run.wave.amplitude_m if run.wave else 0.0
 
-    calm_runs = [r for r in runs if amplitude(r) < CALM_AMPLITUDE_M]
+    calm_runs = [r for r in runs if r.calm]
     calm = min(calm_runs, key=amplitude) if calm_runs else None
     conditions = [{"name": "calm", "amplitude_m": 0.0, "frequency_hz": None, "dvl_std": [0.0] * 3}]
     for run in runs:
-        if run in calm_runs or run.wave is None:
+        if run.calm:
             continue
         conditions.append(
             {

@@ -1,13 +1,20 @@
 """The whole study (`undertow demo` / `undertow reproduce`): every seed, tables, figures, report.
 
+0. Inputs are checked before any work: distinct seeds >= 0, an output folder that is not a file,
+   and the scheduler (a known name or a reachable address; Dask installed).
 1. The first seed runs in this process and keeps its in-memory results for the figures; its
    simulated runs, trajectories and maps are written under ``OUT/runs/`` so every step can be
-   redone with the CLI (and the files opened in evo, CloudCompare, Foxglove).
+   redone with the CLI (and the files opened in evo, CloudCompare, Foxglove). It stays out of
+   Dask on purpose: those in-memory results are about 330 MB per seed (the logs with their
+   2 kHz ground truth, 16 trajectories with full 18-state covariances, 12 maps) and would have
+   to be pickled and shipped back from a worker (over the network from a remote cluster). It
+   runs under the same guard as a Dask task: if it raises, the failure is recorded by seed and
+   the next seed takes its place (in this process) for the figures and runs.
 2. The other seeds are independent Dask tasks (:func:`undertow.batch.run_batch`): a local
    cluster by default, or an existing scheduler. A failed seed is reported and the rest kept.
 3. ``tables.md`` / ``tables.json`` aggregate all seeds (mean and 95 % interval per cell, the
    fraction of seeds where each claim of the paper holds); ``seeds/seed_N.json`` keep every seed's
-   numbers; figures (PNG) and ``report.html`` come from the first seed.
+   numbers; figures (PNG) and ``report.html`` come from the first successful seed.
 """
 
 from __future__ import annotations
@@ -15,13 +22,15 @@ from __future__ import annotations
 import json
 import platform
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from numbers import Integral
 from pathlib import Path
 
-from ._atomic import atomic_path
+from ._atomic import atomic_path, check_output_folder
 from ._plain import to_plain
-from .errors import UndertowError
+from .errors import ConfigError, UndertowError
 from .experiments import Artifacts, StudySettings, run_seed, run_seed_with_artifacts
 
 
@@ -49,30 +58,28 @@ def run_study(
 
     start = time.perf_counter()
     settings = settings or StudySettings()
-    seeds = list(seeds or [0])
-    if len(set(seeds)) != len(seeds):
-        raise UndertowError(f"seeds must be distinct, got {seeds}")
+    seeds = check_study_inputs(out_dir, seeds, scheduler)
     note = progress or (lambda _msg: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
 
-    note(f"seed {seeds[0]}: simulate, characterize, localize, map")
-    first, artifacts = run_seed_with_artifacts(seeds[0], settings)
-    results = {seeds[0]: first}
-    failures: dict[int, str] = {}
-    if len(seeds) > 1:
+    results, failures, artifacts, rest = _first_seed(seeds, settings, note)
+    if rest:
         from .batch import run_batch
 
-        note(f"seeds {seeds[1:]}: {len(seeds) - 1} Dask tasks")
+        note(f"seeds {rest}: {len(rest)} Dask tasks")
         batch = run_batch(
             run_seed,
-            seeds[1:],
+            rest,
             scheduler=scheduler,
             args=(settings,),
             progress=lambda done, total: note(f"Monte Carlo: {done}/{total} seeds done"),
         )
         results.update(batch.results)
         failures.update(batch.failures)
+    if not results:
+        first = min(failures)
+        raise UndertowError(f"every seed failed; seed {first}: {failures[first]}")
     ordered = [results[s] for s in sorted(results)]
     tables = build_tables(ordered)
     tables["failures"] = {str(k): v for k, v in failures.items()}
@@ -94,6 +101,54 @@ def run_study(
         study.figures, study.report = build_report(out, tables, markdown, artifacts, _versions())
     study.wall_s = time.perf_counter() - start
     return study
+
+
+def check_study_inputs(out_dir, seeds, scheduler) -> list[int]:
+    """The seeds to run (default [0]), after checking every input before any work: distinct
+    integer seeds >= 0, ``out_dir`` not an existing file, the scheduler valid (and reachable if
+    an address) when more than one seed runs; with one seed a scheduler is unused (warning)."""
+    from .batch import check_scheduler
+
+    seeds = list(seeds if seeds is not None else [0])
+    if not seeds:
+        raise ConfigError("no seeds to run")
+    if any(not isinstance(s, Integral) or isinstance(s, bool) or s < 0 for s in seeds):
+        raise ConfigError(f"seeds must be integers >= 0, got {seeds}")
+    seeds = [int(s) for s in seeds]
+    if len(set(seeds)) != len(seeds):
+        raise ConfigError(f"seeds must be distinct, got {seeds}")
+    check_output_folder(out_dir, overwrite=True)
+    if len(seeds) > 1:
+        check_scheduler(scheduler, reach=True)
+    elif scheduler is not None:
+        check_scheduler(scheduler)
+        warnings.warn(
+            f"scheduler {scheduler!r} not used: with one seed, the seed runs in this process "
+            "(it makes the figures); the scheduler runs the seeds after the first",
+            stacklevel=2,
+        )
+    return seeds
+
+
+def _first_seed(seeds: list[int], settings: StudySettings, note):
+    """Run seeds in this process, in order, until one succeeds (its artifacts make the figures
+    and runs); a seed that raises is recorded as a failure, as a Dask task's would be.
+    Returns (results, failures, artifacts, the seeds left for Dask)."""
+    from .batch import describe_exception
+
+    results: dict[int, dict] = {}
+    failures: dict[int, str] = {}
+    for i, seed in enumerate(seeds):
+        note(f"seed {seed}: simulate, characterize, localize, map")
+        try:
+            result, artifacts = run_seed_with_artifacts(seed, settings)
+        except Exception as exc:  # a failing seed must not lose the others
+            failures[seed] = describe_exception(exc)
+            note(f"seed {seed} failed: {failures[seed]}")
+            continue
+        results[seed] = result
+        return results, failures, artifacts, seeds[i + 1 :]
+    return results, failures, None, []
 
 
 def _write_text(path: Path, text: str) -> None:

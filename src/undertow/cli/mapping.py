@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from .._atomic import check_output_folder
+from ..errors import UndertowError
 from ._app import (
     ConfigOption,
     OverwriteOption,
@@ -37,6 +38,14 @@ def map_command(
         float | None, typer.Option(help="Isotropic length scale of bki, m (0.15).")
     ] = None,
     prior: Annotated[Path | None, typer.Option(help="Seed from a saved map.npz.")] = None,
+    variance_bounds: Annotated[
+        str | None,
+        typer.Option(
+            help="adaptive only: fixed pose-variance bounds for the length scales, six numbers "
+            "min_x,min_y,min_z,max_x,max_y,max_z (m^2), so maps of several logs (or online "
+            "updates) share one normalization; default: min and max over this log's samples."
+        ),
+    ] = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
     overwrite: OverwriteOption = False,
@@ -54,20 +63,58 @@ def map_command(
     from ..trajectory import Trajectory
 
     check_output_folder(out_dir, overwrite)
+    trajectory_file = trajectory / "trajectory.npz" if trajectory.is_dir() else trajectory
+    _check_npz(trajectory_file, "a trajectory.npz written by `undertow localize` (or its folder)")
+    if prior is not None:
+        _check_npz(prior, "a map.npz written by `undertow map` (or its folder)", "--prior ")
     settings = Settings.from_yaml(config)
-    options = {"method": method, "resolution": resolution, "length_scale": length_scale}
+    options = {
+        "method": method,
+        "resolution": resolution,
+        "length_scale": length_scale,
+        "variance_bounds": _variance_bounds(variance_bounds),
+    }
     given = {k: v for k, v in options.items() if v is not None}  # options win over the file
     cfg = MappingConfig.from_dict({**settings.mapping.model_dump(), **given})
+    if variance_bounds is not None and cfg.method != "adaptive":
+        raise UndertowError(f"--variance-bounds applies to the adaptive method, not {cfg.method}")
     with _progress(quiet) as progress:
         progress.add_task(f"mapping ({cfg.method})", total=None)
         log = _load_log(log_path, topics, settings)
-        result = map_log(log, Trajectory.load_npz(trajectory), cfg, prior=prior)
+        result = map_log(log, Trajectory.load_npz(trajectory_file), cfg, prior=prior)
         save_map(result, out_dir, overwrite)
     if not quiet:
+        normalization = result.metadata["mapper"].get("normalization")
+        how = f", {normalization} normalization" if normalization else ""
         err.print(
             f"wrote {out_dir}/map.npz, map.ply ({result.metadata['occupied_cells']} occupied "
-            "cells), config.yaml"
+            f"cells{how}), config.yaml"
         )
+
+
+def _check_npz(path: Path, expected: str, prefix: str = "") -> None:
+    """A wrong kind of file (a .tum, .ply, .yaml) named as an .npz input: one clear line."""
+    from ..errors import ReaderError
+    from ..mapping.grid import not_an_npz
+
+    problem = not_an_npz(path, expected)
+    if problem:
+        raise ReaderError(prefix + problem)
+
+
+def _variance_bounds(text: str | None):
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 6:
+        raise UndertowError(
+            "--variance-bounds: expected six comma-separated numbers "
+            f"min_x,min_y,min_z,max_x,max_y,max_z (m^2), got {text!r}"
+        )
+    return (tuple(values[:3]), tuple(values[3:]))
 
 
 @evaluate_app.command("map")
@@ -75,7 +122,13 @@ def map_command(
 def evaluate_map_command(
     map_path: Annotated[Path, typer.Argument(metavar="MAP", help="map.npz, map.ply or folder.")],
     ground_truth: Annotated[Path, typer.Argument(help="Ground-truth point cloud (PLY).")],
-    threshold: Annotated[float, typer.Option(help="Occupied if mean > threshold.")] = 0.5,
+    threshold: Annotated[
+        float | None,
+        typer.Option(
+            help="Occupied if mean > threshold, in (0, 1); default 0.5. A map.npz only: a map.ply "
+            "holds the cells already thresholded when it was written."
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
     """Average cloud-to-cloud distance map -> ground truth (CloudCompare's C2C), occupied cells
@@ -83,19 +136,35 @@ def evaluate_map_command(
 
     Example: `undertow evaluate map runs/a10/map runs/a10/ground_truth.ply --json`
     """
+    from ..errors import DataError
     from ..evaluation.cloud import evaluate_map
-    from ..io.ply import read_ply
     from ..mapping.grid import OccupancyMap
 
+    if threshold is not None and not 0.0 < threshold < 1.0:
+        raise UndertowError(f"--threshold must be in (0, 1), got {threshold}")
     if map_path.is_dir():
         map_path = map_path / "map.npz"
     resolution = None
-    if map_path.suffix == ".ply":
-        points, _ = read_ply(map_path)
+    if map_path.suffix.lower() == ".ply":
+        if threshold is not None:
+            raise UndertowError(
+                f"--threshold applies to a map.npz; {map_path} holds the cells already "
+                "thresholded when it was written (give the map.npz, or leave --threshold out)"
+            )
+        points = _read_cloud(map_path)
+        if len(points) == 0:
+            err.print(
+                f"[yellow]warning:[/] {map_path}: the map has no points",
+                highlight=False,
+                soft_wrap=True,
+            )
     else:
         occupancy = OccupancyMap.load(map_path)
-        points, resolution = occupancy.points(threshold), occupancy.resolution
-    gt_points, _ = read_ply(ground_truth)
+        points = occupancy.points(0.5 if threshold is None else threshold)
+        resolution = occupancy.resolution
+    gt_points = _read_cloud(ground_truth)
+    if len(gt_points) == 0:
+        raise DataError(f"{ground_truth}: the ground-truth cloud has no points")
     result = evaluate_map(points, gt_points, resolution=resolution)
     if as_json:
         _print_json(result.to_dict())
@@ -104,3 +173,24 @@ def evaluate_map_command(
         console.print(
             f"{key:>28}: {value:.4f}" if isinstance(value, float) else f"{key:>28}: {value}"
         )
+
+
+def _read_cloud(path: Path):
+    """Points of a PLY file; a valid header declaring 0 vertices gives an empty cloud (the
+    reader would call the missing rows of an ASCII file malformed)."""
+    import re
+
+    import numpy as np
+
+    from ..io.ply import read_ply
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(65536)
+    except OSError:
+        head = b""
+    if head.startswith(b"ply") and b"end_header" in head:
+        header = head[: head.index(b"end_header")].decode("ascii", "replace")
+        if re.search(r"^element\s+vertex\s+0\s*$", header, re.MULTILINE):
+            return np.zeros((0, 3))
+    return read_ply(path)[0]

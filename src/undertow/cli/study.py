@@ -48,6 +48,9 @@ def characterize_command(
     result = characterize([_load_log(p, topics, settings) for p in logs])
     if out is not None:
         result.profile.to_yaml(out)
+    for run in result.runs:
+        for note in run.notes:
+            err.print(f"[yellow]warning:[/] {run.source}: {note}", highlight=False, soft_wrap=True)
     if as_json:
         _print_json({"runs": result.table(), "profile": result.profile.to_dict()})
         return
@@ -73,12 +76,16 @@ def characterize_command(
 def reproduce(
     out_dir: Annotated[Path, typer.Option("--out", help="Results folder.")] = Path("results"),
     seeds: Annotated[int, typer.Option(help="Number of independent seeds (Monte Carlo).")] = 1,
-    first_seed: Annotated[int, typer.Option(help="Seeds are first_seed, first_seed+1, ...")] = 0,
+    first_seed: Annotated[
+        int, typer.Option(help="Seeds are first_seed, first_seed+1, ... (>= 0).")
+    ] = 0,
     scheduler: Annotated[
         str | None,
         typer.Option(
-            help="Dask scheduler for seeds after the first: local (default: a local cluster), "
-            "threads, sync, or the address of a running scheduler (tcp://host:8786)."
+            help="Dask scheduler for the seeds after the first (the first runs in this process "
+            "and makes the figures; unused with --seeds 1): local (default: a local cluster), "
+            "threads, sync, or the address of a running scheduler (tcp://host:8786). Checked "
+            "before any work."
         ),
     ] = None,
     rock_survey: Annotated[bool, typer.Option(help="Also run the rock survey.")] = True,

@@ -192,8 +192,13 @@ class OccupancyMap:
 
     @classmethod
     def load(cls, path: str | Path) -> OccupancyMap:
-        """Read a map written by :meth:`save`."""
+        """Read a map written by :meth:`save` (a folder means FOLDER/map.npz)."""
         path = Path(path)
+        if path.is_dir():
+            path = path / "map.npz"
+        wrong = not_an_npz(path, "a map.npz written by `undertow map` (or its folder)")
+        if wrong:
+            raise ReaderError(wrong)
         try:
             with np.load(path, allow_pickle=False) as d:
                 return cls(
@@ -205,3 +210,32 @@ class OccupancyMap:
             raise ReaderError(f"{path}: no such map file") from exc
         except (KeyError, ValueError, OSError) as exc:
             raise ReaderError(f"{path}: not an undertow map ({exc})") from exc
+
+
+_KINDS = {
+    ".ply": "a PLY point cloud", ".tum": "a TUM trajectory", ".txt": "a text file",
+    ".yaml": "a YAML file", ".yml": "a YAML file", ".json": "a JSON file", ".bag": "a ROS bag",
+    ".mcap": "a ROS 2 bag", ".db3": "a ROS 2 bag",
+}  # fmt: skip
+
+
+def not_an_npz(path: str | Path, expected: str) -> str | None:
+    """None if ``path`` is a missing file or a zip archive (what ``.npz`` files are), else a
+    one-line message saying what it looks like and what was ``expected`` (instead of numpy's
+    "pickled data" error for a text or PLY file)."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except FileNotFoundError:
+        return None
+    except IsADirectoryError:
+        return f"{path}: is a folder; expected {expected}"
+    except OSError:
+        return None  # let the reader report it
+    if magic == b"PK\x03\x04":
+        return None
+    kind = _KINDS.get(path.suffix.lower(), "not an .npz archive")
+    if magic == b"ply\n" or magic[:3] == b"ply":
+        kind = "a PLY point cloud"
+    return f"{path}: {kind}, expected {expected}"

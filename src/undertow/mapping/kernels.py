@@ -226,3 +226,39 @@ def _add_mass(start, cells, d_alpha, d_beta, table_keys, table_vals, chunk_keys,
         alpha[ci, ix & 7, iy & 7, iz & 7] += d_alpha[s]
         beta[ci, ix & 7, iy & 7, iz & 7] += d_beta[s]
     return cells.shape[0]
+
+
+@njit(cache=True)
+def _expand_rays(origin, direction, r, var, sig, sensor, n_free, f):
+    """Training samples of rays (see ``samples.py``): first one hit per ray at o + r v (label
+    1), then each ray's free samples at o + k f v, k = 0 .. n_free - 1 (label 0), in ray order;
+    every sample carries its ray's variance, sigma_0, index and sensor. One pass, no
+    temporaries (the numpy version gathered every per-ray array once per sample)."""
+    n_rays = r.shape[0]
+    total = n_rays + int(n_free.sum())
+    points = np.empty((total, 3))
+    label = np.zeros(total)
+    sigma0 = np.empty(total)
+    pose_variance = np.empty((total, 3))
+    ray = np.empty(total, np.int64)
+    sensor_out = np.empty(total, np.int8)
+    for i in range(n_rays):
+        for j in range(3):
+            points[i, j] = origin[i, j] + r[i] * direction[i, j]
+            pose_variance[i, j] = var[i, j]
+        label[i] = 1.0
+        sigma0[i] = sig[i]
+        ray[i] = i
+        sensor_out[i] = sensor[i]
+    k = n_rays
+    for i in range(n_rays):
+        for q in range(n_free[i]):
+            s = q * f
+            for j in range(3):
+                points[k, j] = origin[i, j] + s * direction[i, j]
+                pose_variance[k, j] = var[i, j]
+            sigma0[k] = sig[i]
+            ray[k] = i
+            sensor_out[k] = sensor[i]
+            k += 1
+    return points, label, sigma0, pose_variance, ray, sensor_out

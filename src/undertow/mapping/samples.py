@@ -15,6 +15,7 @@ and counted in ``Samples.dropped``.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,6 +24,7 @@ from ..errors import ConfigError, DataError, MissingStreamError
 from ..log import Log
 from ..rotations import rpy_to_matrix, wrap_angle
 from ..trajectory import Trajectory
+from .kernels import _expand_rays
 
 SENSOR_DVL, SENSOR_SONAR = 0, 1
 DVL_MIN_RANGE, DVL_MAX_RANGE = 0.05, 50.0
@@ -152,19 +154,47 @@ def build_samples(log: Log, trajectory: Trajectory, free_resolution: float = 0.1
         unit = np.tile([0.0, 0.0, 1.0], (len(s), 1))
         parts.append(_rays(s.t, s.range, unit, ok, log.mounting.sonar, trajectory,
                            sigma0_sonar, SENSOR_SONAR))  # fmt: skip
+    _check_time_overlap(log, span, dropped, sum(p[2].size for p in parts), use_dvl, use_sonar)
     origin, direction, r, var, sig, sensor = (np.concatenate(c) for c in zip(*parts, strict=True))
     return _expand(origin, direction, r, var, sig, sensor, free_resolution, dropped)
 
 
+def _check_time_overlap(log: Log, span, dropped: dict, kept: int, use_dvl, use_sonar) -> None:
+    """No usable range inside the trajectory's time span is an error naming both spans (a
+    trajectory of another log, or times in another clock); more than half outside it, a
+    warning (the map covers only part of the log)."""
+    outside = sum(v for k, v in dropped.items() if k.endswith("_outside_trajectory"))
+    if outside == 0:
+        return
+    streams = [n for n, use in (("dvl", use_dvl), ("sonar", use_sonar)) if use]
+    times = [getattr(log, n).t for n in streams if getattr(log, n) is not None]
+    times = [t for t in times if len(t)]
+    first, last = min(float(t[0]) for t in times), max(float(t[-1]) for t in times)
+    spans = (
+        f"trajectory {span[0]:.3f} .. {span[1]:.3f} s, ranges ({', '.join(streams)}) "
+        f"{first:.3f} .. {last:.3f} s"
+    )
+    if kept == 0:
+        raise DataError(
+            f"no range measurement falls inside the trajectory's time span ({spans}): is the "
+            "trajectory from this log?"
+        )
+    if outside > 0.5 * (outside + kept):
+        warnings.warn(
+            f"{outside} of {outside + kept} valid ranges lie outside the trajectory's time span "
+            f"and were dropped ({spans})",
+            stacklevel=3,
+        )
+
+
 def _expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
-    """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f."""
-    n_rays = r.size
+    """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f (numba kernel
+    :func:`~undertow.mapping.kernels._expand_rays`: hits first, then free samples ray by ray)."""
     n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
-    ray_free = np.repeat(np.arange(n_rays), n_free)
-    first = np.cumsum(n_free) - n_free
-    k = np.arange(ray_free.size) - np.repeat(first, n_free)
-    s = np.concatenate([r, k * f])
-    ray = np.concatenate([np.arange(n_rays), ray_free])
-    points = origin[ray] + s[:, None] * direction[ray]
-    label = np.concatenate([np.ones(n_rays), np.zeros(ray_free.size)])
-    return Samples(points, label, sig[ray], var[ray], ray, sensor[ray], origin, dropped)
+    points, label, sigma0, pose_variance, ray, sensor_out = _expand_rays(
+        np.ascontiguousarray(origin, float), np.ascontiguousarray(direction, float),
+        np.ascontiguousarray(r, float), np.ascontiguousarray(var, float),
+        np.ascontiguousarray(sig, float), np.ascontiguousarray(sensor, np.int8),
+        n_free.astype(np.int64), float(f),
+    )  # fmt: skip
+    return Samples(points, label, sigma0, pose_variance, ray, sensor_out, origin, dropped)

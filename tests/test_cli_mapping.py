@@ -1,0 +1,157 @@
+"""`undertow map` and `undertow evaluate map` at the command line: input mistakes give one line
+naming the file and what was expected, the normalization used is recorded, time spans checked."""
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from undertow.cli import app
+from undertow.trajectory import Trajectory
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """A simulated calm carriage run on disk, and its ground truth as a trajectory (18 states,
+    a small position variance growing along the run) instead of a filter's output."""
+    from undertow.sim import load_scenario, simulate, write_simulation
+
+    root = tmp_path_factory.mktemp("cli_mapping")
+    sim = simulate(load_scenario("calm"), seed=0)
+    write_simulation(sim, root / "run")
+    gt = sim.log.ground_truth
+    keep = slice(None, None, 20)  # 100 Hz is plenty for interpolation
+    t = gt.t[keep]
+    x = np.zeros((t.size, 18))
+    x[:, :3], x[:, 3:6] = gt.position[keep], gt.orientation[keep]
+    P = np.zeros((t.size, 18, 18))
+    for k in range(3):
+        P[:, k, k] = 1e-4 + 1e-3 * (t - t[0]) / (t[-1] - t[0])
+    Trajectory(t, x, P, variant="ground truth").save_npz(root / "est" / "trajectory.npz")
+    shifted = Trajectory(t + 1e4, x, P, variant="shifted")
+    shifted.save_npz(root / "shifted" / "trajectory.npz")
+    third = slice(0, t.size // 3)
+    Trajectory(t[third], x[third], P[third]).save_npz(root / "third" / "trajectory.npz")
+    return root
+
+
+def _map(run, out, *extra):
+    return runner.invoke(
+        app, ["map", str(run / "run" / "log"), "--out", str(out), "-q", *extra]
+    )  # fmt: skip
+
+
+def _one_error_line(result):
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert result.exit_code == 1, result.output
+    assert len(lines) == 1 and lines[0].startswith("error:"), result.output
+    return lines[0]
+
+
+def test_config_records_the_normalization_and_variance_bounds_fix_it(run, tmp_path):
+    r = _map(run, tmp_path / "session", "--trajectory", str(run / "est"))
+    assert r.exit_code == 0, r.output
+    doc = yaml.safe_load((tmp_path / "session" / "config.yaml").read_text())
+    assert doc["mapping"]["variance_bounds"] is None
+    mapper = doc["result"]["mapper"]
+    assert mapper["normalization"] == "session"
+    # per session: the bounds are the min and max of the variance the trajectory carried
+    np.testing.assert_allclose(mapper["variance_bounds"][0], [1e-4] * 3, rtol=0.02)
+    np.testing.assert_allclose(mapper["variance_bounds"][1], [1.1e-3] * 3, rtol=0.02)
+
+    bounds = "0,0,0,0.002,0.002,0.002"
+    r = _map(run, tmp_path / "fixed", "--trajectory", str(run / "est"), "--variance-bounds", bounds)
+    assert r.exit_code == 0, r.output
+    doc = yaml.safe_load((tmp_path / "fixed" / "config.yaml").read_text())
+    assert doc["mapping"]["variance_bounds"] == [[0.0] * 3, [0.002] * 3]
+    assert doc["result"]["mapper"]["normalization"] == "fixed"
+    assert doc["result"]["mapper"]["variance_bounds"] == [[0.0] * 3, [0.002] * 3]
+    # the variance reaches only about half of the fixed range: shorter kernels, fewer cells
+    assert (
+        doc["result"]["occupied_cells"]
+        < yaml.safe_load((tmp_path / "session" / "config.yaml").read_text())["result"][
+            "occupied_cells"
+        ]
+    )
+
+    est = ["--trajectory", str(run / "est")]
+    line = _one_error_line(_map(run, tmp_path / "a", *est, "--variance-bounds", "1,2,3"))
+    assert "six comma-separated numbers" in line
+    line = _one_error_line(_map(run, tmp_path / "b", *est, "--variance-bounds", "0,0,0,1,1,1",
+                                "--method", "csm"))  # fmt: skip
+    assert "adaptive" in line
+    line = _one_error_line(_map(run, tmp_path / "c", *est, "--variance-bounds", "2,0,0,1,1,1"))
+    assert "variance_bounds" in line
+
+
+def test_a_trajectory_of_another_time_span_is_an_error_and_a_partial_one_warns(run, tmp_path):
+    line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(run / "shifted")))
+    assert "no range measurement falls inside the trajectory's time span" in line
+    t = Trajectory.load_npz(run / "shifted").t
+    assert f"trajectory {t[0]:.3f} .. {t[-1]:.3f} s, ranges (dvl, sonar) 0.000 .. " in line
+    assert not (tmp_path / "m").exists()
+    r = _map(run, tmp_path / "part", "--trajectory", str(run / "third"))
+    assert r.exit_code == 0, r.output
+    warnings = [ln for ln in r.output.splitlines() if ln.startswith("warning:")]
+    assert len(warnings) == 1 and "outside the trajectory's time span" in warnings[0]
+
+
+def test_wrong_kinds_of_input_files_say_what_was_expected(run, tmp_path):
+    tum, ply = run / "run" / "ground_truth.tum", run / "run" / "ground_truth.ply"
+    line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(tum)))
+    assert line == (
+        f"error: {tum}: a TUM trajectory, expected a trajectory.npz written by `undertow "
+        "localize` (or its folder)"
+    )
+    settings = tmp_path / "settings.yaml"
+    settings.write_text("mapping: {method: csm}\n")
+    line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(run / "est"),
+                                "--prior", str(settings)))  # fmt: skip
+    assert line == (
+        f"error: --prior {settings}: a YAML file, expected a map.npz written by `undertow map` "
+        "(or its folder)"
+    )
+    line = _one_error_line(runner.invoke(app, ["evaluate", "map", str(tum), str(ply)]))
+    assert line == (
+        f"error: {tum}: a TUM trajectory, expected a map.npz written by `undertow map` (or its "
+        "folder)"
+    )
+
+
+def test_evaluate_map_threshold_and_empty_clouds(run, tmp_path):
+    out = tmp_path / "map"
+    assert _map(run, out, "--trajectory", str(run / "est")).exit_code == 0
+    gt = str(run / "run" / "ground_truth.ply")
+    for bad in ("1.5", "0", "1", "-0.2"):
+        line = _one_error_line(runner.invoke(app, ["evaluate", "map", str(out), gt,
+                                                   "--threshold", bad]))  # fmt: skip
+        assert "--threshold must be in (0, 1)" in line
+    line = _one_error_line(
+        runner.invoke(app, ["evaluate", "map", str(out / "map.ply"), gt, "--threshold", "0.7"])
+    )
+    assert "--threshold applies to a map.npz" in line
+    # the map's PLY and its map.npz at the default threshold are the same points
+    from_ply = runner.invoke(app, ["evaluate", "map", str(out / "map.ply"), gt, "--json"])
+    from_npz = runner.invoke(app, ["evaluate", "map", str(out), gt, "--json"])
+    assert from_ply.exit_code == from_npz.exit_code == 0
+    a, b = json.loads(from_ply.stdout), json.loads(from_npz.stdout)
+    assert a["occupied_cells"] == b["occupied_cells"] > 0
+    assert a["c2c_mean_m"] == pytest.approx(b["c2c_mean_m"], abs=1e-6)
+    # a higher threshold keeps fewer cells
+    high = runner.invoke(app, ["evaluate", "map", str(out), gt, "--json", "--threshold", "0.95"])
+    assert json.loads(high.stdout)["occupied_cells"] < b["occupied_cells"]
+
+    empty = tmp_path / "empty.ply"
+    empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\n"
+                     "property float y\nproperty float z\nend_header\n")  # fmt: skip
+    line = _one_error_line(runner.invoke(app, ["evaluate", "map", str(out), str(empty)]))
+    assert line == f"error: {empty}: the ground-truth cloud has no points"
+    r = runner.invoke(app, ["evaluate", "map", str(empty), gt, "--json"])
+    assert r.exit_code == 0, r.output
+    assert f"{empty}: the map has no points" in r.stderr
+    data = json.loads(r.stdout)
+    assert data["occupied_cells"] == 0 and data["c2c_mean_m"] is None
