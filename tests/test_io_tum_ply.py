@@ -64,3 +64,11 @@ def test_ply_not_a_ply(tmp_path):
     (tmp_path / "x.ply").write_text("hello\n")
     with pytest.raises(ReaderError, match=r"x\.ply: not a PLY"):
         read_ply(tmp_path / "x.ply")
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_a_cloud_with_no_points_reads_as_empty(tmp_path, binary):
+    """A map with no occupied cell is a valid PLY of 0 vertices, not a malformed file."""
+    path = write_ply(tmp_path / "empty.ply", np.zeros((0, 3)), binary=binary)
+    points, _ = read_ply(path)
+    assert points.shape == (0, 3)

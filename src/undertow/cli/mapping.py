@@ -138,6 +138,7 @@ def evaluate_map_command(
     """
     from ..errors import DataError
     from ..evaluation.cloud import evaluate_map
+    from ..io.ply import read_ply
     from ..mapping.grid import OccupancyMap
 
     if threshold is not None and not 0.0 < threshold < 1.0:
@@ -151,7 +152,7 @@ def evaluate_map_command(
                 f"--threshold applies to a map.npz; {map_path} holds the cells already "
                 "thresholded when it was written (give the map.npz, or leave --threshold out)"
             )
-        points = _read_cloud(map_path)
+        points = read_ply(map_path)[0]
         if len(points) == 0:
             err.print(
                 f"[yellow]warning:[/] {map_path}: the map has no points",
@@ -162,7 +163,7 @@ def evaluate_map_command(
         occupancy = OccupancyMap.load(map_path)
         points = occupancy.points(0.5 if threshold is None else threshold)
         resolution = occupancy.resolution
-    gt_points = _read_cloud(ground_truth)
+    gt_points = read_ply(ground_truth)[0]
     if len(gt_points) == 0:
         raise DataError(f"{ground_truth}: the ground-truth cloud has no points")
     result = evaluate_map(points, gt_points, resolution=resolution)
@@ -173,24 +174,3 @@ def evaluate_map_command(
         console.print(
             f"{key:>28}: {value:.4f}" if isinstance(value, float) else f"{key:>28}: {value}"
         )
-
-
-def _read_cloud(path: Path):
-    """Points of a PLY file; a valid header declaring 0 vertices gives an empty cloud (the
-    reader would call the missing rows of an ASCII file malformed)."""
-    import re
-
-    import numpy as np
-
-    from ..io.ply import read_ply
-
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(65536)
-    except OSError:
-        head = b""
-    if head.startswith(b"ply") and b"end_header" in head:
-        header = head[: head.index(b"end_header")].decode("ascii", "replace")
-        if re.search(r"^element\s+vertex\s+0\s*$", header, re.MULTILINE):
-            return np.zeros((0, 3))
-    return read_ply(path)[0]

@@ -117,7 +117,9 @@ def read_ply(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         raise ReaderError(f"{path}: vertex element needs scalar x, y, z properties")
     dtype = np.dtype([(p, t) for p, t in props])
     try:
-        if fmt == "binary_little_endian":
+        if count == 0:  # a valid, empty cloud (e.g. a map with no occupied cell)
+            table = np.empty(0, dtype=dtype)
+        elif fmt == "binary_little_endian":
             table = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
         else:
             lines = data[offset:].decode("ascii").splitlines()[skip_rows : skip_rows + count]
