@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from undertow.errors import MissingStreamError
+from undertow.errors import DataError, MissingStreamError
 from undertow.estimation.calibration import Calibration, calibrate
 from undertow.log import DeadReckoning, Dvl, GroundTruth, Imu, Log, Mounting
 from undertow.rotations import rpy_to_matrix
@@ -60,3 +60,43 @@ def test_needs_ground_truth():
     log = _run()
     with pytest.raises(MissingStreamError, match="calibrate needs stream.s. ground_truth"):
         calibrate(log.replace(ground_truth=None))
+
+
+def test_ground_truth_with_rounded_times_is_deduplicated_with_a_warning():
+    """Ground truth at 2000 Hz with its times rounded to 0.01 s repeats each time 20 times: the
+    repeats are dropped (one warning) and the planted parameters are still found."""
+    log = _run()
+    gt = log.ground_truth
+    rounded = GroundTruth(t=np.round(gt.t, 2), position=gt.position, orientation=gt.orientation)
+    with pytest.warns(RuntimeWarning, match="repeats 113999 timestamps"):
+        cal = calibrate(log.replace(ground_truth=rounded))
+    np.testing.assert_allclose(cal.dead_reckoning_drift_rad_per_s, [0, 0, 2e-4], atol=2e-5)
+    np.testing.assert_allclose(cal.imu_gyro_bias_rad_per_s, [0.01, -0.02, 0.005], atol=3e-4)
+    assert cal.dvl_scale_factor == pytest.approx(1.02, abs=2e-3)
+    same = GroundTruth(t=np.zeros(5), position=np.zeros((5, 3)), orientation=np.zeros((5, 3)))
+    with (
+        pytest.warns(RuntimeWarning, match="repeats 4"),
+        pytest.raises(DataError, match="1 usable poses at distinct times; need at least 3"),
+    ):
+        calibrate(log.replace(ground_truth=same))
+
+
+def test_too_little_overlap_is_an_error_not_a_calibration():
+    """Four ground-truth poses (2 ms at 2000 Hz) overlap one IMU sample at most: refused."""
+    log = _run()
+    gt = log.ground_truth.select(
+        np.isin(np.arange(len(log.ground_truth)), [1000, 1001, 1002, 1003])
+    )
+    with pytest.raises(DataError, match=r"overlaps .*1 samples for imu_gyro_bias.*need at least"):
+        calibrate(log.replace(ground_truth=gt))
+
+
+def test_a_parameter_with_too_few_samples_keeps_its_default_and_says_so():
+    """3 s of ground truth: 300 IMU samples and 24 DVL, but DR at 5 Hz gives only 15."""
+    log = _run()
+    gt = log.ground_truth.select((log.ground_truth.t >= 10.0) & (log.ground_truth.t <= 12.9))
+    with pytest.warns(RuntimeWarning, match="dead_reckoning_drift_rad_per_s .*left at the default"):
+        cal = calibrate(log.replace(ground_truth=gt))
+    assert cal.dead_reckoning_drift_rad_per_s == (0.0, 0.0, 0.0)
+    assert "dead_reckoning" not in cal.samples and cal.samples["imu"] >= 290
+    np.testing.assert_allclose(cal.imu_gyro_bias_rad_per_s, [0.01, -0.02, 0.005], atol=1e-3)

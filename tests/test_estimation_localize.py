@@ -163,3 +163,46 @@ def test_dvl_scale_factor_and_wave_from_log_metadata():
     traj = Localizer("proposed", dvl_scale_factor=1.5).run(log)
     assert abs(traj.x[-1, 6] - 0.2) < 0.02  # v_used = v_measured / scale
     assert traj.metadata["wave_noise"]["condition"] == "wave-a0.10-f1.00"
+
+
+def test_dr_orientation_in_the_dvl_frame_is_rotated_through_the_mounting():
+    """DR reports the DVL's attitude, R_dr = R_body R_mount. For a level vehicle at yaw psi and a
+    DVL mounted at pitch b, yaw a: R_dr = Rz(psi) Rz(a) Ry(b), i.e. DR (roll, pitch, yaw) =
+    (0, b, psi + a) in closed form; dr_orientation_frame="dvl" must give back (0, 0, psi)."""
+    a, b = 0.3, 0.1
+    mounting = Mounting().updated({"dvl": {"rotation": [0.0, b, a]}})
+    psi0, r = 2.8, 0.05
+    log = make_log(duration=20.0, u=0.2, r=r, psi0=psi0, mounting=mounting)
+    dr = log.dead_reckoning
+    rpy_dvl = np.array(dr.orientation) + [0.0, b, a]  # the truth's (0, 0, psi) + noise, moved
+    log = log.replace(dead_reckoning=DeadReckoning(dr.t, dr.position, wrap_angle(rpy_dvl)))
+    traj = Localizer("baseline", dr_orientation_frame="dvl").run(log)
+    _, rpy = truth(traj.t, 0.2, r, psi0)
+    err = wrap_angle(traj.x[:, 3:6] - rpy)
+    assert np.max(np.abs(err[:, :2])) < 0.01
+    assert np.max(np.abs(err[:, 2])) < 0.02  # yaw crosses pi on the way
+    np.testing.assert_allclose(wrap_angle(traj.x[0, 3:6] - [0, 0, psi0]), 0, atol=0.01)
+    body = Localizer("baseline").run(log)  # read as body attitude: off by the mounting
+    assert abs(wrap_angle(body.x[-1, 4] - b)) < 0.02  # the mount pitch taken as attitude
+
+
+def test_calibrated_gyro_bias_is_the_initial_bias_state():
+    """`undertow calibrate`'s IMU gyro bias starts the bias state of be / proposed: with a
+    tight initial bias std and no DR, the yaw rate is then right from the start; the baseline
+    has no bias states (the paper's definition) and ignores it."""
+    from undertow.estimation.calibration import Calibration
+    from undertow.estimation.run import localize
+
+    bias = np.array([0.002, -0.003, 0.02])
+    log = make_log(duration=3.0, u=0.2, imu_bias=bias).replace(dead_reckoning=None)
+    std = [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3 + [0.005] * 3 + [1e-4] * 3
+    cal = Calibration(imu_gyro_bias_rad_per_s=tuple(bias))
+    with_cal = localize(log, "be", calibration=cal, initial_std=std)
+    without = localize(log, "be", initial_std=std)
+    assert with_cal.metadata["config"]["initial_gyro_bias_rad_s"] == pytest.approx(bias)
+    np.testing.assert_allclose(with_cal.x[:, 15:18] - bias, 0, atol=3e-4)
+    assert abs(np.mean(with_cal.x[10:, 11])) < 0.002  # true yaw rate 0
+    assert abs(np.mean(without.x[10:, 11]) - bias[2]) < 0.002  # the bias taken as rotation
+    base = localize(log, "baseline", calibration=cal)
+    assert np.all(base.x[:, 12:18] == 0.0)
+    assert list(base.metadata["config"]["initial_gyro_bias_rad_s"]) == [0.0, 0.0, 0.0]

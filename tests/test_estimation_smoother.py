@@ -3,16 +3,20 @@ logs drawn from the filter's own model (see test_estimation_nis.simulate)."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from test_estimation_nis import PARAMS, simulate
 
+from undertow._plain import to_plain
 from undertow.errors import ConfigError, DataError
 from undertow.estimation import ukf
 from undertow.estimation.localize import Localizer, LocalizerConfig
 from undertow.estimation.smoother import _rts_step, _rts_workspace, smooth
 from undertow.log import Imu
 from undertow.rotations import wrap_angle
+from undertow.trajectory import Trajectory
 
 
 def test_linear_gaussian_equals_closed_form_rts():
@@ -140,3 +144,31 @@ def test_smoother_refuses_decimated_or_unknown_input():
     np.testing.assert_array_equal(smooth(bare, cfg).x, smooth(filt).x)
     with pytest.raises(DataError):
         smooth(filt.replace(t=filt.t[::-1].copy()), cfg)
+
+
+def test_saved_trajectory_keeps_its_metadata_and_can_be_smoothed(tmp_path):
+    """trajectory.npz stores the metadata (as JSON), so smooth() runs on a loaded file with
+    the filter's own config and gives what it gives on the trajectory in memory."""
+    cfg = LocalizerConfig(**PARAMS, variant="proposed")
+    log, _, _ = simulate(cfg, duration=3.0)
+    traj = Localizer.from_config(cfg).run(log)
+    back = Trajectory.load_npz(traj.save_npz(tmp_path / "trajectory.npz"))
+    assert back.metadata["config"] == json.loads(json.dumps(to_plain(traj.metadata["config"])))
+    assert back.metadata["counts"] == traj.metadata["counts"] and back.variant == "proposed"
+    np.testing.assert_array_equal(back.P, traj.P)
+    a, b = smooth(traj), smooth(back)
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.P, b.P)
+    assert b.metadata["smoothed"] is True
+    with pytest.raises(ConfigError, match="already smoothed"):  # and that survives a save too
+        smooth(Trajectory.load_npz(b.save_npz(tmp_path / "smoothed.npz")))
+
+
+def test_npz_without_metadata_still_loads(tmp_path):
+    path = tmp_path / "old.npz"
+    np.savez(path, t=np.arange(3.0), x=np.zeros((3, 18)), P=np.tile(np.eye(18), (3, 1, 1)),
+             variant=np.array("be"))  # fmt: skip
+    old = Trajectory.load_npz(path)
+    assert old.metadata == {} and old.variant == "be"
+    with pytest.raises(ConfigError, match="carries no filter config"):
+        smooth(old)

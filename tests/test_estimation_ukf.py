@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
 from undertow.estimation import model, ukf
+from undertow.estimation._reference import FilterPyModel
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
 NO_ANGLES = np.zeros(4, dtype=np.bool_)
@@ -52,110 +52,49 @@ def test_cholesky_repair_makes_pd():
     assert np.all(np.linalg.eigvalsh(P) > 0)
 
 
-# --- an independent numpy version of the 18-state model for FilterPy --------------------------
+# --- the filter loop against FilterPy running an independent numpy statement of the model -----
+R_IMU = rpy_to_matrix([np.pi, 0.0, 0.02])  # a REP-103 IMU, slightly turned
 R_DVL = rpy_to_matrix([0.0, 0.0, 0.05])
 R_DVL_ARM = np.array([0.164, 0.004, 0.284])
 BARO_ARM = np.array([0.0, 0.1, -0.05])
 Q_ACC, Q_B, MU = np.full(6, 0.02), np.full(6, 1e-6), np.array([0, 0, 1e-3, 0, 0, 0])
 
 
-def euler_rate(phi, theta):
-    return np.array([
-        [1, np.sin(phi) * np.tan(theta), np.cos(phi) * np.tan(theta)],
-        [0, np.cos(phi), -np.sin(phi)],
-        [0, np.sin(phi) / np.cos(theta), np.cos(phi) / np.cos(theta)],
-    ])  # fmt: skip
-
-
-def fx(x, dt):
-    J = np.zeros((6, 6))
-    J[:3, :3], J[3:, 3:] = rpy_to_matrix(x[3:6]), euler_rate(x[3], x[4])
-    out = x.copy()
-    out[:6] = x[:6] + J @ x[6:12] * dt
-    out[3:6] = wrap_angle(out[3:6])
-    out[12:] += MU * dt
-    return out
-
-
-def q_matrix(x, dt):
-    J = np.zeros((6, 6))
-    J[:3, :3], J[3:, 3:] = rpy_to_matrix(x[3:6]), euler_rate(x[3], x[4])
-    G = np.vstack([J * dt**2 / 2, np.eye(6) * dt])
-    Q = np.zeros((18, 18))
-    Q[:12, :12] = G @ np.diag(Q_ACC / dt) @ G.T
-    Q[12:, 12:] = np.diag(Q_B * dt)
-    return Q
-
-
-def hx(x, kind):
-    if kind == 0:
-        return x[9:12] + x[15:18]
-    if kind == 1:
-        return R_DVL.T @ (x[6:9] + np.cross(x[9:12], R_DVL_ARM))
-    if kind == 2:
-        return wrap_angle(x[3:6] + x[12:15])
-    return np.array([x[2] + (rpy_to_matrix(x[3:6]) @ BARO_ARM)[2]])
-
-
-def angle_mean(sigmas, wm, mask):
-    ref = sigmas[0]
-    d = sigmas - ref
-    d[:, mask] = wrap_angle(d[:, mask])
-    m = ref + wm @ d
-    m[mask] = wrap_angle(m[mask])
-    return m
-
-
-def residual(a, b, mask):
-    d = a - b
-    d[mask] = wrap_angle(d[mask])
-    return d
-
-
 def test_full_model_agrees_with_filterpy():
+    """All four measurement kinds through their mounting, angles near +-pi, equal times
+    (updates without predict), one gap longer than dt_max (capped): every recorded mean and
+    covariance equal to FilterPy's on the numpy model of estimation/_reference.py."""
     rng = np.random.default_rng(7)
     n, N = 18, 80
     kinds = rng.integers(0, 4, N)
     t = np.sort(np.round(rng.uniform(0, 4, N), 2))  # some equal times: updates without predict
+    t[N // 2 :] += 1.5  # a gap longer than dt_max
+    dt_max = 1.0
     x0 = np.r_[0, 0, 1, 0.05, -0.03, np.pi - 0.05, 0.3, 0, 0, 0, 0, 0.05, np.zeros(6)]
     P0 = np.diag(np.r_[[0.01] * 3, [0.02] * 3, [0.05] * 6, [0.005] * 3, [0.002] * 3] ** 2)
+    alpha, beta, kappa = 0.8, 2.0, 0.0
+    ref = FilterPyModel(x0, P0, 0.0, alpha=alpha, beta=beta, kappa=kappa, q_acc=Q_ACC,
+                        q_bias=Q_B, mu_bias=MU, imu_rotation=R_IMU, dvl_rotation=R_DVL,
+                        dvl_translation=R_DVL_ARM, baro_translation=BARO_ARM,
+                        dt_max=dt_max)  # fmt: skip
     z = np.zeros((N, 3))
     Rm = np.zeros((N, 3, 3))
     for k in range(N):
         m = 1 if kinds[k] == 3 else 3
-        z[k, :m] = hx(x0, kinds[k]) + rng.normal(0, 0.02, m)
+        z[k, :m] = ref.hx(x0, kinds[k]) + rng.normal(0, 0.02, m)
         Rm[k, :m, :m] = np.diag(rng.uniform(1e-4, 1e-3, m))
-    alpha, beta, kappa = 0.8, 2.0, 0.0
     wm, wc, lam = ukf._weights(n, alpha, beta, kappa)
     out_t, out_x, out_P, counts = model._run_filter(
-        t, kinds, z, Rm, x0, P0, 0.0, wm, wc, lam, Q_ACC, Q_B, MU, np.eye(3),
-        np.ascontiguousarray(R_DVL.T), R_DVL_ARM, BARO_ARM, 10.0, np.full(4, np.inf), False,
+        t, kinds, z, Rm, x0, P0, 0.0, wm, wc, lam, Q_ACC, Q_B, MU, np.ascontiguousarray(R_IMU.T),
+        np.ascontiguousarray(R_DVL.T), R_DVL_ARM, BARO_ARM, dt_max, np.full(4, np.inf), False,
         np.empty(0), True, N,
     )  # fmt: skip
-
-    smask = np.zeros(n, bool)
-    smask[3:6] = True
-    pts = MerweScaledSigmaPoints(n, alpha, beta, kappa)
-    f = UnscentedKalmanFilter(n, 3, 1.0, hx=None, fx=fx, points=pts,
-                              x_mean_fn=lambda s, w: angle_mean(s, w, smask),
-                              residual_x=lambda a, b: residual(a, b, smask))  # fmt: skip
-    f.x, f.P = x0.copy(), P0.copy()
-    t_cur, rows = 0.0, []
+    rows = []
     for k in range(N):
-        if t[k] > t_cur:
-            f.Q = q_matrix(f.x, t[k] - t_cur)
-            f.predict(dt=t[k] - t_cur)
-            t_cur = t[k]
-        m = 1 if kinds[k] == 3 else 3
-        zmask = np.full(m, kinds[k] == 2)
-        f.sigmas_f = pts.sigma_points(f.x, f.P)  # redraw between updates (as the kernel does)
-        f.z_mean = lambda s, w, zm=zmask: angle_mean(s, w, zm)
-        f.residual_z = lambda a, b, zm=zmask: residual(a, b, zm)
-        f.update(z[k, :m], R=Rm[k, :m, :m], hx=lambda x, kd=kinds[k]: hx(x, kd))
-        f.x[3:6] = wrap_angle(f.x[3:6])
+        x, P = ref.step(t[k], kinds[k], z[k], Rm[k])
         if k == N - 1 or t[k + 1] != t[k]:
-            rows.append((t[k], f.x.copy(), f.P.copy()))
-    assert counts[:4].sum() == N
+            rows.append((t[k], x.copy(), P.copy()))
+    assert counts[:4].sum() == N and counts[9] == 1  # all used, one dt capped
     np.testing.assert_allclose(out_t, [r[0] for r in rows])
     for (_, xr, Pr), xk, Pk in zip(rows, out_x, out_P, strict=True):
         np.testing.assert_allclose(wrap_angle(xk - xr), 0, atol=1e-9)

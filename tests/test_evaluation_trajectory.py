@@ -110,3 +110,84 @@ def test_no_overlap_is_a_clear_error():
     est = _estimate(gt, np.linspace(10, 12, 5))
     with pytest.raises(DataError, match="does not overlap ground truth"):
         trajectory_rmse(est, gt)
+
+
+def test_empty_or_nan_time_trajectories_are_refused():
+    gt = _carriage(duration=5.0)
+    empty = Trajectory(t=np.zeros(0), x=np.zeros((0, 18)), P=np.zeros((0, 18, 18)))
+    with pytest.raises(DataError, match="no samples"):
+        trajectory_rmse(empty, gt)
+    est = _estimate(gt, np.linspace(1, 4, 10))
+    t = est.t.copy()
+    t[3] = np.nan
+    with pytest.raises(DataError, match="1 non-finite times"):
+        trajectory_rmse(est.replace(t=t), gt)
+
+
+def test_nan_states_are_dropped_with_a_warning():
+    gt = _carriage()
+    est = _estimate(gt, np.linspace(1, 19, 100), dpos=(0.3, 0, 0))
+    x = est.x.copy()
+    x[::10, 0] = np.nan
+    with pytest.warns(RuntimeWarning, match="dropped 10 samples"):
+        r = trajectory_rmse(est.replace(x=x), gt)
+    assert r.samples == 90 and r.rmse["x_m"] == pytest.approx(0.3, abs=1e-9)
+
+
+def test_unusable_covariances_are_left_out_of_nees():
+    """A zero or indefinite pose covariance has no NEES (it used to give ~1e14 through a
+    1e-12 floor); the others keep theirs: sigma = 0.1 and errors (0.1, 0, ...) give 1."""
+    gt = _carriage()
+    est = _estimate(gt, np.linspace(1, 19, 100), dpos=(0.1, 0, 0))
+    P = est.P.copy()
+    P[:40] = 0.0
+    P[40:50, 2, 2] = -1.0
+    with pytest.warns(RuntimeWarning, match="50 of 100 samples .* not positive definite"):
+        r = trajectory_rmse(est.replace(P=P), gt)
+    assert r.nees_samples == 50 and r.samples == 100
+    assert r.nees_mean == pytest.approx(1.0, rel=1e-6)
+    with pytest.warns(RuntimeWarning):
+        none = trajectory_rmse(est.replace(P=np.zeros_like(P)), gt)
+    assert none.nees_samples == 0 and np.isnan(none.nees_mean)
+    assert none.rmse["x_m"] == pytest.approx(0.1, abs=1e-9)
+
+
+def test_ground_truth_with_repeated_times_is_deduplicated():
+    """Times rounded to 0.01 s (20 poses per time at 2000 Hz): the first pose per time is kept,
+    one warning; a constant offset still gives its RMSE, velocities stay right."""
+    gt = _carriage()
+    est = _estimate(gt, np.linspace(1, 19, 300), dpos=(0.0, 0.2, 0.0))
+    rounded = GroundTruth(t=np.round(gt.t, 2), position=gt.position, orientation=gt.orientation)
+    with pytest.warns(RuntimeWarning, match="repeats .* timestamps"):
+        r = trajectory_rmse(est, rounded)
+    assert r.rmse["y_m"] == pytest.approx(0.2, abs=1e-9)
+    assert r.rmse["x_m"] < 0.8 * 0.005 + 1e-9  # the kept pose is at most 5 ms early
+    assert r.rmse["vx_mps"] < 0.005  # the kept poses are 0-0.5 ms irregular: small jitter
+
+
+def test_align_origin_rotates_the_covariance_with_the_estimate():
+    """An estimate expressed in a frame turned by 90 deg, with errors drawn from an anisotropic
+    P in that frame: after origin alignment the errors have covariance R P R^T, so the NEES mean
+    is 6 (chi-square, 6 dof) only if P is rotated too (unrotated it is far off)."""
+    rng = np.random.default_rng(5)
+    gt = _carriage(duration=20.0)
+    t = np.linspace(0.0, 19.0, 6000)
+    a = np.pi / 2
+    Rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    gt_pos = np.column_stack([np.interp(t, gt.t, gt.position[:, i]) for i in range(3)])
+    sd = np.array([0.01, 0.2, 0.05, 0.002, 0.003, 0.02])  # std along the estimate's own axes
+    e = rng.normal(size=(t.size, 6)) * sd
+    e[0] = 0.0  # the first pose is what the alignment takes as exact
+    x = np.zeros((t.size, 18))
+    x[:, :3] = (gt_pos - gt_pos[0]) @ Rz.T + e[:, :3]  # the run seen in the turned frame
+    x[:, 3:6] = e[:, 3:6] + [0.0, 0.0, a]
+    x[:, 6] = 0.8
+    P = np.zeros((t.size, 18, 18))
+    P[:, :6, :6] = np.diag(sd**2)
+    P[:, 6:, 6:] = np.eye(12)
+    r = trajectory_rmse(Trajectory(t=t, x=x, P=P), gt, align="origin")
+    assert r.nees_mean == pytest.approx(6.0, rel=0.06)
+    assert r.rmse["y_m"] == pytest.approx(0.01, rel=0.05)  # the 0.01 along-x std, now along y
+    assert r.rmse["x_m"] == pytest.approx(0.2, rel=0.05)
+    unrotated = pose_nees(e[1:], np.tile(np.diag(sd**2), (t.size - 1, 1, 1)))  # sanity: 6
+    assert unrotated.mean() == pytest.approx(6.0, rel=0.06)

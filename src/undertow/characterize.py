@@ -44,7 +44,7 @@ from scipy.signal import periodogram
 from .errors import DataError
 from .estimation.noise import NoiseProfile, wave_name
 from .evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
-from .log import Log, WaveProbe
+from .log import FRESH_WATER_DENSITY, Log, WaveProbe
 from .rotations import rpy_to_matrix
 
 CALM_AMPLITUDE_M = 0.01  # a probe showing less than this is calm water
@@ -170,7 +170,9 @@ def _steady_segments(speed: np.ndarray, n: int) -> list[tuple[int, int]]:
     return _runs(steady)
 
 
-def characterize_run(log: Log, max_accel_mps2: float = 0.02, water_density: float = 997.0):
+def characterize_run(
+    log: Log, max_accel_mps2: float = 0.02, water_density: float = FRESH_WATER_DENSITY
+):
     """Characterize one run (needs dvl; wave_probe, ground_truth, pressure used when present)."""
     log.require("dvl", stage="characterize")
     notes: list[str] = []

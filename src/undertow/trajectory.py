@@ -11,12 +11,15 @@ Positions in m (world, z down), angles in rad, velocities in m/s and rad/s.
 from __future__ import annotations
 
 import dataclasses
+import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ._atomic import atomic_path
+from ._plain import to_plain
 from .errors import ReaderError
 
 STATE_NAMES = (
@@ -75,8 +78,11 @@ class Trajectory:
         return np.einsum("nii->ni", self.P[:, POSITION, POSITION])
 
     def save_npz(self, path: str | Path) -> Path:
-        """Write times, full state and full covariance (atomic: temp file then rename)."""
+        """Write times, full state, full covariance and the metadata (a JSON string, so that
+        e.g. :func:`~undertow.estimation.smooth` can run on a loaded trajectory); atomic: temp
+        file then rename."""
         path = Path(path)
+        metadata = json.dumps(to_plain(self.metadata), default=str)
         with atomic_path(path) as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(
                 fh,
@@ -85,6 +91,7 @@ class Trajectory:
                 P=self.P,
                 state_names=np.array(STATE_NAMES),
                 variant=np.array(self.variant),
+                metadata_json=np.array(metadata),
             )
         return path
 
@@ -96,10 +103,21 @@ class Trajectory:
             path = path / "trajectory.npz"
         try:
             with np.load(path, allow_pickle=False) as data:
-                return cls(t=data["t"], x=data["x"], P=data["P"], variant=str(data["variant"]))
+                metadata = {}
+                if "metadata_json" in data.files:  # older files have none
+                    metadata = json.loads(str(data["metadata_json"]))
+                    if not isinstance(metadata, dict):
+                        raise ValueError("metadata_json is not a JSON object")
+                return cls(
+                    t=data["t"],
+                    x=data["x"],
+                    P=data["P"],
+                    variant=str(data["variant"]),
+                    metadata=metadata,
+                )
         except FileNotFoundError as exc:
             raise ReaderError(f"{path}: no such trajectory file") from exc
-        except (KeyError, ValueError, OSError) as exc:
+        except (KeyError, ValueError, OSError, zipfile.BadZipFile) as exc:
             raise ReaderError(f"{path}: not an undertow trajectory ({exc})") from exc
 
     def replace(self, **changes) -> Trajectory:

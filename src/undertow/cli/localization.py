@@ -54,6 +54,13 @@ def localize(
         typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
     ] = None,
     smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
+    gate: Annotated[
+        float | None,
+        typer.Option(
+            help="Mahalanobis gate: drop a measurement whose NIS exceeds the chi-square quantile "
+            "of this probability, e.g. 0.999 (default: off)."
+        ),
+    ] = None,
     output_rate: Annotated[
         float | None, typer.Option(help="Output rate, Hz (default: every measurement).")
     ] = None,
@@ -82,6 +89,8 @@ def localize(
     params.pop("variant", None)
     if output_rate is not None:
         params["output_rate_hz"] = output_rate
+    if gate is not None:
+        params["gate_probability"] = gate
     with _progress(quiet) as progress:
         progress.add_task(f"localizing ({variant})", total=None)
         log = _load_log(log_path, topics, settings)
@@ -158,7 +167,15 @@ def evaluate_trajectory(
     for key, value in result.rmse.items():
         table.add_row(key, f"{value:.4f}")
     console.print(table)
+    if result.nees_samples == 0:
+        console.print(f"NEES: none (no sample of {result.samples} has a usable covariance)")
+        return
     console.print(
         f"NEES (pose, 6 dof): mean {result.nees_mean:.2f}, "
         f"{100 * result.nees_fraction_in_95:.0f} % inside the 95 % bound; {result.samples} samples"
+        + (
+            f" ({result.nees_samples} with a usable covariance)"
+            if result.nees_samples != result.samples
+            else ""
+        )
     )

@@ -14,15 +14,24 @@
 
 from __future__ import annotations
 
+import math
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from .._atomic import atomic_path
+from .._validate import validate
 from ..errors import ConfigError, DataError
-from ..evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
+from ..evaluation.trajectory import (
+    deduplicate_ground_truth,
+    ground_truth_velocity,
+    interpolate_ground_truth,
+)
 from ..log import Log
 from ..rotations import rpy_to_matrix, wrap_angle
 
@@ -54,20 +63,51 @@ class Calibration:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> Calibration:
+        """Read a file written by :meth:`save_yaml`; anything else (another YAML file, unknown
+        keys, a non-finite or non-positive value) is a ConfigError naming the problem."""
         try:
-            data = yaml.safe_load(Path(path).read_text()) or {}
-            return cls(
-                dead_reckoning_drift_rad_per_s=tuple(
-                    data.get("dead_reckoning_drift_rad_per_s", (0, 0, 0))
-                ),
-                imu_gyro_bias_rad_per_s=tuple(data.get("imu_gyro_bias_rad_per_s", (0, 0, 0))),
-                dvl_scale_factor=float(data.get("dvl_scale_factor", 1.0)),
-                dvl_scale_factor_std=float(data.get("dvl_scale_factor_std", float("nan"))),
-                samples=data.get("samples"),
-                source=str(data.get("source", "")),
-            )
-        except (OSError, yaml.YAMLError, TypeError, ValueError) as exc:
+            data = yaml.safe_load(Path(path).read_text())
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
             raise ConfigError(f"{path}: not a calibration file ({exc})") from exc
+        data = {} if data is None else data
+        if not isinstance(data, dict):
+            raise ConfigError(
+                f"{path}: not a calibration file (expected a mapping of "
+                f"{', '.join(_CalibrationFile.model_fields)}, got a {type(data).__name__})"
+            )
+        unknown = sorted(str(k) for k in data if k not in _CalibrationFile.model_fields)
+        if unknown:
+            raise ConfigError(
+                f"{path}: not a calibration file of `undertow calibrate`: unknown keys "
+                f"{', '.join(unknown)}"
+            )
+        checked = validate(_CalibrationFile, data, f"{path}: calibration field ")
+        return cls(**checked.model_dump())
+
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+class _CalibrationFile(BaseModel):
+    """What a calibration YAML may hold (all optional; defaults as :class:`Calibration`)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    dead_reckoning_drift_rad_per_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    imu_gyro_bias_rad_per_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    dvl_scale_factor: float = Field(1.0, gt=0, allow_inf_nan=False)
+    dvl_scale_factor_std: float | None = float("nan")  # NaN / null: not determined
+    samples: dict[str, int] | None = None
+    source: str = ""
+
+    @field_validator("dvl_scale_factor_std")
+    @classmethod
+    def _std(cls, value):
+        if value is None or math.isnan(value):
+            return float("nan")
+        if not (0 <= value < math.inf):
+            raise ValueError("must be a finite number >= 0 (or .nan: not determined)")
+        return value
 
 
 def _euler_rates_to_body(rpy: np.ndarray, rpy_dot: np.ndarray) -> np.ndarray:
@@ -89,17 +129,30 @@ def _line_slope(t: np.ndarray, y: np.ndarray) -> float:
     return float(np.dot(tc, y - y.mean()) / np.dot(tc, tc))
 
 
-def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) -> Calibration:
+MIN_SAMPLES = 20  # per parameter: fewer overlapping samples leave it at its default
+
+
+def calibrate(
+    log: Log,
+    min_speed_mps: float = 0.05,
+    smoothing_s: float = 0.05,
+    min_samples: int = MIN_SAMPLES,
+) -> Calibration:
     """Estimate mu_b, the IMU gyro bias and the DVL scale factor from ``log`` and its ground truth.
 
-    Needs the ground_truth stream; each other parameter is estimated when its stream exists.
+    Needs the ground_truth stream (repeated timestamps are dropped with a warning, see
+    :func:`~undertow.evaluation.trajectory.deduplicate_ground_truth`). Each parameter is
+    estimated from its stream's samples inside the ground-truth span (DVL: valid and moving)
+    when there are at least ``min_samples`` of them; a parameter with fewer keeps its default
+    and is named in a warning, and a DataError says what overlaps when none can be estimated.
     """
     log.require("ground_truth", stage="calibrate")
-    gt = log.ground_truth
+    gt = deduplicate_ground_truth(log.ground_truth, "calibrate")
     v_world = ground_truth_velocity(gt, smoothing_s)
     rpy_dot_full = np.gradient(np.unwrap(gt.orientation, axis=0), gt.t, axis=0)
     omega_full = _euler_rates_to_body(gt.orientation, rpy_dot_full)
     counts: dict[str, int] = {}
+    found: dict[str, int] = {}  # samples available per parameter, estimated or not
     result = {}
 
     def inside(t):
@@ -108,7 +161,8 @@ def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) 
     dr = log.dead_reckoning
     if dr is not None and len(dr):
         keep = inside(dr.t) & np.all(np.isfinite(dr.orientation), axis=1)
-        if keep.sum() >= 3:
+        found["dead_reckoning_drift_rad_per_s (dead_reckoning)"] = int(keep.sum())
+        if keep.sum() >= max(min_samples, 3) and np.ptp(dr.t[keep]) > 0:
             _, rpy, _ = interpolate_ground_truth(gt, dr.t[keep])
             e = np.unwrap(wrap_angle(dr.orientation[keep] - rpy), axis=0)
             result["dead_reckoning_drift_rad_per_s"] = tuple(
@@ -118,7 +172,8 @@ def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) 
     imu = log.imu
     if imu is not None and len(imu):
         keep = inside(imu.t) & np.all(np.isfinite(imu.angular_velocity), axis=1)
-        if keep.any():
+        found["imu_gyro_bias_rad_per_s (imu)"] = int(keep.sum())
+        if keep.sum() >= max(min_samples, 1):
             omega = np.column_stack(
                 [np.interp(imu.t[keep], gt.t, omega_full[:, i]) for i in range(3)]
             )
@@ -135,7 +190,8 @@ def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) 
         mount = log.mounting.dvl
         v_true = (v_body + np.cross(omega, np.asarray(mount.translation))) @ mount.rotation_matrix()
         moving = np.linalg.norm(v_true, axis=1) > min_speed_mps
-        if moving.sum() >= 3:
+        found["dvl_scale_factor (dvl, valid and moving)"] = int(moving.sum())
+        if moving.sum() >= max(min_samples, 3):
             vt, vm = v_true[moving], dvl.velocity[keep][moving]
             s = float(np.sum(vm * vt) / np.sum(vt * vt))
             resid = vm - s * vt
@@ -143,6 +199,19 @@ def calibrate(log: Log, min_speed_mps: float = 0.05, smoothing_s: float = 0.05) 
             result["dvl_scale_factor"] = s
             result["dvl_scale_factor_std"] = s_std
             counts["dvl_moving"] = int(moving.sum())
+    span = f"[{gt.t[0]:.3f}, {gt.t[-1]:.3f}] s"
+    overlap = ", ".join(f"{n} samples for {what}" for what, n in found.items()) or "no samples"
     if not counts:
-        raise DataError("calibrate: no dead_reckoning, imu or dvl samples overlap the ground truth")
+        raise DataError(
+            f"calibrate: the ground truth {span} ({len(gt)} poses) overlaps {overlap}; "
+            f"need at least {min_samples} for a parameter"
+        )
+    short = [what for what, n in found.items() if n < min_samples]
+    if short:
+        warnings.warn(
+            f"calibrate: fewer than {min_samples} samples inside the ground truth {span} for "
+            f"{', '.join(short)}: left at the default",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     return Calibration(**result, samples=counts, source=log.source)

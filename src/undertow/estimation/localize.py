@@ -10,65 +10,92 @@ measurement, as in the paper); see :mod:`undertow.estimation.model` for the equa
 
 from __future__ import annotations
 
-from typing import Literal
+import warnings
+from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from .._validate import validate
 from ..errors import ConfigError
-from ..log import P_ATM, Log
+from ..log import FRESH_WATER_DENSITY, P_ATM, Log
 from ..rotations import matrix_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
 from . import model
 from .noise import NoiseProfile, WaveNoise
 from .ukf import _weights
 
-Vec3 = tuple[float, float, float]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Vec3 = tuple[Finite, Finite, Finite]
+PositiveVec3 = tuple[Positive, Positive, Positive]
+NonNegativeVec3 = tuple[NonNegative, NonNegative, NonNegative]
 VARIANTS = ("baseline", "be", "an", "proposed")
+# a run where more than this fraction of the processed measurements needed a covariance repair
+# or a reverted step (or were gated) is reported: the track is then mostly frozen
+TROUBLE_FRACTION = 0.5
 
 
 class LocalizerConfig(BaseModel):
-    """Filter parameters; units in the names. Densities are continuous-time (see model.py)."""
+    """Filter parameters; units in the names. Densities are continuous-time (see model.py).
+
+    Every number must be finite; standard deviations and acceleration densities must be > 0
+    (measurement stds are also floored at ``std_floor``, so R is never 0); bias-walk densities
+    may be 0 (a constant bias). Sigma points: alpha in [0.5, 2], beta in [0, 10], kappa in
+    [0, 54] (kappa >= 0 keeps the centre weight from going strongly negative; NOTES.md
+    section 3).
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     variant: Literal["baseline", "be", "an", "proposed"] = "proposed"
     # process noise (eq:dynamics_model): Gamma = density / dt, Gamma_b dt
-    accel_density: Vec3 = (0.01, 0.01, 0.01)  # (m/s^2)^2/Hz
-    angular_accel_density: Vec3 = (0.005, 0.005, 0.005)  # (rad/s^2)^2/Hz
-    dr_bias_walk_density: Vec3 = (1e-7, 1e-7, 1e-6)  # rad^2/s
-    gyro_bias_walk_density: Vec3 = (1e-8, 1e-8, 1e-8)  # (rad/s)^2/s
+    accel_density: PositiveVec3 = (0.01, 0.01, 0.01)  # (m/s^2)^2/Hz
+    angular_accel_density: PositiveVec3 = (0.005, 0.005, 0.005)  # (rad/s^2)^2/Hz
+    dr_bias_walk_density: NonNegativeVec3 = (1e-7, 1e-7, 1e-6)  # rad^2/s
+    gyro_bias_walk_density: NonNegativeVec3 = (1e-8, 1e-8, 1e-8)  # (rad/s)^2/s
     dr_bias_drift_rad_s: Vec3 = (0.0, 0.0, 0.0)  # mu_b: mean drift of the DR bias (calibration)
     gyro_bias_drift_rad_s2: Vec3 = (0.0, 0.0, 0.0)  # mean drift of the IMU gyro bias
     # measurement noise (std devs, per sample)
-    imu_gyro_std_rad_s: Vec3 = (0.005, 0.005, 0.005)
-    dvl_velocity_std_m_s: Vec3 = (0.01, 0.01, 0.01)  # used when the log has no covariance
-    dvl_std_floor_m_s: float = Field(0.001, gt=0)
-    dr_orientation_std_rad: Vec3 = (0.005, 0.005, 0.01)
-    depth_std_m: float = Field(0.01, gt=0)
-    std_floor: float = Field(1e-6, gt=0)  # every measurement std is at least this
+    imu_gyro_std_rad_s: PositiveVec3 = (0.005, 0.005, 0.005)
+    dvl_velocity_std_m_s: PositiveVec3 = (0.01, 0.01, 0.01)  # used when the log has no covariance
+    dvl_std_floor_m_s: Positive = 0.001
+    dr_orientation_std_rad: PositiveVec3 = (0.005, 0.005, 0.01)
+    depth_std_m: Positive = 0.01
+    std_floor: Positive = 1e-6  # every measurement std is at least this
     dr_orientation_frame: Literal["body", "dvl"] = "body"
     # initial state (None: zeros, orientation from the first DR report, z from the first depth)
-    initial_state: list[float] | None = None
+    initial_state: list[Finite] | None = None
     # start position (m, world) when initial_state is None; None: x = y = 0, z from the first depth
     initial_position: Vec3 | None = None
-    initial_std: list[float] = Field(
+    # initial IMU gyro bias mean b-bar^g (rad/s) when initial_state is None, e.g. from
+    # `undertow calibrate`; only the variants that estimate biases (be, proposed) use it
+    initial_gyro_bias_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    initial_std: list[NonNegative] = Field(
         default_factory=lambda: [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3
         + [0.005] * 3 + [0.01] * 3
     )  # fmt: skip
     # sensors
-    dvl_scale_factor: float = Field(1.0, gt=0)  # v_used = v_measured / scale
-    water_density_kg_m3: float = Field(997.0, gt=0)
-    surface_pressure_pa: float = P_ATM
+    dvl_scale_factor: Positive = 1.0  # v_used = v_measured / scale
+    water_density_kg_m3: Positive = FRESH_WATER_DENSITY
+    surface_pressure_pa: Positive = P_ATM
     # robustness and output
-    gate_probability: float | None = Field(None, gt=0, lt=1)  # chi-square quantile, None = off
-    max_dt_s: float = Field(1.0, gt=0)
-    output_rate_hz: float | None = Field(None, gt=0)  # None: every processed measurement time
+    # Mahalanobis gate: chi-square probability of the NIS quantile, None = off
+    gate_probability: float | None = Field(None, gt=0, lt=1, allow_inf_nan=False)
+    max_dt_s: Positive = 1.0
+    output_rate_hz: Positive | None = None  # None: every processed measurement time
     # sigma points (alpha ~0.5-1; NOT 1e-3 for n = 18)
-    alpha: float = Field(1.0, gt=0.1, le=2.0)
-    beta: float = 2.0
-    kappa: float = 0.0
+    alpha: float = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False)
+    beta: float = Field(2.0, ge=0.0, le=10.0, allow_inf_nan=False)
+    kappa: float = Field(0.0, ge=0.0, le=3.0 * 18, allow_inf_nan=False)
+
+    @field_validator("initial_state", "initial_std")
+    @classmethod
+    def _eighteen(cls, value):
+        if value is not None and len(value) != model.N_STATE:
+            raise ValueError(f"needs {model.N_STATE} values (one per state), got {len(value)}")
+        return value
 
     @property
     def estimates_bias(self) -> bool:
@@ -131,9 +158,11 @@ class Localizer:
             float(cfg.max_dt_s), gate, not cfg.estimates_bias, out_times, record_all, out_n,
             nis_stats,
         )  # fmt: skip
+        counts = dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))
+        _warn_if_frozen(counts, int(t.size))
         metadata = {
             "variant": cfg.variant,
-            "counts": {**rejected, **dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))},
+            "counts": {**rejected, **counts},
             "nis": _nis_summary(nis_stats),
             "wave_noise": noise.to_dict() if cfg.adds_wave_noise else None,
             "wave_condition": noise.condition,
@@ -141,6 +170,28 @@ class Localizer:
             "source": log.source,
         }
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
+
+
+def _warn_if_frozen(counts: dict, n_measurements: int) -> None:
+    """One warning line when most processed measurements needed a covariance repair, a
+    reverted step or were gated: the filter then barely moves (inconsistent parameters, a
+    gate too tight for the noise, or data far from the model)."""
+    processed = n_measurements - counts["nonfinite_rejected"]
+    if processed <= 0:
+        return
+    troubled = {
+        "covariance repairs": counts["cholesky_repairs"],
+        "reverted steps": counts["numerical_reverts"],
+        "gated measurements": sum(counts[f"gated_{name}"] for name in model.KIND_NAMES),
+    }
+    worst = max(troubled, key=troubled.get)
+    if troubled[worst] > TROUBLE_FRACTION * processed:
+        warnings.warn(
+            f"Localizer: {troubled[worst]} {worst} for {processed} measurements; the track is "
+            "probably frozen or wrong (check the noise parameters, the gate and the data)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def _nis_summary(stats: np.ndarray) -> dict:
@@ -255,6 +306,7 @@ def _initial_state(log: Log, cfg: LocalizerConfig, t0: float):
             x0[2] = d[ok[0]] - lever[2]
     if cfg.initial_position is not None:
         x0[0:3] = cfg.initial_position
+    x0[15:18] = cfg.initial_gyro_bias_rad_s  # held at 0 by the variants without bias states
     return x0, np.diag(np.maximum(std, 1e-9) ** 2)
 
 

@@ -42,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .ukf import _predict_moments, _sigma_points, _update, _wrap
+from .ukf import _cholesky_repair, _predict_moments, _sigma_points, _spread, _update, _wrap
 
 N_STATE = 18
 IMU, DVL, DR, BARO = 0, 1, 2, 3
@@ -178,10 +178,16 @@ def _freeze_bias(x, P):
 
 
 @njit(cache=True)
-def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws):
-    """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place."""
+def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
+    """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place.
+
+    ``factored``: the workspace's L already holds the Cholesky factor of P (skip factorizing)."""
     chi, chi_f, D, L, Q, R, T, xi = ws
-    status = _sigma_points(x, P, lam, STATE_ANGLES, L, chi)
+    if factored:
+        status = 0
+        _spread(x, L, lam, STATE_ANGLES, chi)
+    else:
+        status = _sigma_points(x, P, lam, STATE_ANGLES, L, chi)
     # L is lower triangular, so most sigma points share chi_0's angles: trig only when they change
     a0, a1, a2 = np.nan, np.nan, np.nan
     for i in range(chi.shape[0]):
@@ -205,7 +211,9 @@ def _run_filter(
     measurement time (none if dt <= 0, dt capped at dt_max), redraw sigma points, update.
 
     Records (x, P) after the last update at each distinct time (record_all) or, otherwise, at
-    ``out_times`` (the filter predicted to that time; the filter itself is not changed).
+    ``out_times`` (the filter predicted to that time; the filter itself is not changed). A
+    recorded P that is not positive definite (rounding after extreme updates) is repaired
+    first, as the next sigma-point draw would do, so every emitted covariance is SPD.
     Returns (out_t, out_x, out_P, counts) with counts as in COUNT_NAMES.
 
     ``nis_stats`` (optional, (4, 3) float, zeroed by the caller) accumulates per kind the
@@ -243,6 +251,7 @@ def _run_filter(
     xb = np.empty(n)
     Pb = np.empty((n, n))
     t_cur = t0
+    factored = False  # L holds the Cholesky factor of the current P
     k_out = 0
     j_out = 0
     N = t.size
@@ -255,6 +264,8 @@ def _run_filter(
                 dt = min(out_times[j_out] - t_cur, dt_max)
                 if dt > 0:
                     counts[11] += max(_predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws), 0)
+                counts[11] += max(_cholesky_repair(Pb, L), 0)  # emit only a PD covariance
+                factored = False  # L now belongs to Pb
                 out_t[k_out] = out_times[j_out]
                 out_x[k_out] = xb
                 out_P[k_out] = Pb
@@ -281,7 +292,9 @@ def _run_filter(
                     counts[9] += 1
                 xb[:] = x
                 Pb[:, :] = P
-                counts[11] += max(_predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, ws), 0)
+                counts[11] += max(
+                    _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, ws, factored), 0
+                )
                 if not (_all_finite(x) and _all_finite(P)):
                     x[:] = xb
                     P[:, :] = Pb
@@ -291,6 +304,7 @@ def _run_filter(
                 t_cur = tk
             else:
                 counts[10] += 1
+            factored = False
             counts[11] += max(_sigma_points(x, P, lam, STATE_ANGLES, L, chi), 0)
             for i in range(npts):
                 _h(kd, chi[i], imu_Rt, dvl_Rt, dvl_r, baro_r, zi, R)
@@ -317,6 +331,10 @@ def _run_filter(
             if freeze:
                 _freeze_bias(x, P)
         if record_all and k_out < out_n and (k == N - 1 or t[k + 1] != tk):
+            # the repair the next sigma-point draw would make, done now: every emitted
+            # covariance is symmetric positive definite (the next draw then needs none)
+            counts[11] += max(_cholesky_repair(P, L), 0)
+            factored = True
             out_t[k_out] = tk
             out_x[k_out] = x
             out_P[k_out] = P

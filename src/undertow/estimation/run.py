@@ -2,13 +2,15 @@
 
 Adds to :class:`Localizer` the choices a command line needs:
 
-- a calibration file (``undertow calibrate``) supplies mu_b (the DR bias drift) and the DVL scale
-  factor, unless the caller sets them explicitly;
+- a calibration file (``undertow calibrate``) supplies the DVL scale factor and, for the
+  variants with bias states (``be``, ``proposed``), mu_b (the DR bias drift) and the initial mean
+  of the IMU gyro bias state, unless the caller sets them explicitly. ``baseline`` and ``an``
+  have no bias states by the paper's definition, so they use neither (they still use the scale);
 - the start position: DVL and IMU observe no absolute x, y, so it is given (``initial_position``),
   or ``"auto"``: the first ground-truth pose when the log has ground truth (simulated or tank
   runs), else the origin with z from the first depth;
 - the water density: from the log's metadata when it records one (simulated logs), else the
-  config's (fresh water, 997 kg/m^3).
+  config's (fresh water, ``log.FRESH_WATER_DENSITY``).
 """
 
 from __future__ import annotations
@@ -46,6 +48,10 @@ def localize(
             params.setdefault(
                 "dr_bias_drift_rad_s", tuple(calibration.dead_reckoning_drift_rad_per_s)
             )
+            if params.get("initial_state") is None:
+                params.setdefault(
+                    "initial_gyro_bias_rad_s", tuple(calibration.imu_gyro_bias_rad_per_s)
+                )
         params.setdefault("dvl_scale_factor", calibration.dvl_scale_factor)
     if isinstance(initial_position, str):
         if initial_position != "auto":

@@ -123,8 +123,15 @@ def _cholesky_repair(P, L):
 @njit(cache=True)
 def _sigma_points(x, P, lam, angle_mask, L, chi):
     """Sigma points chi (2n+1, n) of N(x, P); angle entries wrapped. Returns the repair flag."""
-    n = x.size
     status = _cholesky_repair(P, L)
+    _spread(x, L, lam, angle_mask, chi)
+    return status
+
+
+@njit(cache=True)
+def _spread(x, L, lam, angle_mask, chi):
+    """Sigma points chi (2n+1, n) around x from a Cholesky factor L of P; angles wrapped."""
+    n = x.size
     c = np.sqrt(n + lam)
     for j in range(n):
         chi[0, j] = x[j]
@@ -137,7 +144,6 @@ def _sigma_points(x, P, lam, angle_mask, L, chi):
         if angle_mask[j]:
             for i in range(2 * n + 1):
                 chi[i, j] = _wrap(chi[i, j])
-    return status
 
 
 @njit(cache=True)

@@ -6,16 +6,26 @@
   convolution with a normalized window of ``smoothing_s`` seconds; the world velocity is then
   expressed in the body frame with the true attitude, v^B = R(eta)^T v^W, to compare with the
   filter's nu = (u, v, w) (what the DVL measures).
+- Ground truth with repeated timestamps (e.g. rounded to 0.01 s) or non-finite poses: those rows
+  are dropped with one warning each (the first pose at a repeated time is kept); fewer than 3
+  distinct poses left is a DataError.
 - No alignment by default (NOTES.md section 3: alignment on a straight line is ill-posed and
   hides the heading drift being measured); ``align="origin"`` moves the estimate rigidly so that
-  its first pose equals the ground truth's (evo's ``--align_origin``).
+  its first pose equals the ground truth's (evo's ``--align_origin``), and moves the pose
+  covariance with it: P' = J P J^T with J = diag(R_align, d rpy'/d rpy) (the latter by central
+  differences; the first estimated pose is taken as exact).
 - RMSE per axis: sqrt(mean(e_i^2)), angles wrapped to [-pi, pi).
 - NEES of the pose: epsilon_k = e_k^T P_k^{-1} e_k over the 6 pose states; for a consistent filter
-  its mean is 6 and 95 % of samples lie below chi2_6(0.95) = 12.59.
+  its mean is 6 and 95 % of samples lie below chi2_6(0.95) = 12.59. Samples whose pose
+  covariance is not positive definite (zero, non-finite, negative eigenvalues) have no NEES: they
+  are left out with a warning (``nees_samples`` counts the others).
+- A trajectory with no rows or non-finite times is refused (DataError); rows with a non-finite
+  pose or velocity are dropped with a warning.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -41,9 +51,39 @@ class TrajectoryErrors:
     samples: int
     dropped_outside_ground_truth: int
     align: str
+    nees_samples: int = 0  # samples with a positive definite pose covariance
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+def deduplicate_ground_truth(gt: GroundTruth, where: str = "ground truth", min_poses: int = 3):
+    """``gt`` without repeated timestamps (the first pose at each time is kept) and without
+    non-finite poses, each with one warning line; DataError if fewer than ``min_poses`` remain."""
+    bad = ~(np.all(np.isfinite(gt.position), axis=1) & np.all(np.isfinite(gt.orientation), axis=1))
+    if bad.any():
+        warnings.warn(
+            f"{where}: dropped {int(bad.sum())} ground-truth poses with non-finite values",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        gt = gt.select(~bad)
+    repeated = np.r_[False, np.diff(gt.t) == 0] if len(gt) else np.zeros(0, bool)
+    if repeated.any():
+        first = gt.t[int(np.argmax(repeated))]
+        warnings.warn(
+            f"{where}: ground truth repeats {int(repeated.sum())} timestamps (first at "
+            f"t = {first:.6f} s, rounded times?); kept the first pose at each time",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        gt = gt.select(~repeated)
+    if len(gt) < min_poses:
+        raise DataError(
+            f"{where}: ground truth has {len(gt)} usable poses at distinct times; "
+            f"need at least {min_poses}"
+        )
+    return gt
 
 
 def ground_truth_velocity(gt: GroundTruth, smoothing_s: float = 0.05) -> np.ndarray:
@@ -76,13 +116,24 @@ def interpolate_ground_truth(gt: GroundTruth, t: np.ndarray, velocity: np.ndarra
     return pos, rpy, vel
 
 
-def _align_origin(pos: np.ndarray, rpy: np.ndarray, gt_pos0, gt_rpy0):
-    """Apply T = T_gt0 T_est0^{-1} to every estimated pose."""
+def _align_origin(pos: np.ndarray, rpy: np.ndarray, gt_pos0, gt_rpy0, P: np.ndarray):
+    """Apply T = T_gt0 T_est0^{-1} to every estimated pose, and to the pose covariance P (N, 6, 6)
+    through its Jacobian J = diag(R, d rpy'/d rpy) (central differences, wrapped)."""
     R_e0 = rpy_to_matrix(rpy[0])
     R = rpy_to_matrix(gt_rpy0) @ R_e0.T
     new_pos = (pos - pos[0]) @ R.T + gt_pos0
     new_rpy = matrix_to_rpy(R @ rpy_to_matrix(rpy))
-    return new_pos, new_rpy
+    h = 1e-6
+    J = np.zeros((rpy.shape[0], 6, 6))
+    J[:, :3, :3] = R
+    for i in range(3):
+        step = np.zeros(3)
+        step[i] = h
+        plus = matrix_to_rpy(R @ rpy_to_matrix(rpy + step))
+        minus = matrix_to_rpy(R @ rpy_to_matrix(rpy - step))
+        J[:, 3:6, 3 + i] = wrap_angle(plus - minus) / (2 * h)
+    new_P = J @ P @ np.swapaxes(J, 1, 2)
+    return new_pos, new_rpy, new_P
 
 
 def trajectory_rmse(
@@ -94,6 +145,22 @@ def trajectory_rmse(
     """RMSE per axis (x, y, z, roll, pitch, yaw, vx, vy, vz) of ``est`` against ``gt``, and NEES."""
     if align not in ("none", "origin"):
         raise DataError(f"align must be 'none' or 'origin', not {align!r}")
+    if len(est) == 0:
+        raise DataError("trajectory has no samples (nothing to evaluate)")
+    if not np.all(np.isfinite(est.t)):
+        raise DataError(f"trajectory: {int(np.sum(~np.isfinite(est.t)))} non-finite times")
+    finite = np.all(np.isfinite(est.x[:, :9]), axis=1)
+    if not finite.all():
+        warnings.warn(
+            f"trajectory: dropped {int(np.sum(~finite))} samples with a non-finite pose or "
+            "velocity",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        if not finite.any():
+            raise DataError("trajectory: no sample has a finite pose and velocity")
+        est = est.replace(t=est.t[finite], x=est.x[finite], P=est.P[finite])
+    gt = deduplicate_ground_truth(gt, "evaluate trajectory")
     inside = (est.t >= gt.t[0]) & (est.t <= gt.t[-1])
     if not np.any(inside):
         raise DataError(
@@ -102,28 +169,54 @@ def trajectory_rmse(
         )
     t = est.t[inside]
     x = est.x[inside]
-    P = est.P[inside]
+    P = est.P[inside][:, :6, :6]
     v_world = ground_truth_velocity(gt, smoothing_s)
     gt_pos, gt_rpy, gt_vel = interpolate_ground_truth(gt, t, v_world)
     gt_vel_body = np.einsum("nji,nj->ni", rpy_to_matrix(gt_rpy), gt_vel)
     pos, rpy = x[:, 0:3], x[:, 3:6]
     if align == "origin":
-        pos, rpy = _align_origin(pos, rpy, gt_pos[0], gt_rpy[0])
+        pos, rpy, P = _align_origin(pos, rpy, gt_pos[0], gt_rpy[0], P)
     err = np.concatenate([pos - gt_pos, wrap_angle(rpy - gt_rpy), x[:, 6:9] - gt_vel_body], axis=1)
     rmse = {
         f"{a}_{u}": float(np.sqrt(np.mean(err[:, i] ** 2)))
         for i, (a, u) in enumerate(zip(AXES, UNITS, strict=True))
     }
-    nees = pose_nees(err[:, :6], P[:, :6, :6])
+    usable = positive_definite(P)
+    if not usable.all():
+        warnings.warn(
+            f"trajectory: {int(np.sum(~usable))} of {usable.size} samples have a pose covariance "
+            "that is not positive definite (zero, non-finite or negative); NEES leaves them out",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    nees = pose_nees(err[usable, :6], P[usable])
     return TrajectoryErrors(
         rmse=rmse,
-        nees_mean=float(np.mean(nees)),
+        nees_mean=float(np.mean(nees)) if nees.size else float("nan"),
         nees_dof=6,
-        nees_fraction_in_95=float(np.mean(nees <= chi2.ppf(0.95, 6))),
+        nees_fraction_in_95=float(np.mean(nees <= chi2.ppf(0.95, 6)))
+        if nees.size
+        else float("nan"),
         samples=int(t.size),
         dropped_outside_ground_truth=int(np.sum(~inside)),
         align=align,
+        nees_samples=int(nees.size),
     )
+
+
+def positive_definite(P: np.ndarray, rel_floor: float = 1e-12) -> np.ndarray:
+    """Per matrix of P (N, d, d): finite, symmetric (to 1e-9 relative) and with every eigenvalue
+    above ``rel_floor`` times the largest (so that its inverse means something)."""
+    ok = np.all(np.isfinite(P), axis=(1, 2))
+    out = np.zeros(P.shape[0], bool)
+    if not ok.any():
+        return out
+    Q = P[ok]
+    scale = np.max(np.abs(Q), axis=(1, 2))
+    symmetric = np.all(np.abs(Q - np.swapaxes(Q, 1, 2)) <= 1e-9 * scale[:, None, None], axis=(1, 2))
+    w = np.linalg.eigvalsh(0.5 * (Q + np.swapaxes(Q, 1, 2)))
+    out[ok] = symmetric & (w[:, -1] > 0) & (w[:, 0] > rel_floor * w[:, -1])
+    return out
 
 
 def pose_nees(err: np.ndarray, P: np.ndarray) -> np.ndarray:
