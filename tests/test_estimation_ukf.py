@@ -44,6 +44,39 @@ def test_linear_gaussian_equals_kalman_filter():
         np.testing.assert_allclose(P, P_kf, rtol=0, atol=1e-9)
 
 
+def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
+    """The IMU, DVL and DR models are linear: the closed-form update the filter uses for them
+    must equal the full unscented update (sigma points through _h), angles and wrap included."""
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(18, 18)) * 0.05
+    P0 = A @ A.T + np.eye(18) * 1e-3
+    x0 = rng.normal(size=18) * 0.3
+    x0[5] = np.pi - 0.01  # yaw next to the wrap
+    imu_Rt = np.ascontiguousarray(rpy_to_matrix([np.pi, 0.0, 0.02]).T)
+    dvl_Rt = np.ascontiguousarray(rpy_to_matrix([0.0, 0.0, 0.05]).T)
+    arm, baro = np.array([0.164, 0.004, 0.284]), np.zeros(3)
+    H = model._jacobians(imu_Rt, dvl_Rt, arm, baro)
+    wm, wc, lam = ukf._weights(18, 1.0, 2.0, 0.0)
+    R = np.diag([1e-3, 2e-3, 5e-4])
+    for kind in (model.IMU, model.DVL, model.DR):
+        angles = np.full(3, kind == model.DR)
+        z = rng.normal(size=3) * 0.1
+        if kind == model.DR:
+            z[2] = -np.pi + 0.02  # across +-pi from the state's yaw + bias
+        x, P = x0.copy(), P0.copy()
+        chi, L = np.empty((37, 18)), np.zeros((18, 18))
+        ukf._sigma_points(x, P, lam, model.STATE_ANGLES, L, chi)
+        Zs, col, Rw = np.empty((37, 3)), np.empty(3), np.empty((3, 3))
+        for i in range(37):
+            model._h(kind, chi[i], imu_Rt, dvl_Rt, arm, baro, col, Rw)
+            Zs[i] = col
+        ukf._update(x, P, chi, Zs, z, R, wm, wc, model.STATE_ANGLES, angles, np.inf)
+        x_lin, P_lin = x0.copy(), P0.copy()
+        ukf._update_linear(x_lin, P_lin, H[kind], z, R, model.STATE_ANGLES, angles, np.inf)
+        np.testing.assert_allclose(wrap_angle(x_lin - x), 0.0, atol=1e-10)
+        np.testing.assert_allclose(P_lin, P, atol=1e-12)
+
+
 def test_cholesky_repair_makes_pd():
     P = np.diag([1.0, 1e-3, -1e-6])
     L = np.zeros((3, 3))

@@ -31,10 +31,14 @@ Measurements (eq:bar_meas_model .. eq:dr_meas_model), additive Gaussian noise:
     DR   (kind 2):  z = (phi, theta, psi) + b^g + gamma_DR              (rad, wrapped)
     Baro (kind 3):  z = z + e_3^T R_B^W r_bar                           (m, depth)
 
-The wave noise gamma enters as extra variance in R (eq:dvl_meas_model). The loop
-:func:`_run_filter` walks a merged, time-sorted measurement array: it predicts to each
-measurement's time (no prediction when dt <= 0, dt capped at dt_max), draws sigma points again
-and updates; see :mod:`undertow.estimation.localize` for the Python side.
+The wave noise gamma enters as extra variance in R (eq:dvl_meas_model). The IMU, DVL and DR
+models are linear in the state, h(x) = H x (the paper writes all four as H x), and for a linear
+h the unscented update is exact in closed form (ukf._update_linear): those three update without
+drawing sigma points, with H read off _h itself (:func:`_jacobians`). The barometer's lever arm
+makes its model nonlinear in the angles: it updates through sigma points drawn again from the
+predicted (x, P). The loop :func:`_run_filter` walks a merged, time-sorted measurement array: it
+predicts to each measurement's time (no prediction when dt <= 0, dt capped at dt_max) and
+updates; see :mod:`undertow.estimation.localize` for the Python side.
 """
 
 from __future__ import annotations
@@ -42,7 +46,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .ukf import _cholesky_repair, _predict_moments, _sigma_points, _spread, _update, _wrap
+from .ukf import (
+    _cholesky_repair,
+    _predict_moments,
+    _sigma_points,
+    _spread,
+    _update,
+    _update_linear,
+    _wrap,
+)
 
 N_STATE = 18
 IMU, DVL, DR, BARO = 0, 1, 2, 3
@@ -160,10 +172,27 @@ def _h(kind, x, imu_Rt, dvl_Rt, dvl_r, baro_r, out, R):
 
 @njit(cache=True)
 def _all_finite(a):
-    for v in a.ravel():
-        if not np.isfinite(v):
-            return False
-    return True
+    """No NaN or infinity in a (a sum propagates either; a finite overflow to inf also counts
+    as not finite, which is what the callers want)."""
+    return np.isfinite(a.sum())
+
+
+@njit(cache=True)
+def _jacobians(imu_Rt, dvl_Rt, dvl_r, baro_r):
+    """H (3, 18) of the linear models IMU, DVL, DR, column j = h(e_j): (3, 3, 18), indexed by
+    kind (the barometer's row is unused: it is not linear)."""
+    H = np.zeros((3, 3, N_STATE))
+    e = np.zeros(N_STATE)
+    col = np.empty(3)
+    R = np.empty((3, 3))
+    for kd in (IMU, DVL, DR):
+        for j in range(N_STATE):
+            e[j] = 1.0
+            _h(kd, e, imu_Rt, dvl_Rt, dvl_r, baro_r, col, R)
+            e[j] = 0.0
+            for a in range(3):
+                H[kd, a, j] = col[a]
+    return H
 
 
 @njit(cache=True)
@@ -236,7 +265,7 @@ def _run_filter(
         np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
     )  # fmt: skip
     chi, L, R = ws[0], ws[3], ws[5]
-    Zs3 = np.empty((npts, 3))
+    H = _jacobians(imu_Rt, dvl_Rt, dvl_r, baro_r)
     Zs1 = np.empty((npts, 1))
     zk3 = np.empty(3)
     zk1 = np.empty(1)
@@ -277,7 +306,6 @@ def _run_filter(
         m = 1 if kd == BARO else 3
         zk = zk1 if m == 1 else zk3
         Rk = Rk1 if m == 1 else Rk3
-        Zs = Zs1 if m == 1 else Zs3
         for a in range(m):
             zk[a] = z[k, a]
             for b in range(m):
@@ -305,15 +333,17 @@ def _run_filter(
             else:
                 counts[10] += 1
             factored = False
-            counts[11] += max(_sigma_points(x, P, lam, STATE_ANGLES, L, chi), 0)
-            for i in range(npts):
-                _h(kd, chi[i], imu_Rt, dvl_Rt, dvl_r, baro_r, zi, R)
-                for a in range(m):
-                    Zs[i, a] = zi[a]
             xb[:] = x
             Pb[:, :] = P
             zmask = zmask_angle if kd == DR else (zmask_lin1 if m == 1 else zmask_lin)
-            status, nis = _update(x, P, chi, Zs, zk, Rk, wm, wc, STATE_ANGLES, zmask, gate[kd])
+            if kd == BARO:
+                counts[11] += max(_sigma_points(x, P, lam, STATE_ANGLES, L, chi), 0)
+                for i in range(npts):
+                    _h(kd, chi[i], imu_Rt, dvl_Rt, dvl_r, baro_r, zi, R)
+                    Zs1[i, 0] = zi[0]
+                status, nis = _update(x, P, chi, Zs1, zk, Rk, wm, wc, STATE_ANGLES, zmask, gate[kd])
+            else:
+                status, nis = _update_linear(x, P, H[kd], zk, Rk, STATE_ANGLES, zmask, gate[kd])
             if nis_stats is not None and status < 2 and np.isfinite(nis):
                 nis_stats[kd, 0] += nis
                 nis_stats[kd, 1] += 1.0

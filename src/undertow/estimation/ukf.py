@@ -278,10 +278,62 @@ def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate):
     _symmetrize(S)
     C = np.empty((n, m))
     _weighted_outer(Dx, Dz, wc, C)
+    return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate)
+
+
+@njit(cache=True)
+def _update_linear(x, P, H, z, R, x_angles, z_angles, gate):
+    """Measurement update for a linear h(x) = H x (angle entries of z wrapped), in place.
+
+    The unscented transform is exact for a linear function: with sigma points of N(x, P),
+    mean(H chi) = H x, sum W^c dz dz^T = H P H^T and sum W^c dx dz^T = P H^T. So this equals
+    :func:`_update` on the same (x, P) (tested) without drawing sigma points:
+
+        z_hat = H x,  S = H P H^T + R,  C = P H^T,  then as :func:`_update`.
+
+    Returns (status, nis) as :func:`_update`."""
+    n = x.size
+    m = z.size
+    zhat = np.empty(m)
+    C = np.empty((n, m))
+    for a in range(m):
+        s = 0.0
+        for j in range(n):
+            s += H[a, j] * x[j]
+        zhat[a] = _wrap(s) if z_angles[a] else s
+    for i in range(n):
+        for a in range(m):
+            s = 0.0
+            for j in range(n):
+                s += P[i, j] * H[a, j]
+            C[i, a] = s
+    S = np.empty((m, m))
+    for a in range(m):
+        for b in range(m):
+            s = R[a, b]
+            for j in range(n):
+                s += H[a, j] * C[j, b]
+            S[a, b] = s
+    _symmetrize(S)
+    return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate)
+
+
+@njit(cache=True)
+def _innovation(z, zhat, z_angles):
+    """y = z - z_hat, wrapped for angle entries."""
+    m = z.size
     y = np.empty(m)
     for a in range(m):
         d = z[a] - zhat[a]
         y[a] = _wrap(d) if z_angles[a] else d
+    return y
+
+
+@njit(cache=True)
+def _correct(x, P, C, S, y, x_angles, gate):
+    """Kalman correction from the moments: K = C S^-1, x += K y, P -= K S K^T (upper triangle
+    mirrored), gated on nis = y^T S^-1 y. Returns (status, nis) as :func:`_update`."""
+    n, m = C.shape
     Ls = np.zeros((m, m))
     if _cholesky_repair(S, Ls) < 0:
         return 2, np.inf
