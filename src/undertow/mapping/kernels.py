@@ -72,6 +72,26 @@ def _k1(d, l):
 
 
 @njit(cache=True, inline="always")
+def _axis_weights(d0, step, count, l, out):
+    """out[a] = _k1(|d_a|, l) for the signed distances d_a = d0 + a step of ``count`` cell
+    centres along one axis. The angles 2 pi d_a / l are equally spaced, so cos and sin follow
+    by the angle-addition recurrence (4 trig calls per axis instead of 2 per cell); with
+    sin(2 pi |d| / l) = sign(d) sin(2 pi d / l) the result is ``eq:kernel`` to rounding."""
+    theta = _TWO_PI * d0 / l
+    delta = _TWO_PI * step / l
+    c, s = np.cos(theta), np.sin(theta)
+    cd, sd = np.cos(delta), np.sin(delta)
+    for a in range(count):
+        d = d0 + a * step
+        r = abs(d) / l
+        if r >= 1.0:
+            out[a] = 0.0
+        else:
+            out[a] = (2.0 + c) * (1.0 - r) / 3.0 + (s if d >= 0.0 else -s) / _TWO_PI
+        c, s = c * cd - s * sd, s * cd + c * sd
+
+
+@njit(cache=True, inline="always")
 def _pack(cx, cy, cz):
     return ((cx + _OFFSET) << 42) | ((cy + _OFFSET) << 21) | (cz + _OFFSET)
 
@@ -164,9 +184,11 @@ def _scatter(start, mode, points, label, sigma0, variance, var_lo, var_hi, l_min
                 i1 = i0
             lo[j] = i0
             cnt[j] = i1 - i0 + 1
-            for a in range(cnt[j]):
-                dc = abs((i0 + a + 0.5) - p) * res  # distance to the cell centre along e_j
-                w[j, a] = _k1(dc, lj) if mode == MODE_PRODUCT else dc
+            if mode == MODE_PRODUCT:
+                _axis_weights((i0 + 0.5 - p) * res, res, cnt[j], lj, w[j])
+            else:
+                for a in range(cnt[j]):
+                    w[j, a] = abs((i0 + a + 0.5) - p) * res  # distance to the cell centre
         c0x = lo[0] >> CHUNK_SHIFT
         c0y = lo[1] >> CHUNK_SHIFT
         c0z = lo[2] >> CHUNK_SHIFT
@@ -208,8 +230,10 @@ def _scatter(start, mode, points, label, sigma0, variance, var_lo, var_hi, l_min
                     k *= sig
                     ci = chunks[(ix >> CHUNK_SHIFT) - c0x, (iy >> CHUNK_SHIFT) - c0y,
                                 (iz >> CHUNK_SHIFT) - c0z]  # fmt: skip
-                    alpha[ci, ix & 7, iy & 7, iz & 7] += k * y
-                    beta[ci, ix & 7, iy & 7, iz & 7] += k * (1.0 - y)
+                    if y != 0.0:  # hits (y = 1) touch only alpha, free samples only beta
+                        alpha[ci, ix & 7, iy & 7, iz & 7] += k * y
+                    if y != 1.0:
+                        beta[ci, ix & 7, iy & 7, iz & 7] += k * (1.0 - y)
     return n
 
 
