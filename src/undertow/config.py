@@ -17,10 +17,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field
 
-from ._validate import validate
+from ._validate import read_yaml, validate
 from .errors import ConfigError
 from .estimation.localize import LocalizerConfig
 from .io.topics import TopicMap
@@ -45,10 +44,7 @@ class Settings(BaseModel):
         """Read a settings file; errors name the file and the field, in one line."""
         if path is None:
             return cls()
-        try:
-            data = yaml.safe_load(Path(path).read_text()) or {}
-        except (OSError, yaml.YAMLError) as exc:
-            raise ConfigError(f"{path}: cannot read settings ({exc})") from exc
+        data = read_yaml(path, "settings file") or {}
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: settings must be a mapping with topics/localizer/mapping")
         settings = validate(cls, data, f"{path}: ")

@@ -25,7 +25,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from .._atomic import atomic_path
-from .._validate import validate
+from .._validate import read_yaml, validate
 from ..errors import ConfigError, DataError
 from ..evaluation.trajectory import (
     deduplicate_ground_truth,
@@ -65,10 +65,7 @@ class Calibration:
     def from_yaml(cls, path: str | Path) -> Calibration:
         """Read a file written by :meth:`save_yaml`; anything else (another YAML file, unknown
         keys, a non-finite or non-positive value) is a ConfigError naming the problem."""
-        try:
-            data = yaml.safe_load(Path(path).read_text())
-        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-            raise ConfigError(f"{path}: not a calibration file ({exc})") from exc
+        data = read_yaml(path, "calibration file")
         data = {} if data is None else data
         if not isinstance(data, dict):
             raise ConfigError(

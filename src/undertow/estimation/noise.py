@@ -28,6 +28,7 @@ import numpy as np
 import yaml
 
 from .._atomic import atomic_path
+from .._validate import read_yaml
 from ..errors import ConfigError
 
 _NAME = re.compile(r"^wave-a(\d+(?:\.\d*)?)-f(\d+(?:\.\d*)?)$")
@@ -137,10 +138,7 @@ class NoiseProfile:
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> NoiseProfile:
-        try:
-            data = yaml.safe_load(Path(path).read_text())
-        except (OSError, yaml.YAMLError) as exc:
-            raise ConfigError(f"{path}: cannot read noise profile ({exc})") from exc
+        data = read_yaml(path, "noise profile")
         return cls.from_dict(data, origin=str(path))
 
     @classmethod

@@ -17,10 +17,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
 from pydantic import BaseModel, ConfigDict, field_validator
 
-from .._validate import validate
+from .._validate import read_yaml, validate
 from ..errors import ConfigError
 
 STREAM_FIELDS = (
@@ -120,12 +119,7 @@ class TopicMap(BaseModel):
     def from_yaml(cls, path) -> TopicMap:
         """Load from a YAML mapping ``stream: topic`` or ``stream: [topic, ...]``."""
         path = Path(path)
-        try:
-            data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-        except OSError as exc:
-            raise ConfigError(f"{path}: cannot read topic map: {exc.strerror or exc}") from exc
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path}: invalid YAML: {str(exc).splitlines()[0]}") from exc
+        data = read_yaml(path, "topic map") or {}
         if isinstance(data, dict) and isinstance(data.get("topics"), dict):
             data = data["topics"]
         if not isinstance(data, dict):

@@ -13,10 +13,9 @@ from importlib import resources
 from pathlib import Path
 from typing import Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from .._validate import validate
+from .._validate import read_yaml, validate
 from ..errors import ConfigError
 from ..log import FRESH_WATER_DENSITY
 from .scenario_sensors import (
@@ -182,14 +181,9 @@ def _deep_merge(base: dict, over: dict) -> dict:
 
 def _read_yaml(path, label: str) -> dict:
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as exc:
-        raise ConfigError(
-            f"{label}: not a scenario YAML file (binary content: byte {exc.object[exc.start]:#04x}"
-            f" at offset {exc.start} is not UTF-8 text)"
-        ) from None
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"{label}: cannot read scenario YAML: {exc}".replace("\n", " ")) from exc
+        data = read_yaml(path, "scenario YAML file")
+    except ConfigError as exc:
+        raise ConfigError(str(exc).replace(str(path), label, 1)) from None
     if data is None:  # an empty file (or only comments) is more likely a mistake than a request
         raise ConfigError(
             f"{label}: empty scenario file; name what to simulate, e.g. 'base: calm'"
