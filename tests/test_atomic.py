@@ -66,3 +66,23 @@ def test_output_folder_refuses_a_file_and_a_non_empty_folder_unless_overwrite(tm
     with output_folder(full, overwrite=True) as tmp:
         (tmp / "new").write_text("y")
     assert sorted(os.listdir(full)) == ["new"]
+
+
+def test_output_folder_never_holds_an_input_and_is_probed_before_the_work(tmp_path):
+    """--out on the log's own folder (or a parent of it) would delete the input even with
+    --overwrite; a place that cannot be written fails before any work, naming the path given."""
+    from undertow._atomic import check_output_folder
+    from undertow.errors import ConfigError
+
+    run = tmp_path / "run"
+    (run / "log").mkdir(parents=True)
+    (run / "log" / "log.mcap").write_text("bag")
+    for out in (run / "log", run):
+        with pytest.raises(ConfigError, match="holds the input"):
+            check_output_folder(out, overwrite=True, inputs=[run / "log"])
+    assert check_output_folder(run / "est", inputs=[run / "log"]) == run / "est"
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    with pytest.raises(ConfigError, match="cannot write here"):
+        check_output_folder(blocker / "sub" / "out")
+    assert not (tmp_path / "afile" / "sub").exists()

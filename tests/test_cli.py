@@ -171,3 +171,18 @@ def test_outputs_never_clobber_a_folder_or_a_file(tmp_path):
     assert sorted(p.name for p in run.iterdir()) == before
     blocked = str(run / "ground_truth.ply" / "sub")
     _one_error_line(runner.invoke(app, ["simulate", "calm", "--out", blocked, "-q"]))
+
+
+def test_errors_inside_long_work_are_still_one_line_without_quiet(tmp_path):
+    """A failure while the progress bar would run (here: reading the log) prints the error
+    line alone: no blank line from the bar in pipes and logs."""
+    r = runner.invoke(app, ["localize", str(tmp_path / "nope.bag"), "--out", str(tmp_path / "o")])
+    assert _one_error_line(r).startswith("error:") and r.output.startswith("error:")
+
+
+def test_out_holding_the_input_is_refused_even_with_overwrite(tmp_path):
+    run = tmp_path / "run"
+    assert runner.invoke(app, ["simulate", "calm", "--out", str(run), "-q"]).exit_code == 0
+    again = ["simulate", str(run / "scenario.yaml"), "--out", str(run), "--overwrite", "-q"]
+    assert "holds the input" in _one_error_line(runner.invoke(app, again))
+    assert (run / "log").is_dir() and (run / "scenario.yaml").is_file()

@@ -261,6 +261,17 @@ def test_user_topic_missing_from_the_real_bag_warns_once_naming_stream_topics_an
     assert len(log.dvl) == 378 and lines[0] in log.metadata["warnings"]
 
 
+def test_a_user_dvl_topic_not_in_the_bag_says_the_raw_json_was_read_instead():
+    """The real bag also carries the A50's raw JSON: the DVL is still read, and the warning says
+    so instead of claiming the stream was not read."""
+    with pytest.warns(UserWarning) as record:
+        log = read_log(BAG, TopicMap(dvl=["/nope/dvl"]))
+    (line,) = [str(w.message) for w in record if "topic map" in str(w.message)]
+    assert "dvl: no topic of the topic map (/nope/dvl)" in line
+    assert "read from dvl_json" in line and "stream not read" not in line
+    assert log.dvl is not None and len(log.dvl) > 0
+
+
 def test_absent_default_topics_stay_silent():
     """The real bag has no IMU, pressure or sonar: with the defaults (also written out in full,
     as config.yaml does) that is a legal DVL-only log, no warning about topics."""

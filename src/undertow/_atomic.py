@@ -53,15 +53,32 @@ def atomic_path(
         shutil.rmtree(holder, ignore_errors=True)
 
 
-def check_output_folder(path: str | Path, overwrite: bool = False) -> Path:
-    """Refuse an output folder that is a file, or that holds files unless ``overwrite``.
+def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Path:
+    """Refuse an output folder that is a file, that holds files unless ``overwrite``, that is
+    or contains one of the command's ``inputs`` (replacing it would delete them), or whose
+    parent cannot be written.
 
     Called before long work so that a wrong ``--out`` fails at once, not after it."""
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise ConfigError(f"{path}: output folder is an existing file")
+    out = path.resolve()
+    for given in inputs:
+        if given is not None and (
+            out == Path(given).resolve() or out in Path(given).resolve().parents
+        ):
+            raise ConfigError(f"{path}: output folder holds the input {given}; write elsewhere")
     if path.is_dir() and any(path.iterdir()) and not overwrite:
         raise ConfigError(f"{path}: output folder exists and is not empty (use --overwrite)")
+    ancestor = out.parent
+    while not ancestor.exists():  # nothing is created yet: probe the nearest existing folder
+        ancestor = ancestor.parent
+    try:
+        if not ancestor.is_dir():
+            raise NotADirectoryError(f"{ancestor} is a file")
+        os.rmdir(tempfile.mkdtemp(prefix=f".{path.name}.", dir=ancestor))
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot write here ({exc.strerror or exc})") from None
     return path
 
 

@@ -73,7 +73,7 @@ def _progress(quiet: bool):
         BarColumn(),
         TimeElapsedColumn(),
         console=err,
-        disable=quiet,
+        disable=quiet or not err.is_terminal,  # no bar (nor its blank line) in pipes and logs
         transient=True,
     )
 

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from .._atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
     _print_json,
@@ -79,6 +80,7 @@ def simulate(
     if seed is not None and seed < 0:
         raise UndertowError(f"--seed {seed}: must be a non-negative integer")
     spec = load_scenario(scenario)
+    check_output_folder(out_dir, overwrite, inputs=[scenario] if Path(scenario).exists() else [])
     seed = spec.seed if seed is None else seed  # given wins; else the scenario's own (default 0)
     with _progress(quiet) as progress:
         progress.add_task(f"simulating {spec.name} (seed {seed})", total=None)

@@ -63,15 +63,20 @@ def _bag_paths(path: Path) -> list[Path]:
     return [path]
 
 
-def _warn_unmatched(topics: TopicMap, available: dict, path: Path) -> list[str]:
-    """One warning line per user-given stream of which no topic is in the bag."""
+def _warn_unmatched(topics: TopicMap, available: dict, path: Path, log: Log) -> list[str]:
+    """One warning line per user-given stream of which no topic is in the bag, saying whether
+    the stream was read from a fallback (the DVL and its dead reckoning from the raw JSON
+    topic) or not at all."""
     listing = sorted(available)
     shown = ", ".join(listing[:8]) + (f", ... ({len(listing)} in all)" if len(listing) > 8 else "")
-    lines = [
-        f"{path}: {stream}: no topic of the topic map ({', '.join(candidates)}) is in the bag;"
-        f" stream not read (topics in the bag: {shown or 'none'})"
-        for stream, candidates in topics.unmatched_user_topics(available).items()
-    ]
+    lines = []
+    for stream, candidates in topics.unmatched_user_topics(available).items():
+        fallback = log.metadata.get(f"{stream}_source") if getattr(log, stream, None) else None
+        outcome = f"read from {fallback} instead" if fallback else "stream not read"
+        lines.append(
+            f"{path}: {stream}: no topic of the topic map ({', '.join(candidates)}) is in the bag;"
+            f" {outcome} (topics in the bag: {shown or 'none'})"
+        )
     for line in lines:
         warnings.warn(line, stacklevel=3)
     return lines
@@ -95,7 +100,6 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
         raise ReaderError(f"{path}: cannot open bag ({_one_line(exc)})") from exc
     try:
         available = {c.topic: c.msgtype for c in reader.connections}
-        unmatched = _warn_unmatched(topics, available, path)
         mapped = topics.resolve(available)
         used = {}
         for stream, topic in mapped.items():
@@ -113,6 +117,7 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
     if not log.streams():
         listing = ", ".join(f"{t} ({m})" for t, m in sorted(available.items())) or "none"
         raise ReaderError(f"{path}: no known measurement stream; topics in the bag: {listing}")
+    unmatched = _warn_unmatched(topics, available, path, log)
     log.metadata["warnings"] = unmatched + notes.finish()
     return log
 
