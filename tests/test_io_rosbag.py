@@ -394,3 +394,14 @@ def test_folder_of_storage_files_without_metadata(tmp_path):
         shutil.copy(next(path.glob("*.mcap")), two / name)
     with pytest.raises(ReaderError, match=r"two: no metadata\.yaml and 2 storage files"):
         read_log(two)
+
+
+def test_an_empty_topic_list_turns_a_stream_off_without_a_warning():
+    """dvl_json: [] with the DVL topic hidden: no DVL at all, and no warning for the empty list."""
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        with pytest.raises(ReaderError, match="no known measurement stream"):
+            read_log(BAG, TopicMap(dvl=["/nope/dvl"], dvl_json=[]))
+    lines = [str(w.message) for w in record]
+    assert any("dvl: no topic" in line for line in lines)
+    assert not any("dvl_json" in line for line in lines)

@@ -114,10 +114,10 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
     finally:
         reader.close()
     log = _assemble(rows, notes, path, used, topics)
+    unmatched = _warn_unmatched(topics, available, path, log)
     if not log.streams():
         listing = ", ".join(f"{t} ({m})" for t, m in sorted(available.items())) or "none"
         raise ReaderError(f"{path}: no known measurement stream; topics in the bag: {listing}")
-    unmatched = _warn_unmatched(topics, available, path, log)
     log.metadata["warnings"] = unmatched + notes.finish()
     return log
 

@@ -105,13 +105,15 @@ class TopicMap(BaseModel):
         return found
 
     def unmatched_user_topics(self, available) -> dict[str, list[str]]:
-        """Streams whose candidate list differs from the default (the user named them) and of
-        which no topic is in ``available``: ``{stream: candidates}``."""
+        """Streams whose candidate list differs from the default (the user named them), is not
+        empty (which turns the stream off) and of which no topic is in ``available``:
+        ``{stream: candidates}``."""
         available = set(available)
         return {
             stream: getattr(self, stream)
             for stream in (*STREAM_FIELDS, "tf_static")
-            if getattr(self, stream) != type(self).model_fields[stream].default
+            if getattr(self, stream)  # an empty list turns the stream off on purpose
+            and getattr(self, stream) != type(self).model_fields[stream].default
             and not available.intersection(getattr(self, stream))
         }
 
