@@ -74,6 +74,7 @@ def test_gate_option_reaches_the_filter(run):
     # chi-square 0.999 gates about 1 in 1000 innovations of a consistent sensor; not most
     gated = sum(c[f"gated_{k}"] for k in ("imu", "dvl", "dead_reckoning", "pressure"))
     assert gated < 0.05 * sum(c[f"used_{k}"] for k in ("imu", "dvl", "dead_reckoning", "pressure"))
+    assert "wave condition" not in r.output  # -q: no info line
     line = _error_line(_localize(run, "--gate", "1.5", "--overwrite"))
     assert "gate_probability: Input should be less than 1" in line
 
@@ -153,3 +154,102 @@ def test_calibrate_with_a_four_pose_ground_truth_is_one_line(run, tmp_path):
                                            "--out", str(out)]))  # fmt: skip
     assert "need at least 20" in line
     assert not out.exists()
+
+
+def _warnings(output: str) -> list[str]:
+    return [ln for ln in output.splitlines() if ln.startswith("warning:")]
+
+
+def test_calibrate_without_the_imu_says_so_and_localize_does_not_pretend(run, tmp_path):
+    """A topic map hiding the IMU: the gyro bias keeps its default with one warning line, the
+    YAML records what was estimated, and localize --calibration names what it did not get."""
+    topics = tmp_path / "topics.yaml"
+    topics.write_text("imu: [/nothing]\n")
+    cal = tmp_path / "cal.yaml"
+    log, gt = str(run / "run" / "log"), str(run / "run" / "ground_truth.tum")
+    r = runner.invoke(app, ["calibrate", log, gt, "--topics", str(topics), "--out", str(cal)])
+    assert r.exit_code == 0, r.output
+    lines = [w for w in _warnings(r.output) if "calibrate:" in w]
+    assert lines == [
+        "warning: calibrate: imu_gyro_bias_rad_per_s left at the default [0, 0, 0]: the log has "
+        "no imu stream"
+    ]
+    saved = yaml.safe_load(cal.read_text())
+    assert saved["estimated"] == ["dead_reckoning_drift_rad_per_s", "dvl_scale_factor"]
+    assert saved["left_at_default"] == {"imu_gyro_bias_rad_per_s": "the log has no imu stream"}
+    out = run / "cal_est"
+    r = runner.invoke(app, ["localize", log, "--out", str(out), "--calibration", str(cal)])
+    assert r.exit_code == 0, r.output
+    assert any("not estimated" in w and "imu_gyro_bias" in w for w in _warnings(r.output))
+    # the wave condition comes from the bag's sidecar, and says so (one line, not with -q)
+    assert "wave condition: calm (from the bag's sidecar undertow.yaml" in r.output
+    used = yaml.safe_load((out / "config.yaml").read_text())
+    assert used["wave_condition_source"] == "the bag's sidecar undertow.yaml"
+    assert used["calibration"]["estimated"] == saved["estimated"]
+
+
+def test_a_bare_bag_file_is_localized_as_calm_and_says_so(run, tmp_path):
+    bare = tmp_path / "bare"
+    bare.mkdir()
+    (bare / "log.mcap").write_bytes((run / "run" / "log" / "log.mcap").read_bytes())
+    out = tmp_path / "est"
+    r = runner.invoke(
+        app, ["localize", str(bare / "log.mcap"), "--out", str(out), "--variant", "baseline"]
+    )
+    assert r.exit_code == 0, r.output
+    info = [ln for ln in r.output.splitlines() if ln.startswith("wave condition:")]
+    assert len(info) == 1 and info[0].startswith("wave condition: calm (default")
+    assert yaml.safe_load((out / "config.yaml").read_text())["wave_condition_source"] == "default"
+
+
+def _help(command: str) -> str:
+    r = runner.invoke(app, [command, "--help"], env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.output
+    return " ".join(r.output.replace("│", " ").split())
+
+
+def test_help_documents_quiet_and_the_default_wave():
+    for command in ("localize", "calibrate"):
+        assert "No progress or summary on stderr." in _help(command), command
+    assert "undertow.yaml, else calm" in _help("localize")
+
+
+def test_conflicting_wave_options_and_smooth_with_output_rate_are_refused_up_front(run):
+    line = _error_line(_localize(run, "--wave", "calm", "--wave-amplitude", "0.1",
+                                 "--wave-frequency", "1"))  # fmt: skip
+    assert "--wave and --wave-amplitude / --wave-frequency conflict" in line
+    # before reading the log: a missing log would be the error otherwise
+    r = runner.invoke(app, ["localize", str(run / "missing"), "--out", str(run / "y"),
+                            "--output-rate", "1", "--smooth"])  # fmt: skip
+    assert "--smooth needs the filter output at every measurement" in _error_line(r)
+    assert not (run / "y").exists()
+
+
+def test_evaluate_against_a_ground_truth_covering_little_of_the_run(run, tmp_path):
+    rows = (run / "run" / "ground_truth.tum").read_text().splitlines()
+    est = str(run / "est")
+    tiny, short = tmp_path / "tiny.tum", tmp_path / "short.tum"
+    tiny.write_text("\n".join(rows[:4]) + "\n")  # header + 3 poses (1 ms): one sample
+    short.write_text("\n".join(rows[:4001]) + "\n")  # 2 s of 2000 Hz
+    line = _error_line(runner.invoke(app, ["evaluate", "trajectory", est, str(tiny)]))
+    assert "only 1 of" in line and "need at least 10" in line
+    r = runner.invoke(app, ["evaluate", "trajectory", est, str(short)])
+    assert r.exit_code == 0, r.output
+    (warning,) = _warnings(r.output)
+    assert "outside the ground truth" in warning and "are dropped" in warning
+    result = json.loads(
+        runner.invoke(app, ["evaluate", "trajectory", est, str(short), "--json"]).stdout
+    )
+    used, dropped = result["samples"], result["dropped_outside_ground_truth"]
+    assert f"samples: {used} used, {dropped} outside the ground truth (dropped)" in r.output
+
+
+def test_wrong_files_are_one_line_naming_what_they_should_be(run, tmp_path):
+    gt = str(run / "run" / "ground_truth.tum")
+    line = _error_line(runner.invoke(app, ["evaluate", "trajectory", gt, gt]))
+    assert "not a trajectory.npz written by `undertow localize`" in line and "TUM" in line
+    profile = tmp_path / "profile.yaml"
+    profile.write_text("name: mine\nconditions: [{amplitude_m: 0.1, frequency_hz: 1.0}]\n")
+    line = _error_line(_localize(run, "--profile", str(profile), "--overwrite"))
+    assert f"{profile}: noise profile field conditions.0.dvl_std: Field required" in line
+    assert "KeyError" not in line

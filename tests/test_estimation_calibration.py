@@ -100,3 +100,23 @@ def test_a_parameter_with_too_few_samples_keeps_its_default_and_says_so():
     assert cal.dead_reckoning_drift_rad_per_s == (0.0, 0.0, 0.0)
     assert "dead_reckoning" not in cal.samples and cal.samples["imu"] >= 290
     np.testing.assert_allclose(cal.imu_gyro_bias_rad_per_s, [0.01, -0.02, 0.005], atol=1e-3)
+
+
+@pytest.mark.parametrize(
+    ("stream", "parameter"),
+    [("imu", "imu_gyro_bias_rad_per_s"), ("dead_reckoning", "dead_reckoning_drift_rad_per_s")],
+)
+def test_a_missing_stream_leaves_its_parameter_at_the_default_with_a_warning(
+    tmp_path, stream, parameter
+):
+    with pytest.warns(RuntimeWarning, match=f"{parameter} left at the default .*no {stream} str"):
+        cal = calibrate(_run().replace(**{stream: None}))
+    assert parameter not in cal.estimated and "dvl_scale_factor" in cal.estimated
+    assert cal.left_at_default == {parameter: f"the log has no {stream} stream"}
+    back = Calibration.from_yaml(cal.save_yaml(tmp_path / "cal.yaml"))
+    assert back.estimated == cal.estimated and back.left_at_default == cal.left_at_default
+    assert set(calibrate(_run()).estimated) == {
+        "dead_reckoning_drift_rad_per_s",
+        "imu_gyro_bias_rad_per_s",
+        "dvl_scale_factor",
+    }

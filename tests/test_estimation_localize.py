@@ -206,3 +206,48 @@ def test_calibrated_gyro_bias_is_the_initial_bias_state():
     base = localize(log, "baseline", calibration=cal)
     assert np.all(base.x[:, 12:18] == 0.0)
     assert list(base.metadata["config"]["initial_gyro_bias_rad_s"]) == [0.0, 0.0, 0.0]
+
+
+def test_wave_condition_and_where_it_came_from_are_recorded():
+    """Without a wave condition the log's recorded one is used, else calm; config says which."""
+    from undertow.estimation.localize import wave_condition
+
+    log = make_log(duration=3.0)
+    assert wave_condition(None, log) == ("calm", "default")
+    assert wave_condition("wave-a0.10-f1.00", log) == ("wave-a0.10-f1.00", "given")
+    recorded = log.replace(metadata={"wave": {"amplitude_m": 0.1, "frequency_hz": 1.0}})
+    assert wave_condition(None, recorded)[1] == "the log's metadata"
+    bag = log.replace(metadata={"wave": "wave-a0.10-f1.00", "format": "rosbag", "recorded": {}})
+    assert wave_condition(None, bag) == ("wave-a0.10-f1.00", "the bag's sidecar undertow.yaml")
+    traj = Localizer("baseline").run(log)
+    assert (traj.metadata["wave_condition"], traj.metadata["wave_condition_source"]) == (
+        "calm",
+        "default",
+    )
+
+
+def test_smoothing_a_decimated_run_is_refused_before_filtering():
+    """An empty log would fail in the filter: the option clash must be found first."""
+    from undertow.estimation.run import localize
+
+    with pytest.raises(ConfigError, match="smoothing needs the filter output at every"):
+        localize(Log(), smooth=True, output_rate_hz=1.0)
+
+
+def test_calibration_applies_only_what_was_estimated_and_says_so():
+    from undertow.estimation.calibration import Calibration
+    from undertow.estimation.run import _apply_calibration
+
+    cal = Calibration(
+        dead_reckoning_drift_rad_per_s=(0.0, 0.0, 1e-4),
+        dvl_scale_factor=1.02,
+        estimated=("dead_reckoning_drift_rad_per_s", "dvl_scale_factor"),
+        left_at_default={"imu_gyro_bias_rad_per_s": "the log has no imu stream"},
+    )
+    params = {}
+    with pytest.warns(RuntimeWarning, match=r"imu_gyro_bias_rad_per_s \(the log has no imu"):
+        _apply_calibration(cal, "proposed", params)
+    assert params == {"dvl_scale_factor": 1.02, "dr_bias_drift_rad_s": (0.0, 0.0, 1e-4)}
+    params = {}
+    _apply_calibration(cal, "baseline", params)  # uses no bias parameter: nothing to say
+    assert params == {"dvl_scale_factor": 1.02}

@@ -74,3 +74,20 @@ def test_measured_condition_answers_to_its_canonical_name():
     np.testing.assert_allclose(half.dvl_std, [0.01, 0.0005, 0.0], atol=1e-12)
     with pytest.raises(ConfigError, match="outside"):
         profile.noise((0.05, 0.8))
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("name: x\n", "p.yaml: noise profile field conditions: Field required"),
+        ("conditions: [{amplitude_m: 0.1, frequency_hz: 1}]", "conditions.0.dvl_std: Field req"),
+        ("conditions: [{amplitude_m: 0.1, dvl_std: [0, 0, 0]}]", "conditions.0.frequency_hz: a wa"),
+        ("conditions: [{amplitude_m: x, dvl_std: [0, 0, 0]}]", "conditions.0.amplitude_m: Input"),
+        ("[1, 2]\n", "p.yaml: not a noise profile"),
+    ],
+)
+def test_invalid_profile_names_the_file_and_field(tmp_path, text, message):
+    (tmp_path / "p.yaml").write_text(text)
+    with pytest.raises(ConfigError, match=message) as info:
+        NoiseProfile.from_yaml(tmp_path / "p.yaml")
+    assert "Error(" not in str(info.value) and "\n" not in str(info.value)

@@ -191,3 +191,33 @@ def test_align_origin_rotates_the_covariance_with_the_estimate():
     assert r.rmse["x_m"] == pytest.approx(0.2, rel=0.05)
     unrotated = pose_nees(e[1:], np.tile(np.diag(sd**2), (t.size - 1, 1, 1)))  # sanity: 6
     assert unrotated.mean() == pytest.approx(6.0, rel=0.06)
+
+
+def test_too_few_samples_inside_the_ground_truth_is_an_error():
+    gt = _carriage(duration=5.0)
+    est = _estimate(gt, np.linspace(4.0, 60.0, 200))  # 4 samples in [4, 5) s
+    with pytest.raises(DataError, match="only 4 of 200 samples .* need at least 10"):
+        trajectory_rmse(est, gt)
+
+
+def test_most_of_the_estimate_outside_the_ground_truth_warns_with_the_counts():
+    gt = _carriage(duration=5.0)
+    est = _estimate(gt, np.linspace(0.0, 19.9, 200))  # 50 of 200 samples inside [0, 5) s
+    with pytest.warns(RuntimeWarning, match="150 of 200 samples .* outside the ground truth"):
+        result = trajectory_rmse(est, gt)
+    assert (result.samples, result.dropped_outside_ground_truth) == (50, 150)
+
+
+def test_a_tum_file_is_not_a_trajectory_npz(tmp_path):
+    from undertow.errors import ReaderError
+
+    tum = tmp_path / "trajectory.tum"
+    tum.write_text("# t x y z qx qy qz qw\n0.0 0 0 0 0 0 0 1\n")
+    with pytest.raises(ReaderError, match="not a trajectory.npz written by `undertow localize`"):
+        Trajectory.load_npz(tum)
+    with pytest.raises(ReaderError, match="TUM file has poses only, no covariances"):
+        Trajectory.load_npz(tum)
+    (tmp_path / "junk.npz").write_bytes(b"\x00\x01binary")
+    with pytest.raises(ReaderError, match="not a trajectory.npz") as info:
+        Trajectory.load_npz(tmp_path / "junk.npz")
+    assert "pickled" not in str(info.value)

@@ -101,6 +101,7 @@ class Trajectory:
         path = Path(path)
         if path.is_dir():
             path = path / "trajectory.npz"
+        _check_npz(path)
         try:
             with np.load(path, allow_pickle=False) as data:
                 metadata = {}
@@ -118,7 +119,45 @@ class Trajectory:
         except FileNotFoundError as exc:
             raise ReaderError(f"{path}: no such trajectory file") from exc
         except (KeyError, ValueError, OSError, zipfile.BadZipFile) as exc:
-            raise ReaderError(f"{path}: not an undertow trajectory ({exc})") from exc
+            raise ReaderError(f"{path}: {_NOT_NPZ} ({exc})") from exc
 
     def replace(self, **changes) -> Trajectory:
         return dataclasses.replace(self, **changes)
+
+
+_NOT_NPZ = "not a trajectory.npz written by `undertow localize`"
+
+
+def _check_npz(path: Path) -> None:
+    """A file that is not a zip archive (an .npz is one) is refused before numpy reads it, which
+    would talk about pickled data: a TUM file in particular holds poses without covariances."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except FileNotFoundError:
+        raise ReaderError(f"{path}: no such trajectory file") from None
+    except IsADirectoryError:
+        raise ReaderError(f"{path}: {_NOT_NPZ} (a folder without trajectory.npz)") from None
+    except OSError as exc:
+        raise ReaderError(f"{path}: cannot read trajectory: {exc.strerror or exc}") from None
+    if head == b"PK\x03\x04":
+        return
+    if head == b"PK\x05\x06":  # an empty zip archive
+        raise ReaderError(f"{path}: {_NOT_NPZ} (an empty archive)")
+    tum = path.suffix.lower() in (".tum", ".txt") or _looks_like_text(path)
+    hint = (
+        " (a TUM file has poses only, no covariances; give the localize output folder or its "
+        "trajectory.npz)"
+        if tum
+        else ""
+    )
+    raise ReaderError(f"{path}: {_NOT_NPZ}{hint}")
+
+
+def _looks_like_text(path: Path) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            fh.read(4096).decode("ascii")
+    except (OSError, UnicodeDecodeError):
+        return False
+    return True

@@ -25,6 +25,10 @@ from ._app import (
     user_errors,
 )
 
+QuietOption = Annotated[
+    bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
+]
+
 
 @app.command()
 @user_errors
@@ -39,7 +43,11 @@ def localize(
         Path | None, typer.Option(help="Wave noise profile YAML (default: the paper's Table I).")
     ] = None,
     wave: Annotated[
-        str | None, typer.Option(help="Wave condition by name, e.g. calm or wave-a0.10-f1.00.")
+        str | None,
+        typer.Option(
+            help="Wave condition by name, e.g. calm or wave-a0.10-f1.00 (default: the one the "
+            "log records, e.g. in the bag's sidecar undertow.yaml, else calm)."
+        ),
     ] = None,
     wave_amplitude: Annotated[float | None, typer.Option(help="Wave amplitude, m.")] = None,
     wave_frequency: Annotated[float | None, typer.Option(help="Wave frequency, Hz.")] = None,
@@ -67,22 +75,29 @@ def localize(
     config: ConfigOption = None,
     topics: TopicsOption = None,
     overwrite: OverwriteOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """Localize a log with the paper's 18-state UKF; writes trajectory.tum/.npz and config.yaml.
 
     Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
     --calibration calm_cal.yaml --out runs/a10/proposed`
     """
+    from ..config import Settings
+    from ..estimation.localize import wave_condition
+    from ..estimation.noise import parse_wave
     from ..estimation.run import localize as run_localize
     from ..estimation.run import save_trajectory
 
-    check_output_folder(out_dir, overwrite)
-    if (wave_amplitude is None) != (wave_frequency is None):
+    numbers = {"--wave-amplitude": wave_amplitude, "--wave-frequency": wave_frequency}
+    by_number = [name for name, value in numbers.items() if value is not None]
+    if wave is not None and by_number:
+        raise UndertowError(
+            f"--wave and {' / '.join(by_number)} conflict: give the condition by name (--wave) "
+            "or by --wave-amplitude and --wave-frequency, not both"
+        )
+    if len(by_number) == 1:
         raise UndertowError("give both --wave-amplitude and --wave-frequency (or --wave NAME)")
     condition = (wave_amplitude, wave_frequency) if wave_amplitude is not None else wave
-    from ..config import Settings
-
     settings = Settings.from_yaml(config)
     params = settings.localizer_params()
     variant = variant or params.pop("variant", "proposed")
@@ -91,9 +106,32 @@ def localize(
         params["output_rate_hz"] = output_rate
     if gate is not None:
         params["gate_probability"] = gate
+    if smooth and params.get("output_rate_hz") is not None:
+        given = "--output-rate" if output_rate is not None else f"output_rate_hz in {config}"
+        raise UndertowError(
+            f"--smooth needs the filter output at every measurement: drop {given} "
+            f"({params['output_rate_hz']} Hz) or --smooth"
+        )
+    check_output_folder(out_dir, overwrite, inputs=[log_path, profile, calibration, config, topics])
     with _progress(quiet) as progress:
         progress.add_task(f"localizing ({variant})", total=None)
         log = _load_log(log_path, topics, settings)
+        used, source = wave_condition(condition, log)
+        if not quiet:
+            how = {
+                "given": "--wave" if wave is not None else "--wave-amplitude/--wave-frequency",
+                "default": "default: none given, none recorded in the log; set it with --wave",
+            }.get(source, f"from {source}; --wave overrides")
+            unused = (
+                f"; the {variant} variant adds no wave noise"
+                if variant in ("baseline", "be")
+                else ""
+            )
+            err.print(
+                f"wave condition: {parse_wave(used)[0]} ({how}{unused})",
+                highlight=False,
+                soft_wrap=True,
+            )
         trajectory = run_localize(
             log,
             variant=variant,
@@ -123,6 +161,7 @@ def calibrate(
     ),
     config: ConfigOption = None,
     topics: TopicsOption = None,
+    quiet: QuietOption = False,
 ) -> None:
     """Estimate the DR drift mu_b, the IMU gyro bias and the DVL scale factor from a run with
     ground truth, for later runs (`undertow localize --calibration`).
@@ -132,12 +171,20 @@ def calibrate(
     from ..config import Settings
     from ..estimation.calibration import calibrate as run_calibration
 
-    log = _load_log(log_path, topics, Settings.from_yaml(config))
-    if ground_truth is not None:
-        log = log.replace(ground_truth=_read_ground_truth(ground_truth))
-    result = run_calibration(log)
-    result.save_yaml(out)
+    with _progress(quiet) as progress:
+        progress.add_task("calibrating", total=None)
+        log = _load_log(log_path, topics, Settings.from_yaml(config))
+        if ground_truth is not None:
+            log = log.replace(ground_truth=_read_ground_truth(ground_truth))
+        result = run_calibration(log)
+        result.save_yaml(out)
     _print_json(result.to_dict())
+    if not quiet:
+        err.print(
+            f"wrote {out} (estimated: {', '.join(result.estimated)})",
+            highlight=False,
+            soft_wrap=True,
+        )
 
 
 @evaluate_app.command("trajectory")
@@ -167,6 +214,10 @@ def evaluate_trajectory(
     for key, value in result.rmse.items():
         table.add_row(key, f"{value:.4f}")
     console.print(table)
+    console.print(
+        f"samples: {result.samples} used, {result.dropped_outside_ground_truth} outside the "
+        "ground truth (dropped)"
+    )
     if result.nees_samples == 0:
         console.print(f"NEES: none (no sample of {result.samples} has a usable covariance)")
         return

@@ -18,7 +18,7 @@ import math
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal, get_args
 
 import numpy as np
 import yaml
@@ -46,6 +46,10 @@ class Calibration:
     dvl_scale_factor_std: float = float("nan")
     samples: dict | None = None
     source: str = ""
+    # the parameters estimated from data (None: not recorded, a file from an older version);
+    # the others hold their defaults, with the reason in ``left_at_default``
+    estimated: tuple[str, ...] | None = None
+    left_at_default: dict[str, str] | None = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -53,6 +57,12 @@ class Calibration:
             float(v) for v in self.dead_reckoning_drift_rad_per_s
         ]
         d["imu_gyro_bias_rad_per_s"] = [float(v) for v in self.imu_gyro_bias_rad_per_s]
+        if self.estimated is not None:
+            d["estimated"] = list(self.estimated)
+        else:
+            del d["estimated"]
+        if self.left_at_default is None:
+            del d["left_at_default"]
         return d
 
     def save_yaml(self, path: str | Path) -> Path:
@@ -79,10 +89,15 @@ class Calibration:
                 f"{', '.join(unknown)}"
             )
         checked = validate(_CalibrationFile, data, f"{path}: calibration field ")
-        return cls(**checked.model_dump())
+        fields = checked.model_dump()
+        if fields["estimated"] is not None:
+            fields["estimated"] = tuple(fields["estimated"])
+        return cls(**fields)
 
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+Parameter = Literal["dead_reckoning_drift_rad_per_s", "imu_gyro_bias_rad_per_s", "dvl_scale_factor"]
+PARAMETERS: tuple[str, ...] = get_args(Parameter)
 
 
 class _CalibrationFile(BaseModel):
@@ -96,6 +111,8 @@ class _CalibrationFile(BaseModel):
     dvl_scale_factor_std: float | None = float("nan")  # NaN / null: not determined
     samples: dict[str, int] | None = None
     source: str = ""
+    estimated: list[Parameter] | None = None
+    left_at_default: dict[Parameter, str] | None = None
 
     @field_validator("dvl_scale_factor_std")
     @classmethod
@@ -140,8 +157,10 @@ def calibrate(
     Needs the ground_truth stream (repeated timestamps are dropped with a warning, see
     :func:`~undertow.evaluation.trajectory.deduplicate_ground_truth`). Each parameter is
     estimated from its stream's samples inside the ground-truth span (DVL: valid and moving)
-    when there are at least ``min_samples`` of them; a parameter with fewer keeps its default
-    and is named in a warning, and a DataError says what overlaps when none can be estimated.
+    when there are at least ``min_samples`` of them; a parameter with fewer, or whose stream the
+    log lacks, keeps its default with one warning line saying why (``estimated`` and
+    ``left_at_default`` of the result record which is which, and the YAML keeps them), and a
+    DataError says what overlaps when none can be estimated.
     """
     log.require("ground_truth", stage="calibrate")
     gt = deduplicate_ground_truth(log.ground_truth, "calibrate")
@@ -151,35 +170,54 @@ def calibrate(
     counts: dict[str, int] = {}
     found: dict[str, int] = {}  # samples available per parameter, estimated or not
     result = {}
+    span = f"[{gt.t[0]:.3f}, {gt.t[-1]:.3f}] s"
+    need = f"need at least {min_samples}"
+    why_not: dict[str, str] = {}  # parameter -> why it keeps its default
 
     def inside(t):
         return (t >= gt.t[0]) & (t <= gt.t[-1])
 
     dr = log.dead_reckoning
-    if dr is not None and len(dr):
+    if dr is None or not len(dr):
+        why_not["dead_reckoning_drift_rad_per_s"] = "the log has no dead_reckoning stream"
+    else:
         keep = inside(dr.t) & np.all(np.isfinite(dr.orientation), axis=1)
-        found["dead_reckoning_drift_rad_per_s (dead_reckoning)"] = int(keep.sum())
-        if keep.sum() >= max(min_samples, 3) and np.ptp(dr.t[keep]) > 0:
+        n = found["dead_reckoning_drift_rad_per_s (dead_reckoning)"] = int(keep.sum())
+        if n < max(min_samples, 3):
+            why_not["dead_reckoning_drift_rad_per_s"] = (
+                f"{n} finite dead_reckoning samples inside the ground truth {span}, {need}"
+            )
+        elif np.ptp(dr.t[keep]) == 0:
+            why_not["dead_reckoning_drift_rad_per_s"] = "all dead_reckoning samples at one time"
+        else:
             _, rpy, _ = interpolate_ground_truth(gt, dr.t[keep])
             e = np.unwrap(wrap_angle(dr.orientation[keep] - rpy), axis=0)
             result["dead_reckoning_drift_rad_per_s"] = tuple(
                 _line_slope(dr.t[keep], e[:, i]) for i in range(3)
             )
-            counts["dead_reckoning"] = int(keep.sum())
+            counts["dead_reckoning"] = n
     imu = log.imu
-    if imu is not None and len(imu):
+    if imu is None or not len(imu):
+        why_not["imu_gyro_bias_rad_per_s"] = "the log has no imu stream"
+    else:
         keep = inside(imu.t) & np.all(np.isfinite(imu.angular_velocity), axis=1)
-        found["imu_gyro_bias_rad_per_s (imu)"] = int(keep.sum())
-        if keep.sum() >= max(min_samples, 1):
+        n = found["imu_gyro_bias_rad_per_s (imu)"] = int(keep.sum())
+        if n < max(min_samples, 1):
+            why_not["imu_gyro_bias_rad_per_s"] = (
+                f"{n} finite imu samples inside the ground truth {span}, {need}"
+            )
+        else:
             omega = np.column_stack(
                 [np.interp(imu.t[keep], gt.t, omega_full[:, i]) for i in range(3)]
             )
             result["imu_gyro_bias_rad_per_s"] = tuple(
                 float(v) for v in np.mean(imu.angular_velocity[keep] - omega, axis=0)
             )
-            counts["imu"] = int(keep.sum())
+            counts["imu"] = n
     dvl = log.dvl
-    if dvl is not None and len(dvl):
+    if dvl is None or not len(dvl):
+        why_not["dvl_scale_factor"] = "the log has no dvl stream"
+    else:
         keep = inside(dvl.t) & dvl.valid & np.all(np.isfinite(dvl.velocity), axis=1)
         _, rpy, vel = interpolate_ground_truth(gt, dvl.t[keep], v_world)
         omega = np.column_stack([np.interp(dvl.t[keep], gt.t, omega_full[:, i]) for i in range(3)])
@@ -187,28 +225,45 @@ def calibrate(
         mount = log.mounting.dvl
         v_true = (v_body + np.cross(omega, np.asarray(mount.translation))) @ mount.rotation_matrix()
         moving = np.linalg.norm(v_true, axis=1) > min_speed_mps
-        found["dvl_scale_factor (dvl, valid and moving)"] = int(moving.sum())
-        if moving.sum() >= max(min_samples, 3):
+        n = found["dvl_scale_factor (dvl, valid and moving)"] = int(moving.sum())
+        if n < max(min_samples, 3):
+            why_not["dvl_scale_factor"] = (
+                f"{n} valid dvl samples moving faster than {min_speed_mps} m/s inside the "
+                f"ground truth {span}, {need}"
+            )
+        else:
             vt, vm = v_true[moving], dvl.velocity[keep][moving]
             s = float(np.sum(vm * vt) / np.sum(vt * vt))
             resid = vm - s * vt
             s_std = float(np.sqrt(np.sum(resid**2) / (resid.size - 1) / np.sum(vt * vt)))
             result["dvl_scale_factor"] = s
             result["dvl_scale_factor_std"] = s_std
-            counts["dvl_moving"] = int(moving.sum())
-    span = f"[{gt.t[0]:.3f}, {gt.t[-1]:.3f}] s"
+            counts["dvl_moving"] = n
     overlap = ", ".join(f"{n} samples for {what}" for what, n in found.items()) or "no samples"
     if not counts:
         raise DataError(
             f"calibrate: the ground truth {span} ({len(gt)} poses) overlaps {overlap}; "
             f"need at least {min_samples} for a parameter"
+            + ("" if found else " (the log has no dead_reckoning, imu or dvl stream)")
         )
-    short = [what for what, n in found.items() if n < min_samples]
-    if short:
+    defaults = Calibration()
+    for name, reason in why_not.items():
         warnings.warn(
-            f"calibrate: fewer than {min_samples} samples inside the ground truth {span} for "
-            f"{', '.join(short)}: left at the default",
+            f"calibrate: {name} left at the default {_plain_value(getattr(defaults, name))}: "
+            f"{reason}",
             RuntimeWarning,
             stacklevel=2,
         )
-    return Calibration(**result, samples=counts, source=log.source)
+    return Calibration(
+        **result,
+        samples=counts,
+        source=log.source,
+        estimated=tuple(p for p in PARAMETERS if p in result),
+        left_at_default=why_not or None,
+    )
+
+
+def _plain_value(value) -> str:
+    if isinstance(value, tuple):
+        return "[" + ", ".join(f"{v:g}" for v in value) + "]"
+    return f"{value:g}"

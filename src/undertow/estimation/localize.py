@@ -132,7 +132,7 @@ class Localizer:
         """Filter the whole log; (x, P) at every processed measurement time (or output rate)."""
         cfg = self.config
         log.require("dvl", "imu", stage="Localizer")
-        wave = self.wave if self.wave is not None else log.metadata.get("wave")
+        wave, wave_source = wave_condition(self.wave, log)
         noise = self.profile.noise(wave, extrapolate=self.extrapolate)
         t, kind, z, R, rejected = _measurements(log, cfg, noise)
         if t.size == 0:
@@ -166,10 +166,27 @@ class Localizer:
             "nis": _nis_summary(nis_stats),
             "wave_noise": noise.to_dict() if cfg.adds_wave_noise else None,
             "wave_condition": noise.condition,
+            "wave_condition_source": wave_source,
             "config": cfg.model_dump(),
             "source": log.source,
         }
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
+
+
+def wave_condition(wave, log: Log) -> tuple[object, str]:
+    """The wave condition a run uses and where it comes from: ``wave`` when given, else the
+    log's metadata (a simulated log, or a bag whose sidecar ``undertow.yaml`` records it), else
+    calm. Returns (condition, source): source is ``"given"``, ``"default"`` or where in the log
+    the condition was found (e.g. ``"the bag's sidecar undertow.yaml"``)."""
+    if wave is not None:
+        return wave, "given"
+    recorded = log.metadata.get("wave")
+    if recorded is not None:
+        sidecar = log.metadata.get("format") == "rosbag" and "recorded" in log.metadata
+        if sidecar:
+            return recorded, "the bag's sidecar undertow.yaml"
+        return recorded, f"the metadata of {log.source}" if log.source else "the log's metadata"
+    return "calm", "default"
 
 
 def _warn_if_frozen(counts: dict, n_measurements: int) -> None:

@@ -23,12 +23,14 @@ import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import yaml
+from pydantic import BaseModel, Field
 
 from .._atomic import atomic_path
-from .._validate import read_yaml
+from .._validate import read_yaml, validate
 from ..errors import ConfigError
 
 _NAME = re.compile(r"^wave-a(\d+(?:\.\d*)?)-f(\d+(?:\.\d*)?)$")
@@ -117,8 +119,25 @@ def parse_wave(wave) -> tuple[str, float, float | None]:
     return (wave_name(a, f) if a > 0 else "calm"), a, (f if a > 0 else None)
 
 
-def _opt_float(v) -> float | None:
-    return None if v is None else float(v)
+Std = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
+class _ConditionFile(BaseModel):
+    """One condition of a profile YAML: std devs (>= 0, finite) per axis."""
+
+    name: str | None = None
+    amplitude_m: float = Field(ge=0, allow_inf_nan=False)
+    frequency_hz: float | None = Field(None, gt=0, allow_inf_nan=False)
+    dvl_std: tuple[Std, Std, Std]
+    dr_std: tuple[Std, Std, Std] | None = None
+
+
+class _ProfileFile(BaseModel):
+    """What a noise profile YAML holds (``NoiseProfile.to_yaml``, ``undertow characterize``)."""
+
+    name: str | None = ""
+    source: str | None = ""
+    conditions: list[_ConditionFile] = Field(min_length=1)
 
 
 @dataclass
@@ -143,26 +162,33 @@ class NoiseProfile:
 
     @classmethod
     def from_dict(cls, data, origin: str = "noise profile") -> NoiseProfile:
-        try:
-            conds = [
-                WaveCondition(
-                    name=str(c.get("name") or wave_name(c["amplitude_m"], c["frequency_hz"])),
-                    amplitude_m=float(c["amplitude_m"]),
-                    frequency_hz=_opt_float(c.get("frequency_hz")),
-                    dvl_std=tuple(float(v) for v in c["dvl_std"]),
-                    dr_std=tuple(float(v) for v in c.get("dr_std") or (0.0, 0.0, 0.0)),
-                )
-                for c in data["conditions"]
-            ]
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise ConfigError(f"{origin}: invalid noise profile ({exc!r})") from exc
-        for c in conds:
-            bad = len(c.dvl_std) != 3 or len(c.dr_std) != 3
-            if bad or not all(math.isfinite(v) and v >= 0 for v in c.dvl_std + c.dr_std):
-                raise ConfigError(f"{origin}: condition {c.name}: need 3 finite std devs >= 0")
+        """Check ``data`` against the profile layout (:class:`_ProfileFile`); a missing or invalid
+        field is one ConfigError line naming ``origin`` and the field, e.g.
+        ``p.yaml: noise profile field conditions.1.dvl_std: Field required``."""
+        if not isinstance(data, dict):
+            raise ConfigError(
+                f"{origin}: not a noise profile (expected a mapping with a `conditions` list, "
+                f"got {'an empty file' if data is None else 'a ' + type(data).__name__})"
+            )
+        checked = validate(_ProfileFile, data, f"{origin}: noise profile field ")
+        for i, c in enumerate(checked.conditions):
             if c.amplitude_m > 0 and c.frequency_hz is None:
-                raise ConfigError(f"{origin}: condition {c.name}: a wave needs frequency_hz")
-        return cls(conds, name=str(data.get("name", "")), source=str(data.get("source", "")))
+                raise ConfigError(
+                    f"{origin}: noise profile field conditions.{i}.frequency_hz: a wave "
+                    "(amplitude_m > 0) needs a frequency"
+                )
+        conds = [
+            WaveCondition(
+                name=c.name
+                or ("calm" if c.amplitude_m == 0 else wave_name(c.amplitude_m, c.frequency_hz)),
+                amplitude_m=c.amplitude_m,
+                frequency_hz=c.frequency_hz,
+                dvl_std=tuple(c.dvl_std),
+                dr_std=tuple(c.dr_std or (0.0, 0.0, 0.0)),
+            )
+            for c in checked.conditions
+        ]
+        return cls(conds, name=checked.name or "", source=checked.source or "")
 
     def to_dict(self) -> dict:
         return {

@@ -5,7 +5,11 @@ Adds to :class:`Localizer` the choices a command line needs:
 - a calibration file (``undertow calibrate``) supplies the DVL scale factor and, for the
   variants with bias states (``be``, ``proposed``), mu_b (the DR bias drift) and the initial mean
   of the IMU gyro bias state, unless the caller sets them explicitly. ``baseline`` and ``an``
-  have no bias states by the paper's definition, so they use neither (they still use the scale);
+  have no bias states by the paper's definition, so they use neither (they still use the scale).
+  Only the parameters the file lists as ``estimated`` are used, with one warning naming those the
+  variant needs that calibrate left at its default;
+- smoothing needs the filter output at every measurement: ``smooth`` with ``output_rate_hz`` is
+  refused before the filter runs;
 - the start position: DVL and IMU observe no absolute x, y, so it is given (``initial_position``),
   or ``"auto"``: the first ground-truth pose when the log has ground truth (simulated or tank
   runs), else the origin with z from the first depth;
@@ -15,6 +19,7 @@ Adds to :class:`Localizer` the choices a command line needs:
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import yaml
@@ -41,18 +46,15 @@ def localize(
     **params,
 ) -> Trajectory:
     """Run the UKF ``variant`` on ``log``; see the module docstring for the defaults it fills."""
+    if smooth and params.get("output_rate_hz") is not None:
+        raise ConfigError(
+            f"smoothing needs the filter output at every measurement: drop output_rate_hz="
+            f"{params['output_rate_hz']} (--output-rate) or the smoothing (--smooth)"
+        )
     if calibration is not None and not isinstance(calibration, Calibration):
         calibration = Calibration.from_yaml(calibration)
     if calibration is not None:
-        if variant in ("be", "proposed"):  # mu_b is a parameter of the bias model
-            params.setdefault(
-                "dr_bias_drift_rad_s", tuple(calibration.dead_reckoning_drift_rad_per_s)
-            )
-            if params.get("initial_state") is None:
-                params.setdefault(
-                    "initial_gyro_bias_rad_s", tuple(calibration.imu_gyro_bias_rad_per_s)
-                )
-        params.setdefault("dvl_scale_factor", calibration.dvl_scale_factor)
+        _apply_calibration(calibration, variant, params)
     if isinstance(initial_position, str):
         if initial_position != "auto":
             raise ConfigError(
@@ -77,6 +79,39 @@ def localize(
     if calibration is not None:
         trajectory.metadata["calibration"] = calibration.to_dict()
     return trajectory
+
+
+def _apply_calibration(calibration: Calibration, variant: str, params: dict) -> None:
+    """Fill ``params`` from the parameters ``calibration`` estimated (all of them in a file that
+    does not say); one warning names those the variant would use but that were left at their
+    default, so a run is never quietly 'calibrated' with defaults."""
+    estimated = calibration.estimated
+    uses = {"dvl_scale_factor": ("dvl_scale_factor", calibration.dvl_scale_factor)}
+    if variant in ("be", "proposed"):  # mu_b and the gyro bias belong to the bias model
+        uses["dead_reckoning_drift_rad_per_s"] = (
+            "dr_bias_drift_rad_s",
+            tuple(calibration.dead_reckoning_drift_rad_per_s),
+        )
+        if params.get("initial_state") is None:
+            uses["imu_gyro_bias_rad_per_s"] = (
+                "initial_gyro_bias_rad_s",
+                tuple(calibration.imu_gyro_bias_rad_per_s),
+            )
+    skipped = []
+    for name, (field, value) in uses.items():
+        if estimated is None or name in estimated:
+            params.setdefault(field, value)
+        else:
+            skipped.append(name)
+    if skipped:
+        reasons = calibration.left_at_default or {}
+        detail = "; ".join(f"{n} ({reasons.get(n, 'not estimated')})" for n in skipped)
+        warnings.warn(
+            f"calibration: not estimated by `undertow calibrate`, the filter's setting is used "
+            f"for {detail}",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def save_trajectory(trajectory: Trajectory, out_dir: str | Path, overwrite: bool = False) -> Path:

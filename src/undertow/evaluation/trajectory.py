@@ -36,6 +36,7 @@ from ..log import GroundTruth
 from ..rotations import matrix_to_rpy, rpy_to_matrix, wrap_angle
 from ..trajectory import Trajectory
 
+MIN_SAMPLES = 10  # estimates inside the ground truth needed for an RMSE
 AXES = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz")
 UNITS = ("m", "m", "m", "rad", "rad", "rad", "mps", "mps", "mps")
 
@@ -141,8 +142,12 @@ def trajectory_rmse(
     gt: GroundTruth,
     align: str = "none",
     smoothing_s: float = 0.05,
+    min_samples: int = MIN_SAMPLES,
 ) -> TrajectoryErrors:
-    """RMSE per axis (x, y, z, roll, pitch, yaw, vx, vy, vz) of ``est`` against ``gt``, and NEES."""
+    """RMSE per axis (x, y, z, roll, pitch, yaw, vx, vy, vz) of ``est`` against ``gt``, and NEES.
+
+    Fewer than ``min_samples`` estimates inside the ground-truth span is a DataError; more than
+    half of them outside it is a warning (the RMSE then describes a part of the run only)."""
     if align not in ("none", "origin"):
         raise DataError(f"align must be 'none' or 'origin', not {align!r}")
     if len(est) == 0:
@@ -167,6 +172,7 @@ def trajectory_rmse(
             f"trajectory [{est.t[0]:.3f}, {est.t[-1]:.3f}] s does not overlap ground truth "
             f"[{gt.t[0]:.3f}, {gt.t[-1]:.3f}] s"
         )
+    _check_overlap(est.t, inside, gt, min_samples)
     t = est.t[inside]
     x = est.x[inside]
     P = est.P[inside][:, :6, :6]
@@ -202,6 +208,24 @@ def trajectory_rmse(
         align=align,
         nees_samples=int(nees.size),
     )
+
+
+def _check_overlap(t: np.ndarray, inside: np.ndarray, gt: GroundTruth, min_samples: int) -> None:
+    used, dropped = int(inside.sum()), int(t.size - inside.sum())
+    span = f"ground truth [{gt.t[0]:.3f}, {gt.t[-1]:.3f}] s"
+    where = f"of the trajectory [{t[0]:.3f}, {t[-1]:.3f}] s"
+    if used < min_samples:
+        raise DataError(
+            f"only {used} of {t.size} samples {where} lie inside the {span}; need at least "
+            f"{min_samples} for an RMSE (is it the ground truth of this run?)"
+        )
+    if dropped > used:
+        warnings.warn(
+            f"{dropped} of {t.size} samples {where} lie outside the {span} and are dropped; "
+            f"the RMSE covers the other {used} only",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def positive_definite(P: np.ndarray, rel_floor: float = 1e-12) -> np.ndarray:
