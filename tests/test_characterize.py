@@ -170,3 +170,26 @@ def test_barometer_depth_noise_matches_its_closed_form(simulated, name):
     assert characterize_run(log.replace(ground_truth=None)).depth_std_m == pytest.approx(
         expected, rel=rel
     )
+
+
+def test_a_run_without_a_constant_speed_segment_says_so():
+    """A run whose speed keeps changing (as on a circle with manoeuvres) has plenty of valid DVL
+    samples but no segment at constant speed: the error says that, not "too few samples"."""
+    from undertow.errors import DataError
+
+    td = np.arange(0.1, 60, 0.1)
+    speed = 0.5 + 0.4 * np.sin(2 * np.pi * td / 6)  # never within 5 % of a cruise speed for 4 s
+    dvl = Dvl.from_velocity(td, np.column_stack([speed, 0 * td, 0 * td]))
+    with pytest.raises(DataError, match="no constant-speed segment") as info:
+        characterize_run(Log(dvl=dvl, mounting=Mounting()))
+    assert f"among its {td.size} valid DVL samples" in str(info.value)
+    assert "fewer than 10" not in str(info.value)
+
+
+def test_characterize_without_a_calm_run_warns():
+    from undertow.characterize import characterize
+
+    with pytest.warns(UserWarning, match="no calm run among the logs"):
+        t = np.arange(0, 60, 0.01)
+        probe = WaveProbe(t=t, elevation=0.1 * np.cos(2 * np.pi * 0.75 * t))
+        characterize([_ramp_hold_ramp(5, np.array([0.01, 0.01, 0.01]), wave_probe=probe)])

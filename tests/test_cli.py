@@ -165,7 +165,12 @@ def test_outputs_never_clobber_a_folder_or_a_file(tmp_path):
     )
     assert "is a directory" in line
     line = _one_error_line(runner.invoke(app, ["localize", str(run / "log"), "--out", str(run)]))
-    assert "--overwrite" in line
+    assert "holds the input" in line
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    line = _one_error_line(runner.invoke(app, ["localize", str(run / "log"), "--out", str(other)]))
+    assert "--overwrite" in line and (other / "notes.txt").read_text() == "mine"
     line = _one_error_line(runner.invoke(app, ["localize", str(run / "log"), "--out", gt]))
     assert "existing file" in line
     assert sorted(p.name for p in run.iterdir()) == before

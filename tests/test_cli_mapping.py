@@ -2,6 +2,7 @@
 naming the file and what was expected, the normalization used is recorded, time spans checked."""
 
 import json
+import time
 
 import numpy as np
 import pytest
@@ -155,3 +156,86 @@ def test_evaluate_map_threshold_and_empty_clouds(run, tmp_path):
     assert f"{empty}: the map has no points" in r.stderr
     data = json.loads(r.stdout)
     assert data["occupied_cells"] == 0 and data["c2c_mean_m"] is None
+
+
+def test_a_resolution_too_fine_for_memory_is_refused_in_one_line(run, tmp_path):
+    """1e-4 m cells: one sample's kernel support alone is ~10^8 chunks (hundreds of GB), refused
+    at once instead of eating the machine; a modest resolution over a small limit is refused
+    after counting the chunks the supports touch."""
+    est = ["--trajectory", str(run / "est")]
+    start = time.perf_counter()
+    line = _one_error_line(_map(run, tmp_path / "a", *est, "--resolution", "1e-4"))
+    assert time.perf_counter() - start < 30
+    assert (
+        "at resolution 0.0001 m would need an estimated" in line and "mapping.max_memory_gb" in line
+    )
+    settings = tmp_path / "small.yaml"
+    settings.write_text("mapping: {max_memory_gb: 0.001}\n")
+    line = _one_error_line(_map(run, tmp_path / "b", *est, "--config", str(settings)))
+    assert "limit 0.001 GB" in line
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+    for resolution, message in (("0", "greater than 0"), ("2", "not above resolution / 10")):
+        line = _one_error_line(_map(run, tmp_path / "c", *est, "--resolution", resolution))
+        assert "mapping.resolution" in line or message in line
+        assert message in line
+
+
+def test_evaluate_map_uses_the_threshold_the_map_was_made_with(run, tmp_path):
+    from undertow.mapping.grid import OccupancyMap
+
+    settings = tmp_path / "strict.yaml"
+    settings.write_text("mapping: {occupied_threshold: 0.999999}\n")
+    out = tmp_path / "map"
+    r = _map(run, out, "--trajectory", str(run / "est"), "--config", str(settings))
+    assert r.exit_code == 0, r.output
+    made = yaml.safe_load((out / "config.yaml").read_text())["result"]["occupied_cells"]
+    gt = str(run / "run" / "ground_truth.ply")
+    data = json.loads(runner.invoke(app, ["evaluate", "map", str(out), gt, "--json"]).stdout)
+    assert data["occupied_cells"] == made
+    assert data["threshold"] == 0.999999 and "the map" in data["threshold_from"]
+    text = runner.invoke(app, ["evaluate", "map", str(out), gt]).stdout
+    assert "threshold_from: the map (mapping.occupied_threshold)" in text
+    assert "threshold: 0.999999" in text
+    given = runner.invoke(app, ["evaluate", "map", str(out), gt, "--json", "--threshold", "0.5"])
+    assert json.loads(given.stdout)["occupied_cells"] > made
+    assert json.loads(given.stdout)["threshold_from"] == "--threshold"
+    # a map written before the threshold was recorded: 0.5, and the output says so
+    old = OccupancyMap.load(out)
+    legacy = tmp_path / "legacy.npz"
+    meta = {k: v for k, v in old.metadata.items() if k != "occupied_threshold"}
+    OccupancyMap(old.cells, old.alpha, old.beta, old.resolution, metadata=meta).save(legacy)
+    data = json.loads(runner.invoke(app, ["evaluate", "map", str(legacy), gt, "--json"]).stdout)
+    assert data["threshold"] == 0.5 and data["threshold_from"].startswith("default 0.5")
+    assert data["occupied_cells"] == json.loads(given.stdout)["occupied_cells"]
+
+
+def test_prior_may_be_a_map_folder(run, tmp_path):
+    est = ["--trajectory", str(run / "est")]
+    assert _map(run, tmp_path / "first", *est, "--method", "csm").exit_code == 0
+    r = _map(run, tmp_path / "second", *est, "--method", "csm", "--prior", str(tmp_path / "first"))
+    assert r.exit_code == 0, r.output
+    doc = yaml.safe_load((tmp_path / "second" / "config.yaml").read_text())
+    assert doc["result"]["mapper"]["seeded_from"] == str(tmp_path / "first" / "map.npz")
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--method", "csm", "--length-scale", "0.3"], "--length-scale applies to the bki method"),
+        (["--length-scale", "0.3"], "--length-scale applies to the bki method, not adaptive"),
+        (["--method", "bki", "--variance-bounds", "0,0,0,1,1,1"], "--variance-bounds applies"),
+    ],
+)
+def test_options_of_another_method_are_errors(run, tmp_path, args, message):
+    line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(run / "est"), *args))
+    assert message in line
+
+
+def test_both_range_streams_disabled_says_so(run, tmp_path):
+    settings = tmp_path / "none.yaml"
+    settings.write_text("mapping: {use_dvl: false, use_sonar: false}\n")
+    line = _one_error_line(
+        _map(run, tmp_path / "m", "--trajectory", str(run / "est"), "--config", str(settings))
+    )
+    assert "use_dvl and use_sonar are both false in the config" in line
+    assert "the log has none" not in line

@@ -33,7 +33,7 @@ def _free_port() -> int:
         (["--seeds", "2", "--scheduler", "bogus"], "unknown scheduler 'bogus'"),
         (["--seeds", "1", "--scheduler", "bogus"], "unknown scheduler 'bogus'"),
         (["--seeds", "0"], "--seeds must be at least 1"),
-        (["--first-seed", "-1"], "seeds must be integers >= 0, got [-1]"),
+        (["--first-seed", "-1"], "--first-seed must be >= 0, got -1"),
         (["--seeds", "2", "--scheduler", "tcp://127.0.0.1:{port}"], "cannot reach the Dask"),
     ],
 )
@@ -104,3 +104,32 @@ def test_characterize_without_ground_truth_prints_its_notes_and_agrees(runs):
     warnings = [ln for ln in without.stderr.splitlines() if ln.startswith("warning:")]
     assert sum("no ground_truth stream" in w for w in warnings) == 2
     assert any("calm run" in w for w in warnings)
+
+
+def test_characterize_without_a_calm_run_warns_through_the_warning_line(runs):
+    r = runner.invoke(app, ["characterize", str(runs / "wave-a0.10-f0.75" / "log"), "--json"])
+    assert r.exit_code == 0, r.output
+    assert "warning: no calm run among the logs: the profile holds total, not extra, noise" in (
+        r.stderr.splitlines()
+    )
+
+
+def test_characterize_a_circle_says_there_is_no_constant_speed_segment():
+    """The real circle run has 303 valid DVL samples but turns all the time: the error names
+    the missing constant-speed segment, not a shortage of samples."""
+    from conftest import REAL_DATA
+
+    bag = REAL_DATA / "a50_ros1_circle.bag"
+    if not bag.exists():
+        pytest.skip(f"real recording not found: {bag}")
+    line = _one_error_line(runner.invoke(app, ["characterize", str(bag)]))
+    assert "no constant-speed segment" in line and "303 valid DVL samples" in line
+    assert "fewer than 10" not in line
+
+
+@pytest.mark.parametrize("command", ["map", "characterize", "reproduce"])
+def test_quiet_has_help(command):
+    r = runner.invoke(app, [command, "--help"])
+    assert r.exit_code == 0
+    text = " ".join(r.output.replace("│", " ").split())  # rich wraps help inside a box
+    assert "--quiet" in text and "No progress or summary on stderr." in text

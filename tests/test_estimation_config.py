@@ -98,7 +98,7 @@ def _write(tmp_path, text, name="cal.yaml"):
         ("[1, 2]\n", "not a calibration file .*got a list"),
         ("name: paper\nconditions: []\n", "unknown keys conditions, name"),
         ("dvl_scale_factr: 1.01\n", "unknown keys dvl_scale_factr"),
-        ("a: [1\n", "not a calibration file"),
+        ("a: [1\n", "invalid YAML in calibration file at line 2"),
     ],
 )
 def test_bad_calibration_files_are_refused(tmp_path, text, message):

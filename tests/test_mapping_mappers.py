@@ -170,3 +170,60 @@ def test_invalid_inputs_rejected_with_clear_message():
         make_mapper("csm").integrate(np.zeros((3, 3)))
     with pytest.raises(DataError, match="beyond"):  # would alias chunk keys
         make_mapper("bki").integrate(Samples.from_points([[1e6, 0.0, 0.0]], [1.0]))
+
+
+@pytest.mark.parametrize("method", ["csm", "bki", "adaptive"])
+def test_chunk_count_matches_the_chunks_the_scatter_creates(method):
+    """The memory estimate counts the distinct chunks the supports touch without storing them:
+    the same number the scatter then allocates."""
+    from undertow.mapping.kernels import _count_chunks
+
+    rng = np.random.default_rng(3)
+    points = rng.uniform(-2, 2, (500, 3))
+    samples = Samples.from_points(
+        points, rng.integers(0, 2, 500), 0.9, rng.uniform(0, 1e-3, (500, 3))
+    )
+    mapper = make_mapper(method, resolution=0.05)
+    if method == "adaptive":
+        lo, hi, bounds = mapper.l_min, mapper.l_max, mapper._bounds(samples.pose_variance)
+    else:
+        lo = hi = np.full(3, 0.15 if method == "bki" else 0.0)
+        bounds = (np.zeros(3), np.zeros(3))
+    mode = {"csm": 2, "bki": 1, "adaptive": 0}[method]
+    table = np.full(1 << 16, -1, np.int64)
+    n = _count_chunks(mode, samples.points, samples.pose_variance, *bounds, lo, hi, 0.05, table,
+                      0, 10**6)  # fmt: skip
+    mapper.integrate(samples)
+    assert n == mapper.grid.n_chunks
+
+
+def test_memory_limit_and_out_of_memory_are_one_line_errors(monkeypatch):
+    samples = Samples.from_points(np.random.default_rng(0).uniform(0, 5, (2000, 3)), 1.0)
+    mapper = make_mapper("adaptive", max_memory_gb=0.001)
+    with pytest.raises(ConfigError, match=r"would need an estimated .* GB or more \(limit 0.001"):
+        mapper.integrate(samples)
+    assert mapper.grid.n_chunks == 0  # refused before any storage was allocated
+    big = make_mapper("adaptive", max_memory_gb=100)
+
+    def no_memory(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(big.grid, "scatter", no_memory)
+    with pytest.raises(ConfigError, match="ran out of memory at resolution 0.1 m"):
+        big.integrate(samples)
+
+
+def test_length_scales_must_exceed_a_tenth_of_the_resolution():
+    from undertow.mapping.config import MappingConfig
+
+    with pytest.raises(ConfigError, match="length_scale 0.15 m is not above resolution / 10"):
+        make_mapper("bki", resolution=2.0)
+    with pytest.raises(ConfigError, match="l_min"):
+        make_mapper("adaptive", resolution=1.0)
+    make_mapper("csm", resolution=2.0)  # no length scale
+    with pytest.raises(ConfigError, match="not above resolution / 10"):
+        MappingConfig.from_dict({"method": "bki", "resolution": 2.0})
+    with pytest.raises(ConfigError, match="both false in the config"):
+        MappingConfig.from_dict({"use_dvl": False, "use_sonar": False})
+    with pytest.raises(ConfigError, match="mapping.resolution"):
+        MappingConfig.from_dict({"resolution": float("inf")})

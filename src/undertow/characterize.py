@@ -35,6 +35,7 @@ holds the EXTRA noise gamma the filter adds; otherwise it holds the total (and s
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -193,7 +194,7 @@ def characterize_run(
         depth_std = _depth_about_itself(log, period, water_density)
         notes.append(f"no ground_truth stream: DVL noise measured about {reference}")
     if count < 10:
-        raise DataError(f"{log.source or 'log'}: fewer than 10 usable DVL samples to characterize")
+        raise DataError(_too_few_samples(log, count, max_accel_mps2))
     return RunCharacterization(
         source=log.source,
         wave=wave,
@@ -202,6 +203,30 @@ def characterize_run(
         depth_std_m=depth_std,
         reference=reference,
         notes=notes,
+    )
+
+
+def _too_few_samples(log: Log, count: int, max_accel_mps2: float) -> str:
+    """Why fewer than 10 DVL samples could be used: too few valid ones, or (the usual case) no
+    constant-speed segment, where the noise is measured."""
+    name = log.source or "log"
+    valid = int(_dvl_ok(log).sum())
+    if valid < 10:
+        return f"{name}: fewer than 10 valid DVL samples ({valid}) to characterize"
+    if log.ground_truth is not None:
+        rule = (
+            f"from the ground truth: smoothed |acceleration| below {max_accel_mps2:g} m/s^2 "
+            "at over half the top speed"
+        )
+    else:
+        rule = (
+            f"from the DVL: speed within {STEADY_SPEED_TOLERANCE:.0%} of the cruise speed for "
+            "at least one averaging window (4 wave periods, >= 4 s)"
+        )
+    return (
+        f"{name}: no constant-speed segment ({rule}) among its {valid} valid DVL samples "
+        f"({count} usable): the noise is measured at constant speed, so characterize needs "
+        "runs at a steady speed (e.g. a straight carriage run), not turns or manoeuvres"
     )
 
 
@@ -353,6 +378,10 @@ def characterize(logs: list[Log], name: str = "characterized") -> Characterizati
                 "frequency_hz": run.wave.frequency_hz,
                 "dvl_std": list(wave_noise(run, calm)),
             }
+        )
+    if calm is None:
+        warnings.warn(
+            "no calm run among the logs: the profile holds total, not extra, noise", stacklevel=2
         )
     how = "extra noise over the calm run" if calm else "total noise (no calm run given)"
     source = f"undertow characterize: {how}; runs: " + ", ".join(r.source for r in runs)

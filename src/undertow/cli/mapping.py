@@ -35,7 +35,7 @@ def map_command(
     method: Annotated[str | None, typer.Option(help="adaptive (default) | bki | csm")] = None,
     resolution: Annotated[float | None, typer.Option(help="Grid size, m (0.1).")] = None,
     length_scale: Annotated[
-        float | None, typer.Option(help="Isotropic length scale of bki, m (0.15).")
+        float | None, typer.Option(help="bki only: isotropic length scale, m (0.15).")
     ] = None,
     prior: Annotated[Path | None, typer.Option(help="Seed from a saved map.npz.")] = None,
     variance_bounds: Annotated[
@@ -49,7 +49,9 @@ def map_command(
     config: ConfigOption = None,
     topics: TopicsOption = None,
     overwrite: OverwriteOption = False,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: Annotated[
+        bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
+    ] = False,
 ) -> None:
     """Occupancy map of the seafloor from DVL beams and sonar ranges; writes map.npz, map.ply
     (occupied cell centres with mean and variance) and config.yaml.
@@ -62,10 +64,11 @@ def map_command(
     from ..mapping.run import map_log, save_map
     from ..trajectory import Trajectory
 
-    check_output_folder(out_dir, overwrite)
+    check_output_folder(out_dir, overwrite, inputs=[log_path, trajectory, prior, config, topics])
     trajectory_file = trajectory / "trajectory.npz" if trajectory.is_dir() else trajectory
     _check_npz(trajectory_file, "a trajectory.npz written by `undertow localize` (or its folder)")
     if prior is not None:
+        prior = prior / "map.npz" if prior.is_dir() else prior
         _check_npz(prior, "a map.npz written by `undertow map` (or its folder)", "--prior ")
     settings = Settings.from_yaml(config)
     options = {
@@ -76,8 +79,12 @@ def map_command(
     }
     given = {k: v for k, v in options.items() if v is not None}  # options win over the file
     cfg = MappingConfig.from_dict({**settings.mapping.model_dump(), **given})
-    if variance_bounds is not None and cfg.method != "adaptive":
-        raise UndertowError(f"--variance-bounds applies to the adaptive method, not {cfg.method}")
+    for option, value, applies in (
+        ("--length-scale", length_scale, "bki"),
+        ("--variance-bounds", variance_bounds, "adaptive"),
+    ):
+        if value is not None and cfg.method != applies:
+            raise UndertowError(f"{option} applies to the {applies} method, not {cfg.method}")
     with _progress(quiet) as progress:
         progress.add_task(f"mapping ({cfg.method})", total=None)
         log = _load_log(log_path, topics, settings)
@@ -125,8 +132,9 @@ def evaluate_map_command(
     threshold: Annotated[
         float | None,
         typer.Option(
-            help="Occupied if mean > threshold, in (0, 1); default 0.5. A map.npz only: a map.ply "
-            "holds the cells already thresholded when it was written."
+            help="Occupied if mean > threshold, in (0, 1); default: the threshold the map was "
+            "made with (mapping.occupied_threshold; 0.5 for maps that do not record it). A "
+            "map.npz only: a map.ply holds the cells already thresholded when it was written."
         ),
     ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
@@ -137,7 +145,7 @@ def evaluate_map_command(
     Example: `undertow evaluate map runs/a10/map runs/a10/ground_truth.ply --json`
     """
     from ..errors import DataError
-    from ..evaluation.cloud import evaluate_map
+    from ..evaluation.cloud import evaluate_map, map_threshold
     from ..io.ply import read_ply
     from ..mapping.grid import OccupancyMap
 
@@ -145,7 +153,7 @@ def evaluate_map_command(
         raise UndertowError(f"--threshold must be in (0, 1), got {threshold}")
     if map_path.is_dir():
         map_path = map_path / "map.npz"
-    resolution = None
+    resolution, threshold_from = None, "the map.ply (thresholded when it was written)"
     if map_path.suffix.lower() == ".ply":
         if threshold is not None:
             raise UndertowError(
@@ -161,16 +169,17 @@ def evaluate_map_command(
             )
     else:
         occupancy = OccupancyMap.load(map_path)
-        points = occupancy.points(0.5 if threshold is None else threshold)
+        threshold, threshold_from = map_threshold(occupancy, threshold)
+        points = occupancy.points(threshold)
         resolution = occupancy.resolution
     gt_points = read_ply(ground_truth)[0]
     if len(gt_points) == 0:
         raise DataError(f"{ground_truth}: the ground-truth cloud has no points")
     result = evaluate_map(points, gt_points, resolution=resolution)
+    values = {**result.to_dict(), "threshold": threshold, "threshold_from": threshold_from}
     if as_json:
-        _print_json(result.to_dict())
+        _print_json(values)
         return
-    for key, value in result.to_dict().items():
-        console.print(
-            f"{key:>28}: {value:.4f}" if isinstance(value, float) else f"{key:>28}: {value}"
-        )
+    for key, value in values.items():
+        shown = f"{value:.4f}" if isinstance(value, float) and key != "threshold" else value
+        console.print(f"{key:>28}: {shown}", highlight=False)

@@ -21,6 +21,10 @@ from ._app import (
     user_errors,
 )
 
+QuietOption = Annotated[
+    bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
+]
+
 
 @app.command("characterize")
 @user_errors
@@ -32,6 +36,7 @@ def characterize_command(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
     config: ConfigOption = None,
     topics: TopicsOption = None,
+    quiet: QuietOption = False,
 ) -> None:
     """Wave amplitude and frequency (wave probe) and the DVL noise per axis during the waves,
     about the true motion (the paper's Table I), plus the barometer's wave-induced depth noise.
@@ -45,7 +50,9 @@ def characterize_command(
     from ..config import Settings
 
     settings = Settings.from_yaml(config)
-    result = characterize([_load_log(p, topics, settings) for p in logs])
+    with _progress(quiet) as progress:
+        progress.add_task("characterizing", total=None)
+        result = characterize([_load_log(p, topics, settings) for p in logs])
     if out is not None:
         result.profile.to_yaml(out)
     for run in result.runs:
@@ -67,8 +74,8 @@ def characterize_command(
             _fmt(row["depth_std_m"]),
         )
     console.print(table)
-    if result.calm is None:
-        err.print("no calm run among the logs: the profile holds total, not extra, noise")
+    if out is not None and not quiet:
+        err.print(f"wrote {out}")
 
 
 @app.command()
@@ -89,7 +96,7 @@ def reproduce(
         ),
     ] = None,
     rock_survey: Annotated[bool, typer.Option(help="Also run the rock survey.")] = True,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """The paper's experiments end to end: simulate, characterize, localize (4 variants), map
     (CSM, BKI, adaptive BKI), evaluate; tables with the paper's values, figures, report.html.
@@ -101,6 +108,8 @@ def reproduce(
 
     if seeds < 1:
         raise UndertowError("--seeds must be at least 1")
+    if first_seed < 0:
+        raise UndertowError(f"--first-seed must be >= 0, got {first_seed}")
     settings = StudySettings(rock_survey="rock-survey" if rock_survey else None)
     with _progress(quiet) as progress:
         task = progress.add_task("starting", total=None)

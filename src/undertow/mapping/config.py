@@ -24,7 +24,7 @@ class MappingConfig(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     method: Literal["csm", "bki", "adaptive"] = "adaptive"
-    resolution: float = Field(0.1, gt=0, description="grid size, m")
+    resolution: float = Field(0.1, gt=0, allow_inf_nan=False, description="grid size, m")
     length_scale: float = Field(0.15, gt=0, description="isotropic l of the bki method, m")
     l_min: Triple = Field(L_MIN, description="adaptive minimum length scales x, y, z, m")
     l_max: Triple = Field(L_MAX, description="adaptive maximum length scales x, y, z, m")
@@ -39,6 +39,10 @@ class MappingConfig(BaseModel):
     use_dvl: bool = True
     use_sonar: bool = True
     occupied_threshold: float = Field(0.5, ge=0, le=1)
+    max_memory_gb: float | None = Field(
+        None, gt=0, description="refuse a map whose storage would exceed this, GB; None: half "
+        "the machine's RAM"
+    )  # fmt: skip
 
     @model_validator(mode="after")
     def _check(self) -> MappingConfig:
@@ -48,6 +52,18 @@ class MappingConfig(BaseModel):
             lo < 0 or lo > hi for lo, hi in zip(*self.variance_bounds, strict=True)
         ):
             raise ValueError("variance_bounds need 0 <= min <= max per axis")
+        if not (self.use_dvl or self.use_sonar):
+            raise ValueError(
+                "use_dvl and use_sonar are both false in the config: enable at least one range "
+                "stream"
+            )
+        lengths = {"bki": ("length_scale", (self.length_scale,)), "adaptive": ("l_min", self.l_min)}
+        name, values = lengths.get(self.method, ("", ()))
+        if any(v <= self.resolution / 10 for v in values):
+            raise ValueError(
+                f"{name} {values if len(values) > 1 else values[0]} m is not above resolution / "
+                f"10 = {self.resolution / 10:g} m: use a finer resolution or longer length scales"
+            )
         return self
 
     @classmethod
@@ -61,7 +77,7 @@ def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
     return make_mapper(
         config.method, resolution=config.resolution, length_scale=config.length_scale,
         l_min=config.l_min, l_max=config.l_max, alpha0=config.alpha0, beta0=config.beta0,
-        variance_bounds=config.variance_bounds, prior=prior,
+        variance_bounds=config.variance_bounds, prior=prior, max_memory_gb=config.max_memory_gb,
     )  # fmt: skip
 
 

@@ -23,7 +23,21 @@ import numpy as np
 from .._atomic import atomic_path
 from ..errors import DataError, ReaderError
 from .kernels import _OFFSET as _CHUNK_LIMIT
-from .kernels import CHUNK, _add_mass, _max_abs, _rehash, _scatter
+from .kernels import (
+    CHUNK,
+    MODE_CELL,
+    MODE_PRODUCT,
+    _add_mass,
+    _count_chunks,
+    _max_abs,
+    _rehash,
+    _scatter,
+)
+
+# bytes per chunk: alpha and beta (float32), its key, two hash slots (key, value)
+CHUNK_BYTES = 2 * 4 * CHUNK**3 + 3 * 8 + 2 * 2 * 8
+GROWTH_PEAK = 2.5  # growing by 1.5 holds the old and the new arrays at once
+READOUT_BYTES_PER_CELL = 100  # cells(): indices, keys, alpha and beta as float64, temporaries
 
 
 class ChunkedGrid:
@@ -78,6 +92,43 @@ class ChunkedGrid:
         limit = (_CHUNK_LIMIT - 2) * CHUNK * self.resolution
         if points.size and not _max_abs(points) < limit:
             raise DataError(f"map coordinates beyond +-{limit:.0f} m: shift the origin closer")
+
+    def estimate_bytes(self, mode, points, variance, var_bounds, l_min, l_max,
+                       limit_bytes: float) -> int:  # fmt: skip
+        """Peak bytes that scattering ``points`` (same arguments as :meth:`scatter`) and reading
+        the map out would need: distinct chunks touched by the samples' supports (counting those
+        already held) x :data:`CHUNK_BYTES`, with the growth copy, or the readout of every cell
+        with mass. Exact chunk counting stops once the estimate exceeds ``limit_bytes``."""
+        n = points.shape[0]
+        if n == 0:
+            return self.nbytes
+        if mode == MODE_CELL:
+            cells_per_axis = np.ones(3)
+        else:  # support radius per axis: up to l_max (product kernel) or l (radial kernel)
+            radius = np.maximum(l_min, l_max) if mode == MODE_PRODUCT else np.full(3, l_min[0])
+            cells_per_axis = np.ceil(2 * np.asarray(radius, float) / self.resolution) + 1
+        chunks_per_sample = float(np.prod(np.ceil(cells_per_axis / CHUNK) + 1))
+        cells_bound = float(n) * float(np.prod(cells_per_axis))
+
+        def peak(chunks: float) -> float:
+            cells = min(chunks * CHUNK**3, cells_bound)
+            return max(GROWTH_PEAK * chunks * CHUNK_BYTES,
+                       chunks * CHUNK_BYTES + cells * READOUT_BYTES_PER_CELL)  # fmt: skip
+
+        held = self.n_chunks
+        extent = (points.max(axis=0) - points.min(axis=0)) / self.resolution + cells_per_axis
+        box = float(np.prod(np.ceil(extent / CHUNK) + 1))
+        if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:
+            return int(peak(held + min(n * chunks_per_sample, box)))  # cheap upper bound
+        if peak(held + chunks_per_sample) > limit_bytes:
+            return int(peak(held + chunks_per_sample))  # one sample's support alone is too much
+        limit_chunks = held + int(limit_bytes // (GROWTH_PEAK * CHUNK_BYTES)) + 1
+        table = np.full(1 << int(np.ceil(np.log2(2 * limit_chunks + 2))), -1, np.int64)
+        _rehash(self._keys, held, table, np.zeros(table.size, np.int64))
+        lo, hi = var_bounds
+        chunks = _count_chunks(mode, points, variance, lo, hi, l_min, l_max, self.resolution,
+                               table, held, limit_chunks)  # fmt: skip
+        return int(peak(chunks))
 
     def add_mass(self, cells, d_alpha, d_beta) -> None:
         """Add evidence mass to given cells (seeding from a prior map)."""

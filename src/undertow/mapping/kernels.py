@@ -238,6 +238,49 @@ def _scatter(start, mode, points, label, sigma0, variance, var_lo, var_hi, l_min
 
 
 @njit(cache=True)
+def _count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys, n,
+                  limit):  # fmt: skip
+    """Number of distinct chunks the scatter kernel would touch (the supports of ``points``,
+    computed as in :func:`_scatter`), counting on from ``n`` chunks already in ``table_keys``
+    (a key-only hash set, size a power of two > 2 ``limit``); stops once it exceeds ``limit``."""
+    mask = table_keys.shape[0] - 1
+    lo = np.zeros(3, np.int64)
+    hi = np.zeros(3, np.int64)
+    for s in range(points.shape[0]):
+        for j in range(3):
+            p = points[s, j] / res
+            if mode == MODE_CELL:
+                lo[j] = np.int64(np.floor(p)) >> CHUNK_SHIFT
+                hi[j] = lo[j]
+                continue
+            lj = l_min[0]
+            if mode == MODE_PRODUCT:
+                lj = l_min[j]
+                span = var_hi[j] - var_lo[j]
+                if span > 0.0:
+                    v = min(max((variance[s, j] - var_lo[j]) / span, 0.0), 1.0)
+                    lj = v * (l_max[j] - l_min[j]) + l_min[j]
+            r = lj / res
+            i0 = np.int64(np.floor(p - r - 0.5)) + 1
+            i1 = np.int64(np.ceil(p + r - 0.5)) - 1
+            lo[j] = i0 >> CHUNK_SHIFT
+            hi[j] = max(i0, i1) >> CHUNK_SHIFT
+        for cx in range(lo[0], hi[0] + 1):
+            for cy in range(lo[1], hi[1] + 1):
+                for cz in range(lo[2], hi[2] + 1):
+                    key = _pack(cx, cy, cz)
+                    slot = _slot(key, mask)
+                    while table_keys[slot] != -1 and table_keys[slot] != key:
+                        slot = (slot + 1) & mask
+                    if table_keys[slot] == -1:
+                        table_keys[slot] = key
+                        n += 1
+                        if n > limit:
+                            return n
+    return n
+
+
+@njit(cache=True)
 def _add_mass(start, cells, d_alpha, d_beta, table_keys, table_vals, chunk_keys, n_chunks,
               alpha, beta):  # fmt: skip
     """Add per-cell mass (seeding from a prior map); same resume protocol as :func:`_scatter`."""

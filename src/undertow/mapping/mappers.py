@@ -22,6 +22,7 @@ kernels (see :mod:`undertow.mapping.kernels`).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Literal
 
@@ -35,12 +36,32 @@ from .samples import Samples
 Method = Literal["csm", "bki", "adaptive"]
 L_MIN = (0.10, 0.10, 0.05)
 L_MAX = (0.18, 0.18, 0.08)
+DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
+
+
+def default_max_memory_gb() -> float:
+    """Half the machine's physical RAM, in GB (8 GB where it cannot be read), and at most half
+    the process's address-space limit (``ulimit -v``) when one is set."""
+    try:
+        limit = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2 / 1e9
+    except (AttributeError, ValueError, OSError):
+        limit = DEFAULT_MEMORY_GB
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY and soft > 0:
+            limit = min(limit, soft / 2 / 1e9)
+    except (ImportError, ValueError, OSError):
+        pass
+    return limit
 
 
 class Mapper:
     """Base: a chunked grid of evidence mass plus the Beta prior (alpha_0, beta_0)."""
 
     method = ""
+    max_memory_gb: float | None = None  # None: half the machine's RAM (make_mapper sets it)
 
     def __init__(self, resolution: float = 0.1, alpha0: float = 1e-10, beta0: float = 1e-10):
         self.resolution, self.alpha0, self.beta0 = float(resolution), float(alpha0), float(beta0)
@@ -60,6 +81,24 @@ class Mapper:
 
     def _scatter(self, samples: Samples) -> None:
         raise NotImplementedError
+
+    def _grid_scatter(self, mode, samples: Samples, bounds, l_min, l_max) -> None:
+        """Refuse (one line) when the storage the samples need exceeds ``max_memory_gb``,
+        then scatter; running out of memory anyway is the same one line, not a traceback."""
+        limit_gb = self.max_memory_gb or default_max_memory_gb()
+        args = (mode, samples.points, samples.label, samples.sigma0, samples.pose_variance)
+        need = self.grid.estimate_bytes(mode, samples.points, samples.pose_variance, bounds,
+                                        l_min, l_max, limit_gb * 1e9)  # fmt: skip
+        if need > limit_gb * 1e9:
+            raise ConfigError(
+                f"mapping {len(samples)} samples at resolution {self.resolution:g} m would need "
+                f"an estimated {need / 1e9:.3g} GB or more (limit {limit_gb:.3g} GB, "
+                "mapping.max_memory_gb): use a coarser resolution or raise the limit"
+            )
+        try:
+            self.grid.scatter(*args, bounds, l_min, l_max)
+        except MemoryError:
+            raise ConfigError(_out_of_memory(self.resolution)) from None
 
     def seed(self, prior: OccupancyMap | str | Path) -> None:
         """Add a saved map's evidence (alpha - alpha_0, beta - beta_0 per cell) to this map."""
@@ -82,7 +121,10 @@ class Mapper:
 
     def occupancy(self) -> OccupancyMap:
         """Posterior per cell that received kernel mass (``eq:mean_var`` via OccupancyMap)."""
-        cells, a, b = self.grid.cells()
+        try:
+            cells, a, b = self.grid.cells()
+        except MemoryError:
+            raise ConfigError(_out_of_memory(self.resolution)) from None
         return OccupancyMap(cells, self.alpha0 + a, self.beta0 + b, self.resolution,
                             self.alpha0, self.beta0, self.metadata())  # fmt: skip
 
@@ -94,8 +136,7 @@ class CsmMapper(Mapper):
 
     def _scatter(self, samples: Samples) -> None:
         zero = np.zeros(3)
-        self.grid.scatter(MODE_CELL, samples.points, samples.label, samples.sigma0,
-                          samples.pose_variance, (zero, zero), zero, zero)  # fmt: skip
+        self._grid_scatter(MODE_CELL, samples, (zero, zero), zero, zero)
 
 
 class BkiMapper(Mapper):
@@ -109,8 +150,7 @@ class BkiMapper(Mapper):
 
     def _scatter(self, samples: Samples) -> None:
         l, zero = np.full(3, self.length_scale), np.zeros(3)
-        self.grid.scatter(MODE_RADIAL, samples.points, samples.label, samples.sigma0,
-                          samples.pose_variance, (zero, zero), l, l)  # fmt: skip
+        self._grid_scatter(MODE_RADIAL, samples, (zero, zero), l, l)
 
     def metadata(self) -> dict:
         return {**super().metadata(), "length_scale": self.length_scale}
@@ -153,8 +193,7 @@ class AdaptiveBkiMapper(Mapper):
     def _scatter(self, samples: Samples) -> None:
         bounds = self._bounds(samples.pose_variance)
         self.last_variance_bounds = bounds
-        self.grid.scatter(MODE_PRODUCT, samples.points, samples.label, samples.sigma0,
-                          samples.pose_variance, bounds, self.l_min, self.l_max)  # fmt: skip
+        self._grid_scatter(MODE_PRODUCT, samples, bounds, self.l_min, self.l_max)
 
     def metadata(self) -> dict:
         bounds = self.last_variance_bounds
@@ -163,6 +202,13 @@ class AdaptiveBkiMapper(Mapper):
             "normalization": self.normalization,
             "variance_bounds": None if bounds is None else [np.asarray(b).tolist() for b in bounds],
         }  # fmt: skip
+
+
+def _out_of_memory(resolution: float) -> str:
+    return (
+        f"mapping ran out of memory at resolution {resolution:g} m: use a coarser resolution "
+        "(or a lower mapping.max_memory_gb, checked before mapping)"
+    )
 
 
 def _positive(name: str, value) -> float:
@@ -184,18 +230,24 @@ def _triple(name: str, value) -> np.ndarray:
 
 def make_mapper(method: Method, resolution: float = 0.1, length_scale: float = 0.15,
                 l_min=L_MIN, l_max=L_MAX, alpha0: float = 1e-10, beta0: float = 1e-10,
-                variance_bounds=None, prior=None) -> Mapper:  # fmt: skip
-    """A mapper by name ("csm", "bki", "adaptive"), optionally seeded from a prior map."""
+                variance_bounds=None, prior=None, max_memory_gb=None) -> Mapper:  # fmt: skip
+    """A mapper by name ("csm", "bki", "adaptive"), optionally seeded from a prior map.
+
+    ``max_memory_gb`` caps the storage a call of ``integrate`` may need (estimated first; None:
+    half the machine's RAM). Length scales must exceed resolution / 10."""
     resolution = _positive("resolution", resolution)
     alpha0, beta0 = _positive("alpha0", alpha0), _positive("beta0", beta0)
     if method == "csm":
         mapper: Mapper = CsmMapper(resolution, alpha0, beta0)
     elif method == "bki":
-        mapper = BkiMapper(resolution, _positive("length_scale", length_scale), alpha0, beta0)
+        length_scale = _positive("length_scale", length_scale)
+        _above_resolution("length_scale", np.array([length_scale]), resolution)
+        mapper = BkiMapper(resolution, length_scale, alpha0, beta0)
     elif method == "adaptive":
         lo, hi = _triple("l_min", l_min), _triple("l_max", l_max)
         if np.any(lo > hi):
             raise ConfigError(f"l_min {lo.tolist()} must not exceed l_max {hi.tolist()}")
+        _above_resolution("l_min", lo, resolution)
         if variance_bounds is not None:
             try:
                 vb = np.asarray(variance_bounds, float)
@@ -211,9 +263,22 @@ def make_mapper(method: Method, resolution: float = 0.1, length_scale: float = 0
         mapper = AdaptiveBkiMapper(resolution, lo, hi, alpha0, beta0, variance_bounds)
     else:
         raise ConfigError(f"unknown mapping method {method!r}; choose csm, bki or adaptive")
+    if max_memory_gb is not None:
+        mapper.max_memory_gb = _positive("max_memory_gb", max_memory_gb)
     if prior is not None:
         mapper.seed(prior)
     return mapper
+
+
+def _above_resolution(name: str, lengths: np.ndarray, resolution: float) -> None:
+    """A length scale under a tenth of a cell puts a sample's kernel mass in at most one cell
+    centre, or none: the map would lose its samples."""
+    if np.any(lengths <= resolution / 10):
+        shown = lengths.tolist() if lengths.size > 1 else float(lengths[0])
+        raise ConfigError(
+            f"{name} {shown} m is not above resolution / 10 = {resolution / 10:g} m: use a "
+            "finer resolution or longer length scales"
+        )
 
 
 def write_map_ply(path, occupancy_map: OccupancyMap, threshold: float = 0.5) -> Path:

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
 from .._atomic import output_folder
+from ..errors import ConfigError
 from ..log import Log
 from ..trajectory import Trajectory
 from .config import MappingConfig, mapper_from_config, samples_from_config
@@ -30,10 +32,21 @@ def map_log(
     """Training samples from every valid range (DVL beams, sonar), then one mapper pass."""
     config = config or MappingConfig()
     log.require("dvl", stage="map") if config.use_dvl and log.sonar is None else None
-    samples = samples_from_config(log, trajectory, config)
-    mapper = mapper_from_config(config, prior=prior)
-    mapper.integrate(samples)
-    occupancy = mapper.occupancy()
+    try:
+        samples = samples_from_config(log, trajectory, config)
+        mapper = mapper_from_config(config, prior=prior)
+        mapper.integrate(samples)
+        occupancy = mapper.occupancy()
+    except MemoryError:
+        raise ConfigError(
+            f"mapping ran out of memory at resolution {config.resolution:g} m: use a coarser "
+            "resolution (or a lower mapping.max_memory_gb, checked before mapping)"
+        ) from None
+    # the threshold the map was made with, for `evaluate map` (older maps: 0.5)
+    occupancy = dataclasses.replace(
+        occupancy,
+        metadata={**occupancy.metadata, "occupied_threshold": config.occupied_threshold},
+    )
     metadata = {
         "mapper": mapper.metadata(),
         "samples": {

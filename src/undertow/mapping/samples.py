@@ -131,8 +131,13 @@ def build_samples(log: Log, trajectory: Trajectory, free_resolution: float = 0.1
     if not (sigma0_dvl > 0 and sigma0_sonar > 0):
         raise ConfigError(f"sigma0 must be > 0, got dvl {sigma0_dvl}, sonar {sigma0_sonar}")
     wanted = [n for n, use in (("dvl", use_dvl), ("sonar", use_sonar)) if use]
+    if not wanted:
+        raise ConfigError(
+            "mapping.use_dvl and mapping.use_sonar are both false in the config: enable at "
+            "least one range stream"
+        )
     if not any(getattr(log, n) is not None and len(getattr(log, n)) for n in wanted):
-        raise MissingStreamError(f"mapping needs a range stream ({' or '.join(wanted) or 'none'} "
+        raise MissingStreamError(f"mapping needs a range stream ({' or '.join(wanted)} "
                                  "enabled) but the log has none of them")  # fmt: skip
     if len(trajectory) == 0:
         raise DataError("mapping needs a non-empty trajectory")
