@@ -18,22 +18,8 @@ def test_sinusoid_amplitude_and_frequency():
 
 
 def test_dvl_noise_about_truth_excludes_motion_and_acceleration():
-    rng = np.random.default_rng(4)
-    t = np.arange(0, 60, 1 / 2000)
-    speed = np.clip(t / 10, 0, 1) * np.clip((60 - t) / 10, 0, 1) * 1.0  # ramp up, hold, down
-    gt = GroundTruth(
-        t=t,
-        position=np.column_stack([np.cumsum(speed) / 2000, 0 * t, 0 * t]),
-        orientation=np.zeros((t.size, 3)),
-    )
-    mounting = Mounting()
-    td = np.arange(0.1, 59.9, 0.1)
-    v_true = (
-        np.column_stack([np.interp(td, t, speed), 0 * td, 0 * td]) @ mounting.dvl.rotation_matrix()
-    )
     sigma = np.array([0.03, 0.01, 0.003])
-    dvl = Dvl.from_velocity(td, v_true + rng.normal(size=v_true.shape) * sigma)
-    run = characterize_run(Log(dvl=dvl, ground_truth=gt, mounting=mounting))
+    run = characterize_run(_ramp_hold_ramp(4, sigma))
     n = run.dvl_samples
     assert 300 < n < 400  # only the constant-speed phase (~10 s..50 s at 10 Hz, edges trimmed)
     # the sample std of n normal draws has relative standard error 1/sqrt(2(n-1))
