@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -102,13 +103,19 @@ class ChunkedGrid:
         n = points.shape[0]
         if n == 0:
             return self.nbytes
+        # support radius per axis: up to l_max (product kernel) or l (radial kernel); scalar
+        # arithmetic, so the common case (far below the limit) costs a streaming call little
         if mode == MODE_CELL:
-            cells_per_axis = np.ones(3)
-        else:  # support radius per axis: up to l_max (product kernel) or l (radial kernel)
-            radius = np.maximum(l_min, l_max) if mode == MODE_PRODUCT else np.full(3, l_min[0])
-            cells_per_axis = np.ceil(2 * np.asarray(radius, float) / self.resolution) + 1
-        chunks_per_sample = float(np.prod(np.ceil(cells_per_axis / CHUNK) + 1))
-        cells_bound = float(n) * float(np.prod(cells_per_axis))
+            cells_per_axis = (1.0, 1.0, 1.0)
+        elif mode == MODE_PRODUCT:
+            cells_per_axis = tuple(
+                math.ceil(2 * max(float(a), float(b)) / self.resolution) + 1.0
+                for a, b in zip(l_min, l_max, strict=True)
+            )
+        else:
+            cells_per_axis = (math.ceil(2 * float(l_min[0]) / self.resolution) + 1.0,) * 3
+        chunks_per_sample = math.prod(math.ceil(c / CHUNK) + 1.0 for c in cells_per_axis)
+        cells_bound = float(n) * math.prod(cells_per_axis)
 
         def peak(chunks: float) -> float:
             cells = min(chunks * CHUNK**3, cells_bound)
@@ -116,6 +123,9 @@ class ChunkedGrid:
                        chunks * CHUNK_BYTES + cells * READOUT_BYTES_PER_CELL)  # fmt: skip
 
         held = self.n_chunks
+        if peak(held + n * chunks_per_sample) <= limit_bytes:
+            return int(peak(held + n * chunks_per_sample))  # cheapest upper bound
+        cells_per_axis = np.asarray(cells_per_axis)
         extent = (points.max(axis=0) - points.min(axis=0)) / self.resolution + cells_per_axis
         box = float(np.prod(np.ceil(extent / CHUNK) + 1))
         if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:

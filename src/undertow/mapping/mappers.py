@@ -22,6 +22,7 @@ kernels (see :mod:`undertow.mapping.kernels`).
 
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Literal
@@ -39,6 +40,7 @@ L_MAX = (0.18, 0.18, 0.08)
 DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
 
 
+@functools.cache
 def default_max_memory_gb() -> float:
     """Half the machine's physical RAM, in GB (8 GB where it cannot be read), and at most half
     the process's address-space limit (``ulimit -v``) when one is set."""
