@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -22,5 +24,18 @@ def to_plain(value, drop_unknown: bool = False):
     if isinstance(value, np.ndarray):
         return None if drop_unknown else value.tolist()
     if drop_unknown and not isinstance(value, str | int | float | bool):
+        return None
+    return value
+
+
+def json_safe(value):
+    """:func:`to_plain`, and every non-finite float (NaN, infinity: JSON has neither) as None,
+    e.g. the distance of an empty map, so the output parses with any JSON reader."""
+    value = to_plain(value)
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [json_safe(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
         return None
     return value

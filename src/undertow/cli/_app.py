@@ -5,16 +5,15 @@ from __future__ import annotations
 
 import functools
 import json
-import math
 import sys
 import warnings
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 from rich.console import Console
 
+from .._plain import json_safe
 from ..errors import UndertowError
 
 app = typer.Typer(
@@ -78,24 +77,8 @@ def _progress(quiet: bool):
     )
 
 
-def _json_safe(value):
-    """JSON has no NaN or infinity: an undefined number (e.g. the distance of an empty map)
-    becomes null, so the output parses with any JSON reader."""
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float | np.floating):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.ndarray):
-        return _json_safe(value.tolist())
-    return value
-
-
 def _print_json(data) -> None:
-    text = json.dumps(_json_safe(data), indent=2, allow_nan=False, default=float)
+    text = json.dumps(json_safe(data), indent=2, allow_nan=False, default=float)
     sys.stdout.write(text + "\n")
 
 

@@ -11,6 +11,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .._plain import json_safe
 from ..log import Log
 
 
@@ -42,7 +43,7 @@ class LogSummary:
 
     def to_dict(self) -> dict:
         """JSON-serializable dict (NaN becomes None)."""
-        return _json_safe(asdict(self))
+        return json_safe(asdict(self))
 
     def to_rich_table(self):
         """A rich Table with one row per stream."""
@@ -63,18 +64,6 @@ class LogSummary:
                 f"{s.missing_values}" + (f" ({detail})" if detail else ""),
             )
         return table
-
-
-def _json_safe(value):
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float | np.floating):
-        return float(value) if np.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    return value
 
 
 def _missing(name: str, stream) -> dict[str, int]:
