@@ -9,12 +9,14 @@ covariance is not positive definite."""
 from __future__ import annotations
 
 import json
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from undertow.estimation import model
-from undertow.estimation.localize import Localizer
+from undertow.estimation.localizer import Localizer
 from undertow.estimation.ukf import _weights
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
 from undertow.rotations import rpy_to_matrix
@@ -75,9 +77,10 @@ def _per_step_us(n_steps: int = 20000) -> float:
 def _filterpy_us(n_steps: int = 300) -> float:
     """The same model, parameters and steps through FilterPy's UnscentedKalmanFilter: our
     process and measurement functions, angle-aware means and residuals, Q at the mean, sigma
-    points redrawn before the update (estimation/_reference.py, which the FilterPy agreement
+    points redrawn before the update (tests/filterpy_reference.py, which the FilterPy agreement
     test also uses)."""
-    from undertow.estimation._reference import FilterPyModel
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from filterpy_reference import FilterPyModel
 
     f = FilterPyModel(X0, P0, 0.0, alpha=ALPHA, beta=BETA, kappa=KAPPA, q_acc=Q_ACC,
                       q_bias=Q_BIAS, mu_bias=MU, dvl_rotation=DVL_R, dvl_translation=DVL_ARM,

@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from undertow._atomic import atomic_path
+from undertow._util.atomic import atomic_path
 
 
 def test_file_appears_only_on_success(tmp_path):
@@ -48,7 +48,7 @@ def test_a_file_write_never_replaces_a_directory(tmp_path):
 
 
 def test_output_folder_refuses_a_file_and_a_non_empty_folder_unless_overwrite(tmp_path):
-    from undertow._atomic import output_folder
+    from undertow._util.atomic import output_folder
     from undertow.errors import ConfigError
 
     afile = tmp_path / "afile"
@@ -71,7 +71,7 @@ def test_output_folder_refuses_a_file_and_a_non_empty_folder_unless_overwrite(tm
 def test_output_folder_never_holds_an_input_and_is_probed_before_the_work(tmp_path):
     """--out on the log's own folder (or a parent of it) would delete the input even with
     --overwrite; a place that cannot be written fails before any work, naming the path given."""
-    from undertow._atomic import check_output_folder
+    from undertow._util.atomic import check_output_folder
     from undertow.errors import ConfigError
 
     run = tmp_path / "run"

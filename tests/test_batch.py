@@ -10,8 +10,8 @@ import warnings
 import numpy as np
 import pytest
 
-from undertow.batch import BatchResult, run_batch
 from undertow.errors import ConfigError
+from undertow.study.batch import BatchResult, run_batch
 
 SEEDS = [5, 0, 3, 1, 4, 2]
 

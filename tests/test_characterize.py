@@ -4,7 +4,7 @@ configured noise (DVL beams, wave term, barometer) is known in closed form."""
 import numpy as np
 import pytest
 
-from undertow.characterize import characterize_run, estimate_waves, wave_noise
+from undertow.estimation.characterize import characterize_run, estimate_waves, wave_noise
 from undertow.log import Dvl, GroundTruth, Log, Mounting, WaveProbe
 
 
@@ -27,7 +27,7 @@ def test_dvl_noise_about_truth_excludes_motion_and_acceleration():
 
 
 def test_quadrature_subtraction_of_calm_noise():
-    from undertow.characterize import RunCharacterization
+    from undertow.estimation.characterize import RunCharacterization
 
     calm = RunCharacterization("c", None, (0.006, 0.006, 0.002), 100, None, "gt")
     wavy = RunCharacterization("w", None, (0.010, 0.006, 0.001), 100, None, "gt")
@@ -173,7 +173,7 @@ def test_a_run_without_a_constant_speed_segment_says_so():
 
 
 def test_characterize_without_a_calm_run_warns():
-    from undertow.characterize import characterize
+    from undertow.estimation.characterize import characterize
 
     with pytest.warns(UserWarning, match="no calm run among the logs"):
         t = np.arange(0, 60, 0.01)

@@ -58,10 +58,10 @@ def test_an_output_folder_that_is_a_file_is_one_line(tmp_path, command):
 def test_one_seed_says_the_scheduler_is_not_used(tmp_path, monkeypatch):
     """With one seed there is nothing for the scheduler to run: a warning, not silence. The
     study itself is replaced by a seed that fails, which must be one line too."""
-    import undertow.study
+    import undertow.study.runner
 
     monkeypatch.setattr(
-        undertow.study,
+        undertow.study.runner,
         "_first_seed",
         lambda seeds, settings, note: ({}, {s: "RuntimeError: stopped by the test" for s in seeds},
                                        None, []),

@@ -4,10 +4,10 @@ import pytest
 from typer.testing import CliRunner
 
 from undertow.cli import app
-from undertow.config import Settings
 from undertow.errors import ConfigError
-from undertow.estimation.localize import LocalizerConfig
+from undertow.estimation.localizer import LocalizerConfig
 from undertow.mapping.config import MappingConfig
+from undertow.settings import Settings
 
 
 def test_no_file_gives_every_stage_default():

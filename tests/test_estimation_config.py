@@ -12,7 +12,7 @@ from test_estimation_localize import make_log
 
 from undertow.errors import ConfigError
 from undertow.estimation.calibration import Calibration
-from undertow.estimation.localize import Localizer, LocalizerConfig
+from undertow.estimation.localizer import Localizer, LocalizerConfig
 from undertow.log import Dvl, Imu
 
 NAN = float("nan")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError, MissingStreamError
-from undertow.estimation.localize import Localizer
+from undertow.estimation.localizer import Localizer
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
@@ -210,7 +210,7 @@ def test_calibrated_gyro_bias_is_the_initial_bias_state():
 
 def test_wave_condition_and_where_it_came_from_are_recorded():
     """Without a wave condition the log's recorded one is used, else calm; config says which."""
-    from undertow.estimation.localize import wave_condition
+    from undertow.estimation.localizer import wave_condition
 
     log = make_log(duration=3.0)
     assert wave_condition(None, log) == ("calm", "default")

@@ -7,7 +7,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from undertow.estimation import model
-from undertow.estimation.localize import Localizer, LocalizerConfig
+from undertow.estimation.localizer import Localizer, LocalizerConfig
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
 from undertow.rotations import rpy_to_matrix, wrap_angle
 

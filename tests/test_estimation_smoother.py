@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from test_estimation_nis import PARAMS, simulate
 
-from undertow._plain import to_plain
+from undertow._util.plain import to_plain
 from undertow.errors import ConfigError, DataError
 from undertow.estimation import ukf
-from undertow.estimation.localize import Localizer, LocalizerConfig
+from undertow.estimation.localizer import Localizer, LocalizerConfig
 from undertow.estimation.smoother import _rts_step, _rts_workspace, smooth
 from undertow.log import Imu
 from undertow.rotations import wrap_angle

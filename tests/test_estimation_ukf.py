@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+from filterpy_reference import FilterPyModel
 
 from undertow.estimation import model, ukf
-from undertow.estimation._reference import FilterPyModel
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
 NO_ANGLES = np.zeros(4, dtype=np.bool_)
@@ -96,7 +96,7 @@ Q_ACC, Q_B, MU = np.full(6, 0.02), np.full(6, 1e-6), np.array([0, 0, 1e-3, 0, 0,
 def test_full_model_agrees_with_filterpy():
     """All four measurement kinds through their mounting, angles near +-pi, equal times
     (updates without predict), one gap longer than dt_max (capped): every recorded mean and
-    covariance equal to FilterPy's on the numpy model of estimation/_reference.py."""
+    covariance equal to FilterPy's on the numpy model of tests/filterpy_reference.py."""
     rng = np.random.default_rng(7)
     n, N = 18, 80
     kinds = rng.integers(0, 4, N)

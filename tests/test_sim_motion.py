@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import brentq
 
 from undertow.sim.motion import CarriageMotion
-from undertow.sim.scenario import CarriageModel, MountLoadModel
+from undertow.sim.scenario.model import CarriageModel, MountLoadModel
 from undertow.sim.waves import LinearWave
 
 G, H, RHO = 9.80665, 3.0, 998.0

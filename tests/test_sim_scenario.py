@@ -257,7 +257,7 @@ def test_survey_path_stays_inside_the_tank_and_the_water():
             Scenario.model_validate(with_survey(**over))
     # the free vehicle's simulated path (turns and orbital excursion included) stays in the box
     # the check allows: the check is not looser than the motion
-    from undertow.sim.scenario_checks import path_extent
+    from undertow.sim.scenario.checks import path_extent
 
     s = Scenario.model_validate(with_survey(first_pass_y_m=-3.0, passes=2, pass_length_m=2.0))
     box = path_extent(s)

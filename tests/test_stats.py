@@ -8,7 +8,7 @@ import pytest
 from scipy import stats as scipy_stats
 
 from undertow.errors import DataError, UndertowError
-from undertow.stats import aggregate, claim_fraction, format_cell, summarize
+from undertow.study.stats import aggregate, claim_fraction, format_cell, summarize
 
 
 @pytest.mark.parametrize("n", [2, 3, 10, 57])

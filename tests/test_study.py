@@ -5,8 +5,8 @@ from html.parser import HTMLParser
 
 import pytest
 
-from undertow.experiments import CLAIMS, StudySettings, run_seed
-from undertow.study import run_study
+from undertow.study.pipeline import CLAIMS, StudySettings, run_seed
+from undertow.study.runner import run_study
 
 SMALL = StudySettings(conditions=("wave-a0.10-f0.75",), rock_survey=None)
 
@@ -59,7 +59,7 @@ def test_seed_results_do_not_depend_on_where_they_run(study):
 
 def test_a_seed_on_a_process_cluster_equals_the_same_seed_on_threads(study):
     """The issue's check: local threads (the study above) vs a LocalCluster of processes."""
-    from undertow.batch import run_batch
+    from undertow.study.batch import run_batch
 
     batch = run_batch(run_seed, [1], scheduler="local", args=(SMALL,))
     assert not batch.failures, batch.failures
@@ -70,16 +70,16 @@ def test_a_seed_on_a_process_cluster_equals_the_same_seed_on_threads(study):
 def test_a_failing_first_seed_is_reported_and_the_next_one_makes_the_runs(tmp_path, monkeypatch):
     """The first seed runs in this process under the same guard as a Dask task: if it raises,
     it is reported by seed and the next seed takes its place for the runs (and figures)."""
-    import undertow.study
+    import undertow.study.runner
 
-    real = undertow.study.run_seed_with_artifacts
+    real = undertow.study.runner.run_seed_with_artifacts
 
     def fails_on_zero(seed, settings):
         if seed == 0:
             raise RuntimeError("seed 0 diverged")
         return real(seed, settings)
 
-    monkeypatch.setattr(undertow.study, "run_seed_with_artifacts", fails_on_zero)
+    monkeypatch.setattr(undertow.study.runner, "run_seed_with_artifacts", fails_on_zero)
     result = run_study(tmp_path, seeds=[0, 1], scheduler="sync", settings=SMALL, report=False)
     assert list(result.failures) == [0]
     assert result.failures[0].startswith("RuntimeError: seed 0 diverged (at test_study.py:")

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import atomic_path
-from ._plain import to_plain
+from ._util.atomic import atomic_path
+from ._util.plain import to_plain
 from .errors import ReaderError
 
 STATE_NAMES = (

@@ -13,7 +13,7 @@ from typing import Annotated
 import typer
 from rich.console import Console
 
-from .._plain import json_safe
+from .._util.plain import json_safe
 from ..errors import UndertowError
 
 app = typer.Typer(

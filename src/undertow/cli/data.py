@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .._atomic import check_output_folder
+from .._util.atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
     _print_json,

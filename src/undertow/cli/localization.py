@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .._atomic import check_output_folder
+from .._util.atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
@@ -82,11 +82,11 @@ def localize(
     Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
     --calibration calm_cal.yaml --out runs/a10/proposed`
     """
-    from ..config import Settings
-    from ..estimation.localize import wave_condition
+    from ..estimation.localizer import wave_condition
     from ..estimation.noise import parse_wave
     from ..estimation.run import localize as run_localize
     from ..estimation.run import save_trajectory
+    from ..settings import Settings
 
     numbers = {"--wave-amplitude": wave_amplitude, "--wave-frequency": wave_frequency}
     by_number = [name for name, value in numbers.items() if value is not None]
@@ -168,8 +168,8 @@ def calibrate(
 
     Example: `undertow calibrate runs/calm/log runs/calm/ground_truth.tum --out calm_cal.yaml`
     """
-    from ..config import Settings
     from ..estimation.calibration import calibrate as run_calibration
+    from ..settings import Settings
 
     with _progress(quiet) as progress:
         progress.add_task("calibrating", total=None)

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from .._atomic import check_output_folder
+from .._util.atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
@@ -59,9 +59,9 @@ def map_command(
     Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --method adaptive
     --out runs/a10/map`
     """
-    from ..config import Settings
     from ..mapping.config import MappingConfig
     from ..mapping.run import map_log, save_map
+    from ..settings import Settings
     from ..trajectory import Trajectory
 
     check_output_folder(out_dir, overwrite, inputs=[log_path, trajectory, prior, config, topics])

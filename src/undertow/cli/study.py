@@ -46,8 +46,8 @@ def characterize_command(
     """
     from rich.table import Table
 
-    from ..characterize import characterize
-    from ..config import Settings
+    from ..estimation.characterize import characterize
+    from ..settings import Settings
 
     settings = Settings.from_yaml(config)
     with _progress(quiet) as progress:
@@ -103,8 +103,8 @@ def reproduce(
 
     Example: `undertow reproduce --seeds 10 --out results_mc`
     """
-    from ..experiments import StudySettings
-    from ..study import run_study
+    from ..study.pipeline import StudySettings
+    from ..study.runner import run_study
 
     if seeds < 1:
         raise UndertowError("--seeds must be at least 1")

@@ -1,7 +1,7 @@
 """State estimation: the paper's 18-state UKF, wave noise profiles, smoother, calibration."""
 
 from .calibration import Calibration, calibrate
-from .localize import Localizer, LocalizerConfig
+from .localizer import Localizer, LocalizerConfig
 from .noise import NoiseProfile
 from .smoother import smooth
 

@@ -24,8 +24,8 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from .._atomic import atomic_path
-from .._validate import read_yaml, validate
+from .._util.atomic import atomic_path
+from .._util.validate import read_yaml, validate
 from ..errors import ConfigError, DataError
 from ..evaluation.trajectory import (
     deduplicate_ground_truth,

@@ -38,7 +38,7 @@ drawing sigma points, with H read off _h itself (:func:`_jacobians`). The barome
 makes its model nonlinear in the angles: it updates through sigma points drawn again from the
 predicted (x, P). The loop :func:`_run_filter` walks a merged, time-sorted measurement array: it
 predicts to each measurement's time (no prediction when dt <= 0, dt capped at dt_max) and
-updates; see :mod:`undertow.estimation.localize` for the Python side.
+updates; see :mod:`undertow.estimation.localizer` for the Python side.
 """
 
 from __future__ import annotations

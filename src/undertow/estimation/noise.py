@@ -29,8 +29,8 @@ import numpy as np
 import yaml
 from pydantic import BaseModel, Field
 
-from .._atomic import atomic_path
-from .._validate import read_yaml, validate
+from .._util.atomic import atomic_path
+from .._util.validate import read_yaml, validate
 from ..errors import ConfigError
 
 _NAME = re.compile(r"^wave-a(\d+(?:\.\d*)?)-f(\d+(?:\.\d*)?)$")

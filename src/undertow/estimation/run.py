@@ -24,14 +24,14 @@ from pathlib import Path
 
 import yaml
 
-from .._atomic import output_folder
-from .._plain import to_plain
+from .._util.atomic import output_folder
+from .._util.plain import to_plain
 from ..errors import ConfigError
 from ..io.tum import write_tum
 from ..log import Log
 from ..trajectory import Trajectory
 from .calibration import Calibration
-from .localize import Localizer
+from .localizer import Localizer
 
 
 def localize(

@@ -30,7 +30,7 @@ from numba import njit
 from ..errors import ConfigError, DataError
 from ..trajectory import Trajectory
 from . import model
-from .localize import LocalizerConfig
+from .localizer import LocalizerConfig
 from .ukf import (
     _cholesky_repair,
     _gain,

@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .._plain import json_safe
+from .._util.plain import json_safe
 from ..log import Log
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path
+from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
 from .tum import _atomic_write_text
 

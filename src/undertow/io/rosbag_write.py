@@ -31,8 +31,8 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from .._atomic import atomic_path
-from .._plain import to_plain
+from .._util.atomic import atomic_path
+from .._util.plain import to_plain
 from ..errors import UndertowError
 from ..log import Log
 from ..rotations import rpy_to_matrix, rpy_to_quaternion

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, field_validator
 
-from .._validate import read_yaml, validate
+from .._util.validate import read_yaml, validate
 from ..errors import ConfigError
 
 STREAM_FIELDS = (

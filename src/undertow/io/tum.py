@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path
+from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
 

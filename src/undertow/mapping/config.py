@@ -11,7 +11,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from .._validate import validate
+from .._util.validate import validate
 from .mappers import L_MAX, L_MIN, Mapper, make_mapper
 from .samples import Samples, build_samples
 

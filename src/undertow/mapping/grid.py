@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path
+from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
 from .kernels import _OFFSET as _CHUNK_LIMIT
 from .kernels import (

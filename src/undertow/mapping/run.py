@@ -8,7 +8,7 @@ from pathlib import Path
 
 import yaml
 
-from .._atomic import output_folder
+from .._util.atomic import output_folder
 from ..errors import ConfigError
 from ..log import Log
 from ..trajectory import Trajectory

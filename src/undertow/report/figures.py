@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path
+from .._util.atomic import atomic_path
 from ..errors import DataError
 from ..log import Log
 from ..mapping.kernels import product_kernel, sparse_kernel

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .._atomic import atomic_path
+from .._util.atomic import atomic_path
 from ..errors import DataError
 
 VIEWER_POINTS = 25_000

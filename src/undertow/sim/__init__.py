@@ -1,7 +1,7 @@
 """Physics-based wave-tank simulator: Airy waves, tank with a rock platform, carriage or free
 vehicle motion and the BlueROV2's sensors, producing a Log with ground truth."""
 
-from .scenario import Scenario, list_scenarios, load_scenario
+from .scenario.model import Scenario, list_scenarios, load_scenario
 from .simulate import SimulationResult, simulate, write_simulation
 
 __all__ = [

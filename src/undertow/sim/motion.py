@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..rotations import rpy_to_matrix
-from .scenario import CarriageModel, SurveyModel
+from .scenario.model import CarriageModel, SurveyModel
 from .waves import LinearWave
 
 

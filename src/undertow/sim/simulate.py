@@ -13,16 +13,16 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .._atomic import output_folder
+from .._util.atomic import output_folder
 from ..errors import ConfigError
 from ..log import GroundTruth, Log
 from ..rotations import wrap_angle
 from .motion import CarriageMotion, SurveyMotion, kinematics
-from .scenario import Scenario
-from .scenario_checks import floor_cloud_count
-from .sensors_dvl import simulate_dead_reckoning, simulate_dvl
-from .sensors_env import simulate_barometer, simulate_sonar, simulate_wave_probe
-from .sensors_imu import sample_times, simulate_imu
+from .scenario.checks import floor_cloud_count
+from .scenario.model import Scenario
+from .sensors.dvl import simulate_dead_reckoning, simulate_dvl
+from .sensors.env import simulate_barometer, simulate_sonar, simulate_wave_probe
+from .sensors.imu import sample_times, simulate_imu
 from .tank import Tank
 from .waves import LinearWave
 

@@ -15,10 +15,10 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from .._validate import read_yaml, validate
-from ..errors import ConfigError
-from ..log import FRESH_WATER_DENSITY
-from .scenario_sensors import (
+from ..._util.validate import read_yaml, validate
+from ...errors import ConfigError
+from ...log import FRESH_WATER_DENSITY
+from .sensors import (
     BarometerModel,
     DeadReckoningModel,
     DvlModel,
@@ -150,7 +150,7 @@ class Scenario(_Model):
 
     @model_validator(mode="after")
     def _physically_possible(self) -> Scenario:
-        from .scenario_checks import check_scenario
+        from .checks import check_scenario
 
         check_scenario(self)
         return self

@@ -1,7 +1,7 @@
 """One settings file for every stage: ``topics``, ``mounting``, ``localizer``, ``mapping``.
 
 Each section is the stage's own pydantic model (:class:`~undertow.io.topics.TopicMap`,
-:class:`~undertow.estimation.localize.LocalizerConfig`,
+:class:`~undertow.estimation.localizer.LocalizerConfig`,
 :class:`~undertow.mapping.config.MappingConfig`); every field has a default, so an empty file (or
 no file) runs, and a file sets only what differs::
 
@@ -19,9 +19,9 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from ._validate import read_yaml, validate
+from ._util.validate import read_yaml, validate
 from .errors import ConfigError
-from .estimation.localize import LocalizerConfig
+from .estimation.localizer import LocalizerConfig
 from .io.topics import TopicMap
 from .log import Log
 from .mapping.config import MappingConfig

@@ -1,15 +1,15 @@
 """The paper's tables from the study's results, with the paper's values in adjacent columns.
 
-Input: the per-seed result dicts of :func:`undertow.experiments.run_seed`. Every simulated cell is
-the mean over seeds with, for more than one seed, its 95 % Student-t interval of the mean
-(:mod:`undertow.stats`); every "paper" cell comes from :mod:`undertow.report.paper_values`.
+Input: the per-seed result dicts of :func:`undertow.study.pipeline.run_seed`. Every simulated
+cell is the mean over seeds with, for more than one seed, its 95 % Student-t interval of the mean
+(:mod:`undertow.study.stats`); every "paper" cell comes from :mod:`undertow.study.paper`.
 """
 
 from __future__ import annotations
 
-from ..experiments import CLAIMS, MAP_RUNS, TABLE1_CLAIMS, WHY_NOT
-from ..stats import aggregate, claim_fraction
-from . import paper_values as paper
+from . import paper
+from .pipeline import CLAIMS, MAP_RUNS, TABLE1_CLAIMS, WHY_NOT
+from .stats import aggregate, claim_fraction
 
 AXIS_LABELS = {
     "x_m": "x (m)", "y_m": "y (m)", "z_m": "z (m)", "roll_rad": "roll (rad)",

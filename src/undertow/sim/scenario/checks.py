@@ -25,7 +25,7 @@ import numpy as np
 from pydantic import ValidationError
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from .waves import LinearWave
+from ..waves import LinearWave
 
 BREAKING_STEEPNESS = 1.0 / 7.0  # H / lambda above which a wave breaks (NOTES.md section 2)
 

@@ -16,7 +16,7 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from .._validate import validate
+from .._util.validate import validate
 from ..errors import ConfigError
 from ..log import FRESH_WATER_DENSITY, P_ATM, Log
 from ..rotations import matrix_to_rpy, rpy_to_matrix

@@ -6,15 +6,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..experiments import Artifacts
+from .pipeline import Artifacts
 
 
 def build_report(
     out: Path, tables: dict, markdown: str, art: Artifacts, versions: dict
 ) -> tuple[list[tuple[str, Path]], Path]:
     """Write ``figures/*.png`` and ``report.html`` under ``out``; return (figures, report)."""
-    from . import figures as fig
-    from .html import write_report
+    from ..report import figures as fig
+    from ..report.html import write_report
 
     figdir = out / "figures"
     cond = tables["conditions"][0]

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from .errors import DataError
+from ..errors import DataError
 
 LEAF_KEYS = ("mean", "std", "ci95_low", "ci95_high", "n")
 

@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..log import Imu, SensorMount
-from .motion import kinematics
-from .scenario_sensors import ImuModel
+from ...log import Imu, SensorMount
+from ..motion import kinematics
+from ..scenario.sensors import ImuModel
 
 
 def sample_times(duration: float, rate_hz: float) -> np.ndarray:

@@ -19,12 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..log import Pressure, SensorMount, SonarRange, WaveProbe
-from .motion import kinematics
-from .scenario_sensors import BarometerModel, SonarModel, WaveProbeModel
-from .sensors_imu import sample_times
-from .tank import Tank
-from .waves import LinearWave
+from ...log import Pressure, SensorMount, SonarRange, WaveProbe
+from ..motion import kinematics
+from ..scenario.sensors import BarometerModel, SonarModel, WaveProbeModel
+from ..tank import Tank
+from ..waves import LinearWave
+from .imu import sample_times
 
 
 def simulate_barometer(

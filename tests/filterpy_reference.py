@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rotations import rpy_to_matrix, wrap_angle
+from undertow.rotations import rpy_to_matrix, wrap_angle
 
 STATE_ANGLES = np.zeros(18, bool)
 STATE_ANGLES[3:6] = True

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from ..log import Mounting, SensorMount
+from ...log import Mounting, SensorMount
 
 Vec3 = tuple[float, float, float]
 

@@ -1,4 +1,4 @@
-"""The paper's experiments end to end, for one seed (Monte Carlo over seeds: :mod:`undertow.study`).
+"""The paper's experiments end to end for one seed (over seeds: :mod:`undertow.study.runner`).
 
 For a seed s, with every simulator parameter from the built-in scenarios (never tuned here):
 
@@ -23,15 +23,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._plain import to_plain
-from .characterize import characterize, estimate_waves
-from .estimation.calibration import calibrate
-from .estimation.run import localize
-from .evaluation.cloud import evaluate_map
-from .evaluation.trajectory import trajectory_rmse
-from .mapping.config import MappingConfig
-from .mapping.run import map_log
-from .sim import load_scenario, simulate
+from .._util.plain import to_plain
+from ..estimation.calibration import calibrate
+from ..estimation.characterize import characterize, estimate_waves
+from ..estimation.run import localize
+from ..evaluation.cloud import evaluate_map
+from ..evaluation.trajectory import trajectory_rmse
+from ..mapping.config import MappingConfig
+from ..mapping.run import map_log
+from ..sim import load_scenario, simulate
 
 WAVE_CONDITIONS = ("wave-a0.10-f1.00", "wave-a0.10-f0.75", "wave-a0.05-f0.75")
 VARIANTS = ("baseline", "be", "an", "proposed")

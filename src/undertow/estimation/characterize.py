@@ -42,11 +42,11 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.signal import periodogram
 
-from .errors import DataError
-from .estimation.noise import NoiseProfile, wave_name
-from .evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
-from .log import FRESH_WATER_DENSITY, Log, WaveProbe
-from .rotations import rpy_to_matrix
+from ..errors import DataError
+from ..evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
+from ..log import FRESH_WATER_DENSITY, Log, WaveProbe
+from ..rotations import rpy_to_matrix
+from .noise import NoiseProfile, wave_name
 
 CALM_AMPLITUDE_M = 0.01  # a probe showing less than this is calm water
 PEAK_TO_NOISE_MIN = 100.0  # a wave's spectral peak over the median periodogram level

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 NAMED_SCHEDULERS = ("local", "threads", "sync")
 CONNECT_TIMEOUT_S = 3.0

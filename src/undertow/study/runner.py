@@ -10,7 +10,7 @@
    to be pickled and shipped back from a worker (over the network from a remote cluster). It
    runs under the same guard as a Dask task: if it raises, the failure is recorded by seed and
    the next seed takes its place (in this process) for the figures and runs.
-2. The other seeds are independent Dask tasks (:func:`undertow.batch.run_batch`): a local
+2. The other seeds are independent Dask tasks (:func:`undertow.study.batch.run_batch`): a local
    cluster by default, or an existing scheduler. A failed seed is reported and the rest kept.
 3. ``tables.md`` / ``tables.json`` aggregate all seeds (mean and 95 % interval per cell, the
    fraction of seeds where each claim of the paper holds); ``seeds/seed_N.json`` keep every seed's
@@ -28,10 +28,10 @@ from dataclasses import dataclass, field
 from numbers import Integral
 from pathlib import Path
 
-from ._atomic import atomic_path, check_output_folder
-from ._plain import to_plain
-from .errors import ConfigError, UndertowError
-from .experiments import Artifacts, StudySettings, run_seed, run_seed_with_artifacts
+from .._util.atomic import atomic_path, check_output_folder
+from .._util.plain import to_plain
+from ..errors import ConfigError, UndertowError
+from .pipeline import Artifacts, StudySettings, run_seed, run_seed_with_artifacts
 
 
 @dataclass
@@ -54,7 +54,7 @@ def run_study(
     report: bool = True,
 ) -> StudyResult:
     """Run the paper's study for ``seeds`` (default [0]); write everything under ``out_dir``."""
-    from .report.tables import build_tables, render_markdown
+    from .tables import build_tables, render_markdown
 
     start = time.perf_counter()
     settings = settings or StudySettings()
@@ -96,7 +96,7 @@ def run_study(
     _write_runs(out / "runs", artifacts)
     study = StudyResult(out, tables, markdown, failures)
     if report:
-        from .report.build import build_report
+        from .report import build_report
 
         study.figures, study.report = build_report(out, tables, markdown, artifacts, _versions())
     study.wall_s = time.perf_counter() - start
@@ -159,9 +159,9 @@ def _write_text(path: Path, text: str) -> None:
 
 def _write_runs(root: Path, art: Artifacts) -> None:
     """First seed's runs: simulation outputs, trajectories per variant, maps per method."""
-    from .estimation.run import save_trajectory
-    from .mapping.mappers import write_map_ply
-    from .sim import write_simulation
+    from ..estimation.run import save_trajectory
+    from ..mapping.mappers import write_map_ply
+    from ..sim import write_simulation
 
     for name, sim in art.simulations.items():
         write_simulation(sim, root / name / "sim", overwrite=True)

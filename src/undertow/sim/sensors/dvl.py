@@ -29,13 +29,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..log import DeadReckoning, Dvl, SensorMount, a50_beam_units
-from ..rotations import rpy_to_matrix, wrap_angle
-from .motion import kinematics
-from .scenario_sensors import DeadReckoningModel, DvlModel
-from .sensors_imu import sample_times
-from .tank import Tank
-from .waves import LinearWave
+from ...log import DeadReckoning, Dvl, SensorMount, a50_beam_units
+from ...rotations import rpy_to_matrix, wrap_angle
+from ..motion import kinematics
+from ..scenario.sensors import DeadReckoningModel, DvlModel
+from ..tank import Tank
+from ..waves import LinearWave
+from .imu import sample_times
 
 
 def least_squares_velocity(B: np.ndarray, m: np.ndarray, valid: np.ndarray):
