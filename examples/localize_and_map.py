@@ -24,7 +24,7 @@ localizer = Localizer(
     variant="proposed",
     wave=sim.log.metadata["wave"],
     initial_position=tuple(gt.position[0]),
-    dr_bias_drift_rad_s=calibration.dead_reckoning_drift_rad_per_s,
+    dr_bias_drift_rad_s=calibration.dr_bias_drift_rad_s,
     dvl_scale_factor=calibration.dvl_scale_factor,
 )
 trajectory = smooth(localizer.run(sim.log))  # offline: URTS smoothing

@@ -23,7 +23,7 @@ def test_dvl_noise_about_truth_excludes_motion_and_acceleration():
     n = run.dvl_samples
     assert 300 < n < 400  # only the constant-speed phase (~10 s..50 s at 10 Hz, edges trimmed)
     # the sample std of n normal draws has relative standard error 1/sqrt(2(n-1))
-    np.testing.assert_allclose(run.dvl_std_mps, sigma, rtol=4 / np.sqrt(2 * (n - 1)))
+    np.testing.assert_allclose(run.dvl_std_m_s, sigma, rtol=4 / np.sqrt(2 * (n - 1)))
 
 
 def test_quadrature_subtraction_of_calm_noise():
@@ -60,7 +60,7 @@ def test_recovers_the_simulators_waves_and_noise():
     wave_x = kappa[0] * U / np.sqrt(2)
     expected = np.sqrt(base**2 + np.array([np.cos(yaw), np.sin(yaw), 0.0]) ** 2 * wave_x**2)
     n = run.dvl_samples
-    np.testing.assert_allclose(run.dvl_std_mps, expected, rtol=4 / np.sqrt(2 * (n - 1)))
+    np.testing.assert_allclose(run.dvl_std_m_s, expected, rtol=4 / np.sqrt(2 * (n - 1)))
 
 
 def test_calm_probe_is_calm_not_a_random_spectral_peak():
@@ -101,7 +101,7 @@ def test_without_ground_truth_the_acceleration_phases_are_excluded():
     run = characterize_run(_ramp_hold_ramp(4, sigma).replace(ground_truth=None))
     n = run.dvl_samples
     assert 250 < n < 400  # the 40 s plateau at 10 Hz, less one window
-    np.testing.assert_allclose(run.dvl_std_mps, sigma, rtol=4 / np.sqrt(2 * (n - 1)))
+    np.testing.assert_allclose(run.dvl_std_m_s, sigma, rtol=4 / np.sqrt(2 * (n - 1)))
     assert any("no ground_truth" in note for note in run.notes)
 
 
@@ -125,7 +125,7 @@ def test_without_ground_truth_agrees_with_ground_truth(simulated, name):
     n = min(with_gt.dvl_samples, without.dvl_samples)
     assert n > 200
     np.testing.assert_allclose(
-        without.dvl_std_mps, with_gt.dvl_std_mps, rtol=3 / np.sqrt(2 * (n - 1))
+        without.dvl_std_m_s, with_gt.dvl_std_m_s, rtol=3 / np.sqrt(2 * (n - 1))
     )
     assert without.depth_std_m == pytest.approx(with_gt.depth_std_m, rel=0.05)
 

@@ -139,7 +139,7 @@ def test_characterize_writes_a_profile_that_localize_reads(tmp_path):
     used = __import__("yaml").safe_load((tmp_path / "est" / "config.yaml").read_text())
     assert used["smoothed"] is True
     # the extra vx noise comes from the characterized profile (interpolated near its node)
-    assert abs(used["wave_noise"]["dvl_std"][0] - rows[1]["dvl_extra_std_mps"][0]) < 2e-3
+    assert abs(used["wave_noise"]["dvl_std"][0] - rows[1]["dvl_extra_std_m_s"][0]) < 2e-3
 
 
 def _one_error_line(result) -> str:

@@ -44,7 +44,7 @@ def _localize(run, *args):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("dead_reckoning_drift_rad_per_s: [.nan, 0, 0]\n", "dead_reckoning_drift_rad_per_s.0"),
+        ("dr_bias_drift_rad_s: [.nan, 0, 0]\n", "dr_bias_drift_rad_s.0"),
         ("[1, 2]\n", "not a calibration file"),
         ("name: paper\nconditions: []\n", "unknown keys conditions, name"),
     ],
@@ -171,16 +171,16 @@ def test_calibrate_without_the_imu_says_so_and_localize_does_not_pretend(run, tm
     assert r.exit_code == 0, r.output
     lines = [w for w in _warnings(r.output) if "calibrate:" in w]
     assert lines == [
-        "warning: calibrate: imu_gyro_bias_rad_per_s left at the default [0, 0, 0]: the log has "
+        "warning: calibrate: gyro_bias_rad_s left at the default [0, 0, 0]: the log has "
         "no imu stream"
     ]
     saved = yaml.safe_load(cal.read_text())
-    assert saved["estimated"] == ["dead_reckoning_drift_rad_per_s", "dvl_scale_factor"]
-    assert saved["left_at_default"] == {"imu_gyro_bias_rad_per_s": "the log has no imu stream"}
+    assert saved["estimated"] == ["dr_bias_drift_rad_s", "dvl_scale_factor"]
+    assert saved["left_at_default"] == {"gyro_bias_rad_s": "the log has no imu stream"}
     out = run / "cal_est"
     r = runner.invoke(app, ["localize", log, "--out", str(out), "--calibration", str(cal)])
     assert r.exit_code == 0, r.output
-    assert any("not estimated" in w and "imu_gyro_bias" in w for w in _warnings(r.output))
+    assert any("not estimated" in w and "gyro_bias_rad_s" in w for w in _warnings(r.output))
     # the wave condition comes from the bag's sidecar, and says so (one line, not with -q)
     assert "wave condition: calm (from the bag's sidecar undertow.yaml" in r.output
     used = yaml.safe_load((out / "config.yaml").read_text())

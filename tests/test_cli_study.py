@@ -99,7 +99,7 @@ def test_characterize_without_ground_truth_prints_its_notes_and_agrees(runs):
     for ra, rb in zip(a, b, strict=True):
         n = min(ra["samples"], rb["samples"])
         rel = 3 / (2 * (n - 1)) ** 0.5
-        assert rb["dvl_std_mps"] == pytest.approx(ra["dvl_std_mps"], rel=rel)
+        assert rb["dvl_std_m_s"] == pytest.approx(ra["dvl_std_m_s"], rel=rel)
         assert rb["depth_std_m"] == pytest.approx(ra["depth_std_m"], rel=0.05)
     warnings = [ln for ln in without.stderr.splitlines() if ln.startswith("warning:")]
     assert sum("no ground_truth stream" in w for w in warnings) == 2

@@ -87,3 +87,34 @@ def test_imu_logged_in_ros_flu_is_fixed_by_a_mounting_rotation(tmp_path):
     gt = log.ground_truth
     wrong = trajectory_rmse(localize(flu, "proposed"), gt).rmse
     assert wrong["yaw_rad"] > 5 * trajectory_rmse(reference, gt).rmse["yaw_rad"]
+
+
+@pytest.mark.parametrize(
+    "text, old, new",
+    [
+        (
+            "localizer: {initial_gyro_bias_rad_s: [0, 0, 0]}\n",
+            "initial_gyro_bias_rad_s",
+            "gyro_bias_rad_s",
+        ),  # fmt: skip
+        (
+            "localizer: {dead_reckoning_drift_rad_per_s: [0, 0, 0]}\n",
+            "dead_reckoning_drift_rad_per_s",
+            "dr_bias_drift_rad_s",
+        ),  # fmt: skip
+    ],
+)
+def test_a_renamed_setting_is_refused_naming_its_new_name(tmp_path, text, old, new):
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=rf"localizer\.{old}: renamed, use '{new}'"):
+        Settings.from_yaml(path)
+
+
+def test_a_calibration_file_with_an_old_name_is_refused(tmp_path):
+    from undertow.estimation.calibration import Calibration
+
+    path = tmp_path / "cal.yaml"
+    path.write_text("imu_gyro_bias_rad_per_s: [0, 0, 0]\ndvl_scale_factor: 1.0\n")
+    with pytest.raises(ConfigError, match=r"imu_gyro_bias_rad_per_s: renamed, use 'gyro_bias"):
+        Calibration.from_yaml(path)

@@ -43,8 +43,8 @@ def _run(drift=(0.0, 0.0, 2e-4), gyro_bias=(0.01, -0.02, 0.005), scale=1.02, see
 def test_recovers_planted_parameters():
     cal = calibrate(_run())
     # slope standard error: sigma / (sqrt(n) std(t)) = 1e-3 / (sqrt(295) * 17) ~ 3.4e-6
-    np.testing.assert_allclose(cal.dead_reckoning_drift_rad_per_s, [0, 0, 2e-4], atol=2e-5)
-    np.testing.assert_allclose(cal.imu_gyro_bias_rad_per_s, [0.01, -0.02, 0.005], atol=3e-4)
+    np.testing.assert_allclose(cal.dr_bias_drift_rad_s, [0, 0, 2e-4], atol=2e-5)
+    np.testing.assert_allclose(cal.gyro_bias_rad_s, [0.01, -0.02, 0.005], atol=3e-4)
     assert cal.dvl_scale_factor == pytest.approx(1.02, abs=5 * cal.dvl_scale_factor_std)
     assert cal.dvl_scale_factor_std < 1e-3
 
@@ -53,7 +53,7 @@ def test_yaml_round_trip(tmp_path):
     cal = calibrate(_run())
     back = Calibration.from_yaml(cal.save_yaml(tmp_path / "cal.yaml"))
     assert back.dvl_scale_factor == cal.dvl_scale_factor
-    assert back.dead_reckoning_drift_rad_per_s == pytest.approx(cal.dead_reckoning_drift_rad_per_s)
+    assert back.dr_bias_drift_rad_s == pytest.approx(cal.dr_bias_drift_rad_s)
 
 
 def test_needs_ground_truth():
@@ -70,8 +70,8 @@ def test_ground_truth_with_rounded_times_is_deduplicated_with_a_warning():
     rounded = GroundTruth(t=np.round(gt.t, 2), position=gt.position, orientation=gt.orientation)
     with pytest.warns(RuntimeWarning, match="repeats 113999 timestamps"):
         cal = calibrate(log.replace(ground_truth=rounded))
-    np.testing.assert_allclose(cal.dead_reckoning_drift_rad_per_s, [0, 0, 2e-4], atol=2e-5)
-    np.testing.assert_allclose(cal.imu_gyro_bias_rad_per_s, [0.01, -0.02, 0.005], atol=3e-4)
+    np.testing.assert_allclose(cal.dr_bias_drift_rad_s, [0, 0, 2e-4], atol=2e-5)
+    np.testing.assert_allclose(cal.gyro_bias_rad_s, [0.01, -0.02, 0.005], atol=3e-4)
     assert cal.dvl_scale_factor == pytest.approx(1.02, abs=2e-3)
     same = GroundTruth(t=np.zeros(5), position=np.zeros((5, 3)), orientation=np.zeros((5, 3)))
     with (
@@ -87,7 +87,7 @@ def test_too_little_overlap_is_an_error_not_a_calibration():
     gt = log.ground_truth.select(
         np.isin(np.arange(len(log.ground_truth)), [1000, 1001, 1002, 1003])
     )
-    with pytest.raises(DataError, match=r"overlaps .*1 samples for imu_gyro_bias.*need at least"):
+    with pytest.raises(DataError, match=r"overlaps .*1 samples for gyro_bias_rad_s.*need at least"):
         calibrate(log.replace(ground_truth=gt))
 
 
@@ -95,16 +95,16 @@ def test_a_parameter_with_too_few_samples_keeps_its_default_and_says_so():
     """3 s of ground truth: 300 IMU samples and 24 DVL, but DR at 5 Hz gives only 15."""
     log = _run()
     gt = log.ground_truth.select((log.ground_truth.t >= 10.0) & (log.ground_truth.t <= 12.9))
-    with pytest.warns(RuntimeWarning, match="dead_reckoning_drift_rad_per_s .*left at the default"):
+    with pytest.warns(RuntimeWarning, match="dr_bias_drift_rad_s .*left at the default"):
         cal = calibrate(log.replace(ground_truth=gt))
-    assert cal.dead_reckoning_drift_rad_per_s == (0.0, 0.0, 0.0)
+    assert cal.dr_bias_drift_rad_s == (0.0, 0.0, 0.0)
     assert "dead_reckoning" not in cal.samples and cal.samples["imu"] >= 290
-    np.testing.assert_allclose(cal.imu_gyro_bias_rad_per_s, [0.01, -0.02, 0.005], atol=1e-3)
+    np.testing.assert_allclose(cal.gyro_bias_rad_s, [0.01, -0.02, 0.005], atol=1e-3)
 
 
 @pytest.mark.parametrize(
     ("stream", "parameter"),
-    [("imu", "imu_gyro_bias_rad_per_s"), ("dead_reckoning", "dead_reckoning_drift_rad_per_s")],
+    [("imu", "gyro_bias_rad_s"), ("dead_reckoning", "dr_bias_drift_rad_s")],
 )
 def test_a_missing_stream_leaves_its_parameter_at_the_default_with_a_warning(
     tmp_path, stream, parameter
@@ -116,7 +116,7 @@ def test_a_missing_stream_leaves_its_parameter_at_the_default_with_a_warning(
     back = Calibration.from_yaml(cal.save_yaml(tmp_path / "cal.yaml"))
     assert back.estimated == cal.estimated and back.left_at_default == cal.left_at_default
     assert set(calibrate(_run()).estimated) == {
-        "dead_reckoning_drift_rad_per_s",
-        "imu_gyro_bias_rad_per_s",
+        "dr_bias_drift_rad_s",
+        "gyro_bias_rad_s",
         "dvl_scale_factor",
     }

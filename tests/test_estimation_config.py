@@ -89,12 +89,12 @@ def _write(tmp_path, text, name="cal.yaml"):
     ("text", "message"),
     [
         (
-            "dead_reckoning_drift_rad_per_s: [.nan, 0, 0]\n",
-            "dead_reckoning_drift_rad_per_s.0: .*finite",
+            "dr_bias_drift_rad_s: [.nan, 0, 0]\n",
+            "dr_bias_drift_rad_s.0: .*finite",
         ),
-        ("imu_gyro_bias_rad_per_s: [0, .inf, 0]\n", "imu_gyro_bias_rad_per_s.1: .*finite"),
+        ("gyro_bias_rad_s: [0, .inf, 0]\n", "gyro_bias_rad_s.1: .*finite"),
         ("dvl_scale_factor: -1.0\n", "dvl_scale_factor: .*greater than 0"),
-        ("dead_reckoning_drift_rad_per_s: [0, 0]\n", "dead_reckoning_drift_rad_per_s"),
+        ("dr_bias_drift_rad_s: [0, 0]\n", "dr_bias_drift_rad_s"),
         ("[1, 2]\n", "not a calibration file .*got a list"),
         ("name: paper\nconditions: []\n", "unknown keys conditions, name"),
         ("dvl_scale_factr: 1.01\n", "unknown keys dvl_scale_factr"),
@@ -115,9 +115,9 @@ def test_the_shipped_noise_profile_is_not_a_calibration():
 
 
 def test_calibration_file_round_trip_keeps_nan_std(tmp_path):
-    cal = Calibration(dead_reckoning_drift_rad_per_s=(0.0, 0.0, 1e-4), dvl_scale_factor=1.016)
+    cal = Calibration(dr_bias_drift_rad_s=(0.0, 0.0, 1e-4), dvl_scale_factor=1.016)
     back = Calibration.from_yaml(cal.save_yaml(tmp_path / "c.yaml"))
-    assert back.dead_reckoning_drift_rad_per_s == cal.dead_reckoning_drift_rad_per_s
+    assert back.dr_bias_drift_rad_s == cal.dr_bias_drift_rad_s
     assert back.dvl_scale_factor == 1.016 and np.isnan(back.dvl_scale_factor_std)
     assert yaml.safe_load((tmp_path / "c.yaml").read_text())["source"] == ""
     empty = Calibration.from_yaml(_write(tmp_path, "", "empty.yaml"))

@@ -196,16 +196,16 @@ def test_calibrated_gyro_bias_is_the_initial_bias_state():
     bias = np.array([0.002, -0.003, 0.02])
     log = make_log(duration=3.0, u=0.2, imu_bias=bias).replace(dead_reckoning=None)
     std = [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3 + [0.005] * 3 + [1e-4] * 3
-    cal = Calibration(imu_gyro_bias_rad_per_s=tuple(bias))
+    cal = Calibration(gyro_bias_rad_s=tuple(bias))
     with_cal = localize(log, "be", calibration=cal, initial_std=std)
     without = localize(log, "be", initial_std=std)
-    assert with_cal.metadata["config"]["initial_gyro_bias_rad_s"] == pytest.approx(bias)
+    assert with_cal.metadata["config"]["gyro_bias_rad_s"] == pytest.approx(bias)
     np.testing.assert_allclose(with_cal.x[:, 15:18] - bias, 0, atol=3e-4)
     assert abs(np.mean(with_cal.x[10:, 11])) < 0.002  # true yaw rate 0
     assert abs(np.mean(without.x[10:, 11]) - bias[2]) < 0.002  # the bias taken as rotation
     base = localize(log, "baseline", calibration=cal)
     assert np.all(base.x[:, 12:18] == 0.0)
-    assert list(base.metadata["config"]["initial_gyro_bias_rad_s"]) == [0.0, 0.0, 0.0]
+    assert list(base.metadata["config"]["gyro_bias_rad_s"]) == [0.0, 0.0, 0.0]
 
 
 def test_wave_condition_and_where_it_came_from_are_recorded():
@@ -239,13 +239,13 @@ def test_calibration_applies_only_what_was_estimated_and_says_so():
     from undertow.estimation.run import _apply_calibration
 
     cal = Calibration(
-        dead_reckoning_drift_rad_per_s=(0.0, 0.0, 1e-4),
+        dr_bias_drift_rad_s=(0.0, 0.0, 1e-4),
         dvl_scale_factor=1.02,
-        estimated=("dead_reckoning_drift_rad_per_s", "dvl_scale_factor"),
-        left_at_default={"imu_gyro_bias_rad_per_s": "the log has no imu stream"},
+        estimated=("dr_bias_drift_rad_s", "dvl_scale_factor"),
+        left_at_default={"gyro_bias_rad_s": "the log has no imu stream"},
     )
     params = {}
-    with pytest.warns(RuntimeWarning, match=r"imu_gyro_bias_rad_per_s \(the log has no imu"):
+    with pytest.warns(RuntimeWarning, match=r"gyro_bias_rad_s \(the log has no imu"):
         _apply_calibration(cal, "proposed", params)
     assert params == {"dvl_scale_factor": 1.02, "dr_bias_drift_rad_s": (0.0, 0.0, 1e-4)}
     params = {}

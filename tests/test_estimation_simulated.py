@@ -48,6 +48,6 @@ def test_smoother_is_no_worse_than_the_filter(run):
     smoothed = trajectory_rmse(smooth(trajectory), gt).rmse
     # yaw is left out: it hinges on the DR drift mu_b calibrated on another run, a model
     # mismatch under which RTS is not optimal (both are below 0.5 mrad here)
-    for axis in ("z_m", "roll_rad", "pitch_rad", "vx_mps", "vy_mps", "vz_mps"):
+    for axis in ("z_m", "roll_rad", "pitch_rad", "vx_m_s", "vy_m_s", "vz_m_s"):
         assert smoothed[axis] <= filtered[axis] * 1.01, axis
-    assert smoothed["vx_mps"] < 0.9 * filtered["vx_mps"]
+    assert smoothed["vx_m_s"] < 0.9 * filtered["vx_m_s"]

@@ -5,7 +5,6 @@ import pytest
 
 from undertow.errors import DataError
 from undertow.evaluation.trajectory import (
-    ground_truth_velocity,
     pose_nees,
     trajectory_rmse,
 )
@@ -41,7 +40,7 @@ def test_constant_offsets_give_their_rmse():
     assert r["y_m"] == pytest.approx(0.2, abs=1e-9)
     assert r["z_m"] == pytest.approx(0.01, abs=1e-9)
     assert r["yaw_rad"] == pytest.approx(0.02, abs=1e-12)
-    assert r["vx_mps"] == pytest.approx(0.05, abs=1e-6)
+    assert r["vx_m_s"] == pytest.approx(0.05, abs=1e-6)
 
 
 def test_angle_errors_wrap_across_pi():
@@ -59,7 +58,7 @@ def test_ground_truth_velocity_of_a_ramp_profile():
     gt = GroundTruth(
         t=t, position=np.column_stack([x, 0 * t, 0 * t]), orientation=np.zeros((t.size, 3))
     )
-    v = ground_truth_velocity(gt, smoothing_s=0.05)
+    v = gt.differentiated_velocity(smoothing_s=0.05)
     steady = (t > 1) & (t < 4.9)
     np.testing.assert_allclose(v[steady, 0], 0.2 * t[steady], atol=1e-6)
     np.testing.assert_allclose(v[t > 5.1, 0], 1.0, atol=1e-6)
@@ -162,7 +161,7 @@ def test_ground_truth_with_repeated_times_is_deduplicated():
         r = trajectory_rmse(est, rounded)
     assert r.rmse["y_m"] == pytest.approx(0.2, abs=1e-9)
     assert r.rmse["x_m"] < 0.8 * 0.005 + 1e-9  # the kept pose is at most 5 ms early
-    assert r.rmse["vx_mps"] < 0.005  # the kept poses are 0-0.5 ms irregular: small jitter
+    assert r.rmse["vx_m_s"] < 0.005  # the kept poses are 0-0.5 ms irregular: small jitter
 
 
 def test_align_origin_rotates_the_covariance_with_the_estimate():

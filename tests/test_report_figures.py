@@ -92,7 +92,7 @@ def test_dvl_body_velocity_matches_ground_truth(run):
     check of the frame handling used by the velocity figures): median |error| < 5 cm/s."""
     sim, _, _ = run
     t, v = figures.dvl_body_velocity(sim.log)
-    truth = figures.ground_truth_body_velocity(sim.log.ground_truth, t)
+    truth = sim.log.ground_truth.body_velocity(t)
     assert np.median(np.abs(v[:, 0] - truth[:, 0])) < 0.05
 
 

@@ -17,12 +17,14 @@ stages without copies or surprises.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
 
 from .errors import DataError, MissingStreamError
+from .rotations import world_to_body, wrap_angle
 
 G0 = 9.80665  # standard gravity, m/s^2
 P_ATM = 101_325.0  # standard atmosphere, Pa
@@ -285,6 +287,77 @@ class GroundTruth(_Stream):
     position: np.ndarray
     orientation: np.ndarray
     velocity: np.ndarray | None = None
+
+    def usable(self, where: str = "ground truth", min_poses: int = 3) -> GroundTruth:
+        """Without repeated timestamps (the first pose at each time is kept) and without
+        non-finite poses, each with one warning line; DataError if fewer than ``min_poses``
+        remain."""
+        bad = ~(
+            np.all(np.isfinite(self.position), axis=1)
+            & np.all(np.isfinite(self.orientation), axis=1)
+        )
+        gt = self
+        if bad.any():
+            warnings.warn(
+                f"{where}: dropped {int(bad.sum())} ground-truth poses with non-finite values",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            gt = gt.select(~bad)
+        repeated = np.r_[False, np.diff(gt.t) == 0] if len(gt) else np.zeros(0, bool)
+        if repeated.any():
+            first = gt.t[int(np.argmax(repeated))]
+            warnings.warn(
+                f"{where}: ground truth repeats {int(repeated.sum())} timestamps (first at "
+                f"t = {first:.6f} s, rounded times?); kept the first pose at each time",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+            gt = gt.select(~repeated)
+        if len(gt) < min_poses:
+            raise DataError(
+                f"{where}: ground truth has {len(gt)} usable poses at distinct times; "
+                f"need at least {min_poses}"
+            )
+        return gt
+
+    def differentiated_velocity(self, smoothing_s: float = 0.05) -> np.ndarray:
+        """World-frame velocity (N, 3) as the paper measures it: differentiate the positions and
+        smooth, v_k = sum_j w_j (dp/dt)_{k-j} with w a normalized Hann window spanning
+        ``smoothing_s`` (odd length, centred: no delay)."""
+        if len(self) < 3:
+            raise DataError("ground_truth: need at least 3 poses to differentiate")
+        v = np.gradient(self.position, self.t, axis=0)
+        dt = float(np.median(np.diff(self.t)))
+        n = max(int(round(smoothing_s / dt)), 1) | 1
+        if n < 3:
+            return v
+        w = np.hanning(n + 2)[1:-1]
+        w /= w.sum()
+        pad = n // 2
+        padded = np.pad(v, ((pad, n - 1 - pad), (0, 0)), mode="edge")
+        return np.stack([np.convolve(padded[:, i], w, mode="valid") for i in range(3)], axis=1)
+
+    def interpolate(self, t: np.ndarray, velocity: np.ndarray | None = None):
+        """(position, roll-pitch-yaw, velocity or None) at times ``t`` inside the span: linear in
+        position, in unwrapped angles and in ``velocity`` (rows aligned with ``self.t``)."""
+        pos = np.stack([np.interp(t, self.t, self.position[:, i]) for i in range(3)], axis=1)
+        unwrapped = np.unwrap(self.orientation, axis=0)
+        rpy = wrap_angle(
+            np.stack([np.interp(t, self.t, unwrapped[:, i]) for i in range(3)], axis=1)
+        )
+        vel = None
+        if velocity is not None:
+            vel = np.stack([np.interp(t, self.t, velocity[:, i]) for i in range(3)], axis=1)
+        return pos, rpy, vel
+
+    def body_velocity(self, t: np.ndarray, velocity_world: np.ndarray | None = None):
+        """Body-frame velocity at ``t``: v^B = R(eta)^T v^W, with v^W the differentiated
+        velocity unless given (rows aligned with ``self.t``)."""
+        if velocity_world is None:
+            velocity_world = self.differentiated_velocity()
+        _, rpy, vel = self.interpolate(t, velocity_world)
+        return world_to_body(rpy, vel)
 
 
 def a50_beam_units(tilt_deg: float = 22.5) -> np.ndarray:

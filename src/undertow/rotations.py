@@ -33,6 +33,11 @@ def rpy_to_matrix(rpy) -> np.ndarray:
     return R
 
 
+def world_to_body(rpy, v_world) -> np.ndarray:
+    """v^B = R(eta)^T v^W for rows of attitudes ``rpy`` (N, 3) and world vectors (N, 3)."""
+    return np.einsum("nji,nj->ni", rpy_to_matrix(rpy), v_world)
+
+
 def matrix_to_rpy(R) -> np.ndarray:
     """Roll, pitch, yaw (..., 3) of rotation matrices (..., 3, 3) (inverse of rpy_to_matrix)."""
     R = np.asarray(R, dtype=float)

@@ -11,16 +11,41 @@ from ..errors import ConfigError
 
 M = TypeVar("M", bound=BaseModel)
 
+# names a settings, calibration or profile file may still use from before the rename to one
+# name per quantity and one spelling per unit (_m_s, _rad_s, _rad); refused with the new name
+RENAMED = {
+    "dead_reckoning_drift_rad_per_s": "dr_bias_drift_rad_s",
+    "imu_gyro_bias_rad_per_s": "gyro_bias_rad_s",
+    "initial_gyro_bias_rad_s": "gyro_bias_rad_s",
+    "dvl_std_mps": "dvl_std_m_s",
+    "dvl_extra_std_mps": "dvl_extra_std_m_s",
+}
+
 
 def validate(model: type[M], data, prefix: str) -> M:
     """``model.model_validate(data)``; the first error becomes ``ConfigError(prefix + "field.path:
-    message")`` (e.g. prefix ``"run.yaml: field "`` gives ``run.yaml: field dvl.rate_hz: ...``)."""
+    message")`` (e.g. prefix ``"run.yaml: field "`` gives ``run.yaml: field dvl.rate_hz: ...``).
+    A key renamed since an earlier release (:data:`RENAMED`) is refused naming its new name."""
+    refuse_renamed(data, prefix, ())
     try:
         return model.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
         where = ".".join(str(p) for p in err["loc"]) or "(top level)"
         raise ConfigError(f"{prefix}{where}: {err['msg']}") from None
+
+
+def refuse_renamed(data, prefix: str, where: tuple = ()) -> None:
+    """ConfigError naming the new name of the first key of ``data`` (nested) in :data:`RENAMED`."""
+    if isinstance(data, dict):
+        for key, value in data.items():
+            if isinstance(key, str) and key in RENAMED:
+                path = ".".join((*where, key))
+                raise ConfigError(f"{prefix}{path}: renamed, use {RENAMED[key]!r}")
+            refuse_renamed(value, prefix, (*where, str(key)))
+    elif isinstance(data, list):
+        for i, value in enumerate(data):
+            refuse_renamed(value, prefix, (*where, str(i)))
 
 
 def read_yaml(path, what: str):

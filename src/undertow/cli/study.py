@@ -69,8 +69,8 @@ def characterize_command(
             row["source"],
             _fmt(row["amplitude_m"]),
             _fmt(row["frequency_hz"]),
-            *(_fmt(v) for v in row["dvl_std_mps"]),
-            _fmt(row["dvl_extra_std_mps"][0]),
+            *(_fmt(v) for v in row["dvl_std_m_s"]),
+            _fmt(row["dvl_extra_std_m_s"][0]),
             _fmt(row["depth_std_m"]),
         )
     console.print(table)

@@ -25,23 +25,18 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from .._util.atomic import atomic_path
-from .._util.validate import read_yaml, validate
+from .._util.validate import read_yaml, refuse_renamed, validate
 from ..errors import ConfigError, DataError
-from ..evaluation.trajectory import (
-    deduplicate_ground_truth,
-    ground_truth_velocity,
-    interpolate_ground_truth,
-)
 from ..log import Log
-from ..rotations import rpy_to_matrix, wrap_angle
+from ..rotations import world_to_body, wrap_angle
 
 
 @dataclass(frozen=True)
 class Calibration:
     """Calibration parameters (units in the names) and how well each was determined."""
 
-    dead_reckoning_drift_rad_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    imu_gyro_bias_rad_per_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dr_bias_drift_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
     dvl_scale_factor: float = 1.0
     dvl_scale_factor_std: float = float("nan")
     samples: dict | None = None
@@ -53,10 +48,8 @@ class Calibration:
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        d["dead_reckoning_drift_rad_per_s"] = [
-            float(v) for v in self.dead_reckoning_drift_rad_per_s
-        ]
-        d["imu_gyro_bias_rad_per_s"] = [float(v) for v in self.imu_gyro_bias_rad_per_s]
+        d["dr_bias_drift_rad_s"] = [float(v) for v in self.dr_bias_drift_rad_s]
+        d["gyro_bias_rad_s"] = [float(v) for v in self.gyro_bias_rad_s]
         if self.estimated is not None:
             d["estimated"] = list(self.estimated)
         else:
@@ -82,6 +75,7 @@ class Calibration:
                 f"{path}: not a calibration file (expected a mapping of "
                 f"{', '.join(_CalibrationFile.model_fields)}, got a {type(data).__name__})"
             )
+        refuse_renamed(data, f"{path}: calibration field ")
         unknown = sorted(str(k) for k in data if k not in _CalibrationFile.model_fields)
         if unknown:
             raise ConfigError(
@@ -96,7 +90,7 @@ class Calibration:
 
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
-Parameter = Literal["dead_reckoning_drift_rad_per_s", "imu_gyro_bias_rad_per_s", "dvl_scale_factor"]
+Parameter = Literal["dr_bias_drift_rad_s", "gyro_bias_rad_s", "dvl_scale_factor"]
 PARAMETERS: tuple[str, ...] = get_args(Parameter)
 
 
@@ -105,8 +99,8 @@ class _CalibrationFile(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    dead_reckoning_drift_rad_per_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
-    imu_gyro_bias_rad_per_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    dr_bias_drift_rad_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    gyro_bias_rad_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
     dvl_scale_factor: float = Field(1.0, gt=0, allow_inf_nan=False)
     dvl_scale_factor_std: float | None = float("nan")  # NaN / null: not determined
     samples: dict[str, int] | None = None
@@ -148,14 +142,14 @@ MIN_SAMPLES = 20  # per parameter: fewer overlapping samples leave it at its def
 
 def calibrate(
     log: Log,
-    min_speed_mps: float = 0.05,
+    min_speed_m_s: float = 0.05,
     smoothing_s: float = 0.05,
     min_samples: int = MIN_SAMPLES,
 ) -> Calibration:
     """Estimate mu_b, the IMU gyro bias and the DVL scale factor from ``log`` and its ground truth.
 
     Needs the ground_truth stream (repeated timestamps are dropped with a warning, see
-    :func:`~undertow.evaluation.trajectory.deduplicate_ground_truth`). Each parameter is
+    :meth:`~undertow.log.GroundTruth.usable`). Each parameter is
     estimated from its stream's samples inside the ground-truth span (DVL: valid and moving)
     when there are at least ``min_samples`` of them; a parameter with fewer, or whose stream the
     log lacks, keeps its default with one warning line saying why (``estimated`` and
@@ -163,8 +157,8 @@ def calibrate(
     DataError says what overlaps when none can be estimated.
     """
     log.require("ground_truth", stage="calibrate")
-    gt = deduplicate_ground_truth(log.ground_truth, "calibrate")
-    v_world = ground_truth_velocity(gt, smoothing_s)
+    gt = log.ground_truth.usable("calibrate")
+    v_world = gt.differentiated_velocity(smoothing_s)
     rpy_dot_full = np.gradient(np.unwrap(gt.orientation, axis=0), gt.t, axis=0)
     omega_full = _euler_rates_to_body(gt.orientation, rpy_dot_full)
     counts: dict[str, int] = {}
@@ -179,38 +173,38 @@ def calibrate(
 
     dr = log.dead_reckoning
     if dr is None or not len(dr):
-        why_not["dead_reckoning_drift_rad_per_s"] = "the log has no dead_reckoning stream"
+        why_not["dr_bias_drift_rad_s"] = "the log has no dead_reckoning stream"
     else:
         keep = inside(dr.t) & np.all(np.isfinite(dr.orientation), axis=1)
-        n = found["dead_reckoning_drift_rad_per_s (dead_reckoning)"] = int(keep.sum())
+        n = found["dr_bias_drift_rad_s (dead_reckoning)"] = int(keep.sum())
         if n < max(min_samples, 3):
-            why_not["dead_reckoning_drift_rad_per_s"] = (
+            why_not["dr_bias_drift_rad_s"] = (
                 f"{n} finite dead_reckoning samples inside the ground truth {span}, {need}"
             )
         elif np.ptp(dr.t[keep]) == 0:
-            why_not["dead_reckoning_drift_rad_per_s"] = "all dead_reckoning samples at one time"
+            why_not["dr_bias_drift_rad_s"] = "all dead_reckoning samples at one time"
         else:
-            _, rpy, _ = interpolate_ground_truth(gt, dr.t[keep])
+            _, rpy, _ = gt.interpolate(dr.t[keep])
             e = np.unwrap(wrap_angle(dr.orientation[keep] - rpy), axis=0)
-            result["dead_reckoning_drift_rad_per_s"] = tuple(
+            result["dr_bias_drift_rad_s"] = tuple(
                 _line_slope(dr.t[keep], e[:, i]) for i in range(3)
             )
             counts["dead_reckoning"] = n
     imu = log.imu
     if imu is None or not len(imu):
-        why_not["imu_gyro_bias_rad_per_s"] = "the log has no imu stream"
+        why_not["gyro_bias_rad_s"] = "the log has no imu stream"
     else:
         keep = inside(imu.t) & np.all(np.isfinite(imu.angular_velocity), axis=1)
-        n = found["imu_gyro_bias_rad_per_s (imu)"] = int(keep.sum())
+        n = found["gyro_bias_rad_s (imu)"] = int(keep.sum())
         if n < max(min_samples, 1):
-            why_not["imu_gyro_bias_rad_per_s"] = (
+            why_not["gyro_bias_rad_s"] = (
                 f"{n} finite imu samples inside the ground truth {span}, {need}"
             )
         else:
             omega = np.column_stack(
                 [np.interp(imu.t[keep], gt.t, omega_full[:, i]) for i in range(3)]
             )
-            result["imu_gyro_bias_rad_per_s"] = tuple(
+            result["gyro_bias_rad_s"] = tuple(
                 float(v) for v in np.mean(imu.angular_velocity[keep] - omega, axis=0)
             )
             counts["imu"] = n
@@ -219,16 +213,16 @@ def calibrate(
         why_not["dvl_scale_factor"] = "the log has no dvl stream"
     else:
         keep = inside(dvl.t) & dvl.valid & np.all(np.isfinite(dvl.velocity), axis=1)
-        _, rpy, vel = interpolate_ground_truth(gt, dvl.t[keep], v_world)
+        _, rpy, vel = gt.interpolate(dvl.t[keep], v_world)
         omega = np.column_stack([np.interp(dvl.t[keep], gt.t, omega_full[:, i]) for i in range(3)])
-        v_body = np.einsum("nji,nj->ni", rpy_to_matrix(rpy), vel)
+        v_body = world_to_body(rpy, vel)
         mount = log.mounting.dvl
         v_true = (v_body + np.cross(omega, np.asarray(mount.translation))) @ mount.rotation_matrix()
-        moving = np.linalg.norm(v_true, axis=1) > min_speed_mps
+        moving = np.linalg.norm(v_true, axis=1) > min_speed_m_s
         n = found["dvl_scale_factor (dvl, valid and moving)"] = int(moving.sum())
         if n < max(min_samples, 3):
             why_not["dvl_scale_factor"] = (
-                f"{n} valid dvl samples moving faster than {min_speed_mps} m/s inside the "
+                f"{n} valid dvl samples moving faster than {min_speed_m_s} m/s inside the "
                 f"ground truth {span}, {need}"
             )
         else:

@@ -43,9 +43,7 @@ from scipy.ndimage import median_filter
 from scipy.signal import periodogram
 
 from ..errors import DataError
-from ..evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
 from ..log import FRESH_WATER_DENSITY, Log, WaveProbe
-from ..rotations import rpy_to_matrix
 from .noise import NoiseProfile, wave_name
 
 CALM_AMPLITUDE_M = 0.01  # a probe showing less than this is calm water
@@ -71,7 +69,7 @@ class RunCharacterization:
 
     source: str
     wave: WaveEstimate | None
-    dvl_std_mps: tuple[float, float, float]
+    dvl_std_m_s: tuple[float, float, float]
     dvl_samples: int
     depth_std_m: float | None
     reference: str
@@ -172,7 +170,7 @@ def _steady_segments(speed: np.ndarray, n: int) -> list[tuple[int, int]]:
 
 
 def characterize_run(
-    log: Log, max_accel_mps2: float = 0.02, water_density: float = FRESH_WATER_DENSITY
+    log: Log, max_accel_m_s2: float = 0.02, water_density: float = FRESH_WATER_DENSITY
 ):
     """Characterize one run (needs dvl; wave_probe, ground_truth, pressure used when present)."""
     log.require("dvl", stage="characterize")
@@ -187,18 +185,18 @@ def characterize_run(
         )
     period = 1.0 / wave.frequency_hz if wave is not None and not wave.calm else None
     if log.ground_truth is not None:
-        std, count, reference = _dvl_about_truth(log, period, max_accel_mps2)
+        std, count, reference = _dvl_about_truth(log, period, max_accel_m_s2)
         depth_std = _depth_about_truth(log, water_density)
     else:
         std, count, reference = _dvl_about_itself(log, period)
         depth_std = _depth_about_itself(log, period, water_density)
         notes.append(f"no ground_truth stream: DVL noise measured about {reference}")
     if count < 10:
-        raise DataError(_too_few_samples(log, count, max_accel_mps2))
+        raise DataError(_too_few_samples(log, count, max_accel_m_s2))
     return RunCharacterization(
         source=log.source,
         wave=wave,
-        dvl_std_mps=tuple(float(s) for s in std),
+        dvl_std_m_s=tuple(float(s) for s in std),
         dvl_samples=int(count),
         depth_std_m=depth_std,
         reference=reference,
@@ -206,7 +204,7 @@ def characterize_run(
     )
 
 
-def _too_few_samples(log: Log, count: int, max_accel_mps2: float) -> str:
+def _too_few_samples(log: Log, count: int, max_accel_m_s2: float) -> str:
     """Why fewer than 10 DVL samples could be used: too few valid ones, or (the usual case) no
     constant-speed segment, where the noise is measured."""
     name = log.source or "log"
@@ -215,7 +213,7 @@ def _too_few_samples(log: Log, count: int, max_accel_mps2: float) -> str:
         return f"{name}: fewer than 10 valid DVL samples ({valid}) to characterize"
     if log.ground_truth is not None:
         rule = (
-            f"from the ground truth: smoothed |acceleration| below {max_accel_mps2:g} m/s^2 "
+            f"from the ground truth: smoothed |acceleration| below {max_accel_m_s2:g} m/s^2 "
             "at over half the top speed"
         )
     else:
@@ -234,23 +232,22 @@ def _dvl_ok(log: Log) -> np.ndarray:
     return log.dvl.valid & np.all(np.isfinite(log.dvl.velocity), axis=1)
 
 
-def _dvl_about_truth(log: Log, period: float | None, max_accel_mps2: float):
+def _dvl_about_truth(log: Log, period: float | None, max_accel_m_s2: float):
     """DVL - ground truth in the DVL frame during the constant-speed phase."""
     dvl, gt = log.dvl, log.ground_truth
     keep = _dvl_ok(log) & (dvl.t >= gt.t[0]) & (dvl.t <= gt.t[-1])
-    v_world = ground_truth_velocity(gt)
+    v_world = gt.differentiated_velocity()
     accel = np.gradient(v_world, gt.t, axis=0)
     # smoothed over two wave periods, so the wave-frequency sway of a mount is not "acceleration"
     window_s = max(0.5, 2.0 * period) if period else 0.5
     steady_full = np.linalg.norm(_moving_average(accel, window_s * gt.rate_hz), axis=1)
-    steady = np.interp(dvl.t, gt.t, steady_full) < max_accel_mps2
+    steady = np.interp(dvl.t, gt.t, steady_full) < max_accel_m_s2
     # moving at cruise speed: a sound-speed scale error makes the offset speed-dependent,
     # so mixing rest and cruise would inflate the std
     speed = np.linalg.norm(v_world, axis=1)
     cruising = np.interp(dvl.t, gt.t, speed) > max(0.05, 0.5 * float(speed.max()))
     keep &= steady & cruising
-    _, rpy, vel = interpolate_ground_truth(gt, dvl.t[keep], v_world)
-    v_body = np.einsum("nji,nj->ni", rpy_to_matrix(rpy), vel)
+    v_body = gt.body_velocity(dvl.t[keep], v_world)
     residual = dvl.velocity[keep] - v_body @ log.mounting.dvl.rotation_matrix()
     if residual.shape[0] < 2:
         return np.full(3, np.nan), residual.shape[0], "ground truth, constant-speed phase"
@@ -314,10 +311,10 @@ def _depth_about_itself(log: Log, period: float | None, water_density: float) ->
 def wave_noise(run: RunCharacterization, calm: RunCharacterization | None) -> tuple[float, ...]:
     """Extra DVL noise gamma per axis: sqrt(max(sigma_wave^2 - sigma_calm^2, 0)) (or the total)."""
     if calm is None:
-        return run.dvl_std_mps
+        return run.dvl_std_m_s
     return tuple(
         float(np.sqrt(max(w**2 - c**2, 0.0)))
-        for w, c in zip(run.dvl_std_mps, calm.dvl_std_mps, strict=True)
+        for w, c in zip(run.dvl_std_m_s, calm.dvl_std_m_s, strict=True)
     )
 
 
@@ -343,8 +340,8 @@ class Characterization:
                         run.wave.amplitude_zero_crossing_m if run.wave else None
                     ),
                     "frequency_hz": run.wave.frequency_hz if run.wave else None,
-                    "dvl_std_mps": list(run.dvl_std_mps),
-                    "dvl_extra_std_mps": list(extra),
+                    "dvl_std_m_s": list(run.dvl_std_m_s),
+                    "dvl_extra_std_m_s": list(extra),
                     "depth_std_m": run.depth_std_m,
                     "samples": run.dvl_samples,
                     "reference": run.reference,

@@ -71,7 +71,7 @@ class LocalizerConfig(BaseModel):
     initial_position: Vec3 | None = None
     # initial IMU gyro bias mean b-bar^g (rad/s) when initial_state is None, e.g. from
     # `undertow calibrate`; only the variants that estimate biases (be, proposed) use it
-    initial_gyro_bias_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    gyro_bias_rad_s: Vec3 = (0.0, 0.0, 0.0)
     initial_std: list[NonNegative] = Field(
         default_factory=lambda: [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3
         + [0.005] * 3 + [0.01] * 3
@@ -323,7 +323,7 @@ def _initial_state(log: Log, cfg: LocalizerConfig, t0: float):
             x0[2] = d[ok[0]] - lever[2]
     if cfg.initial_position is not None:
         x0[0:3] = cfg.initial_position
-    x0[15:18] = cfg.initial_gyro_bias_rad_s  # held at 0 by the variants without bias states
+    x0[15:18] = cfg.gyro_bias_rad_s  # held at 0 by the variants without bias states
     return x0, np.diag(np.maximum(std, 1e-9) ** 2)
 
 

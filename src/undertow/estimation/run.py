@@ -88,14 +88,14 @@ def _apply_calibration(calibration: Calibration, variant: str, params: dict) -> 
     estimated = calibration.estimated
     uses = {"dvl_scale_factor": ("dvl_scale_factor", calibration.dvl_scale_factor)}
     if variant in ("be", "proposed"):  # mu_b and the gyro bias belong to the bias model
-        uses["dead_reckoning_drift_rad_per_s"] = (
+        uses["dr_bias_drift_rad_s"] = (
             "dr_bias_drift_rad_s",
-            tuple(calibration.dead_reckoning_drift_rad_per_s),
+            tuple(calibration.dr_bias_drift_rad_s),
         )
         if params.get("initial_state") is None:
-            uses["imu_gyro_bias_rad_per_s"] = (
-                "initial_gyro_bias_rad_s",
-                tuple(calibration.imu_gyro_bias_rad_per_s),
+            uses["gyro_bias_rad_s"] = (
+                "gyro_bias_rad_s",
+                tuple(calibration.gyro_bias_rad_s),
             )
     skipped = []
     for name, (field, value) in uses.items():

@@ -33,12 +33,12 @@ from scipy.stats import chi2
 
 from ..errors import DataError
 from ..log import GroundTruth
-from ..rotations import matrix_to_rpy, rpy_to_matrix, wrap_angle
+from ..rotations import matrix_to_rpy, rpy_to_matrix, world_to_body, wrap_angle
 from ..trajectory import Trajectory
 
 MIN_SAMPLES = 10  # estimates inside the ground truth needed for an RMSE
 AXES = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz")
-UNITS = ("m", "m", "m", "rad", "rad", "rad", "mps", "mps", "mps")
+UNITS = ("m", "m", "m", "rad", "rad", "rad", "m_s", "m_s", "m_s")
 
 
 @dataclass(frozen=True)
@@ -56,65 +56,6 @@ class TrajectoryErrors:
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-def deduplicate_ground_truth(gt: GroundTruth, where: str = "ground truth", min_poses: int = 3):
-    """``gt`` without repeated timestamps (the first pose at each time is kept) and without
-    non-finite poses, each with one warning line; DataError if fewer than ``min_poses`` remain."""
-    bad = ~(np.all(np.isfinite(gt.position), axis=1) & np.all(np.isfinite(gt.orientation), axis=1))
-    if bad.any():
-        warnings.warn(
-            f"{where}: dropped {int(bad.sum())} ground-truth poses with non-finite values",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-        gt = gt.select(~bad)
-    repeated = np.r_[False, np.diff(gt.t) == 0] if len(gt) else np.zeros(0, bool)
-    if repeated.any():
-        first = gt.t[int(np.argmax(repeated))]
-        warnings.warn(
-            f"{where}: ground truth repeats {int(repeated.sum())} timestamps (first at "
-            f"t = {first:.6f} s, rounded times?); kept the first pose at each time",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-        gt = gt.select(~repeated)
-    if len(gt) < min_poses:
-        raise DataError(
-            f"{where}: ground truth has {len(gt)} usable poses at distinct times; "
-            f"need at least {min_poses}"
-        )
-    return gt
-
-
-def ground_truth_velocity(gt: GroundTruth, smoothing_s: float = 0.05) -> np.ndarray:
-    """World-frame velocity (N, 3) by differentiating positions and convolution smoothing.
-
-    v_k = sum_j w_j (dp/dt)_{k-j}, with w a normalized Hann window spanning ``smoothing_s``.
-    """
-    if len(gt) < 3:
-        raise DataError("ground_truth: need at least 3 poses to differentiate")
-    v = np.gradient(gt.position, gt.t, axis=0)
-    dt = float(np.median(np.diff(gt.t)))
-    n = max(int(round(smoothing_s / dt)), 1) | 1  # odd, so the window is centred (no delay)
-    if n < 3:
-        return v
-    w = np.hanning(n + 2)[1:-1]
-    w /= w.sum()
-    pad = n // 2
-    padded = np.pad(v, ((pad, n - 1 - pad), (0, 0)), mode="edge")
-    return np.stack([np.convolve(padded[:, i], w, mode="valid") for i in range(3)], axis=1)
-
-
-def interpolate_ground_truth(gt: GroundTruth, t: np.ndarray, velocity: np.ndarray | None = None):
-    """Ground-truth position, attitude (and velocity) at times ``t`` (inside the GT span)."""
-    pos = np.stack([np.interp(t, gt.t, gt.position[:, i]) for i in range(3)], axis=1)
-    unwrapped = np.unwrap(gt.orientation, axis=0)
-    rpy = wrap_angle(np.stack([np.interp(t, gt.t, unwrapped[:, i]) for i in range(3)], axis=1))
-    vel = None
-    if velocity is not None:
-        vel = np.stack([np.interp(t, gt.t, velocity[:, i]) for i in range(3)], axis=1)
-    return pos, rpy, vel
 
 
 def _align_origin(pos: np.ndarray, rpy: np.ndarray, gt_pos0, gt_rpy0, P: np.ndarray):
@@ -165,7 +106,7 @@ def trajectory_rmse(
         if not finite.any():
             raise DataError("trajectory: no sample has a finite pose and velocity")
         est = est.replace(t=est.t[finite], x=est.x[finite], P=est.P[finite])
-    gt = deduplicate_ground_truth(gt, "evaluate trajectory")
+    gt = gt.usable("evaluate trajectory")
     inside = (est.t >= gt.t[0]) & (est.t <= gt.t[-1])
     if not np.any(inside):
         raise DataError(
@@ -176,9 +117,9 @@ def trajectory_rmse(
     t = est.t[inside]
     x = est.x[inside]
     P = est.P[inside][:, :6, :6]
-    v_world = ground_truth_velocity(gt, smoothing_s)
-    gt_pos, gt_rpy, gt_vel = interpolate_ground_truth(gt, t, v_world)
-    gt_vel_body = np.einsum("nji,nj->ni", rpy_to_matrix(gt_rpy), gt_vel)
+    v_world = gt.differentiated_velocity(smoothing_s)
+    gt_pos, gt_rpy, gt_vel = gt.interpolate(t, v_world)
+    gt_vel_body = world_to_body(gt_rpy, gt_vel)
     pos, rpy = x[:, 0:3], x[:, 3:6]
     if align == "origin":
         pos, rpy, P = _align_origin(pos, rpy, gt_pos[0], gt_rpy[0], P)

@@ -35,7 +35,7 @@ from .._util.atomic import atomic_path
 from .._util.plain import to_plain
 from ..errors import UndertowError
 from ..log import Log
-from ..rotations import rpy_to_matrix, rpy_to_quaternion
+from ..rotations import rpy_to_quaternion, world_to_body
 from .a50_json import velocity_report_line
 from .msgdefs import A50_BEAM, A50_DVL, MARINE_DVL, dvl_typestore
 from .rosbag import SIDECAR
@@ -250,7 +250,7 @@ def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None, topics:
             )
     if (s := log.ground_truth) is not None:
         vel = s.velocity if s.velocity is not None else np.full((len(s), 3), np.nan)
-        body_vel = np.einsum("nji,nj->ni", rpy_to_matrix(s.orientation), vel)
+        body_vel = world_to_body(s.orientation, vel)
         twist_t = T["geometry_msgs/msg/TwistWithCovariance"]
         for i in _decimate(s.t, gt_rate):
             h, ns = b.header(s.t[i], "world")

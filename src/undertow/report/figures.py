@@ -23,7 +23,6 @@ from .._util.atomic import atomic_path
 from ..errors import DataError
 from ..log import Log
 from ..mapping.kernels import product_kernel, sparse_kernel
-from ..rotations import rpy_to_matrix
 from ..trajectory import Trajectory
 
 DPI = 120
@@ -93,14 +92,6 @@ def cloud(name: str, points) -> np.ndarray:
     return arr[np.all(np.isfinite(arr), axis=1)]
 
 
-def ground_truth_body_velocity(gt, t: np.ndarray) -> np.ndarray:
-    """Ground-truth velocity in the body frame at ``t``: v^B = R(eta)^T v^W (as the evaluation)."""
-    from ..evaluation.trajectory import ground_truth_velocity, interpolate_ground_truth
-
-    _, rpy, v_world = interpolate_ground_truth(gt, t, ground_truth_velocity(gt))
-    return np.einsum("nji,nj->ni", rpy_to_matrix(rpy), v_world)
-
-
 def dvl_body_velocity(log: Log) -> tuple[np.ndarray, np.ndarray]:
     """Times and valid DVL velocities rotated from the DVL frame to body axes (N, 3).
 
@@ -127,7 +118,7 @@ def plot_velocity(path, log: Log, trajectory: Trajectory) -> Path:
     gt = log.ground_truth
     if gt is not None and len(gt) >= 3:
         t = np.linspace(gt.t[0], gt.t[-1], min(len(gt), 4000))
-        ax.plot(t, ground_truth_body_velocity(gt, t)[:, 0], color=GROUND_TRUTH_COLOR, lw=1.4,
+        ax.plot(t, gt.body_velocity(t)[:, 0], color=GROUND_TRUTH_COLOR, lw=1.4,
                 label="ground truth")  # fmt: skip
     ax.set(xlabel="time (s)", ylabel="body x velocity u (m/s)",
            title="Velocity in x: ground truth, estimate and DVL (paper Fig. 8)")  # fmt: skip

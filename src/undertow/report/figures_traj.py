@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from ..evaluation.trajectory import interpolate_ground_truth
 from ..log import GroundTruth
 from ..rotations import wrap_angle
 from ..trajectory import Trajectory
@@ -51,7 +50,7 @@ def _errors(gt: GroundTruth, traj: Trajectory):
     """Times, errors (x, y, yaw) and their 2-sigma bounds from P, inside the GT time span."""
     inside = (traj.t >= gt.t[0]) & (traj.t <= gt.t[-1])
     t = traj.t[inside]
-    pos, rpy, _ = interpolate_ground_truth(gt, t)
+    pos, rpy, _ = gt.interpolate(t)
     x = traj.x[inside]
     err = np.stack([x[:, 0] - pos[:, 0], x[:, 1] - pos[:, 1],
                     wrap_angle(x[:, 5] - rpy[:, 2])], axis=1)  # fmt: skip

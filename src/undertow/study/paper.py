@@ -8,18 +8,18 @@ measured in; the report shows them next to every simulated condition.
 
 from __future__ import annotations
 
-AXES = ("x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_mps", "vy_mps", "vz_mps")
+AXES = ("x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_m_s", "vy_m_s", "vz_m_s")
 
 #: Table I: std. dev. of DVL velocities during waves, (vx, vy, vz) m/s, by (amplitude, frequency).
 TABLE_I = {
     "wave-a0.10-f1.00": {
-        "amplitude_m": 0.10, "frequency_hz": 1.00, "dvl_std_mps": (0.025, 0.010, 0.003)
+        "amplitude_m": 0.10, "frequency_hz": 1.00, "dvl_std_m_s": (0.025, 0.010, 0.003)
     },
     "wave-a0.10-f0.75": {
-        "amplitude_m": 0.10, "frequency_hz": 0.75, "dvl_std_mps": (0.040, 0.010, 0.003)
+        "amplitude_m": 0.10, "frequency_hz": 0.75, "dvl_std_m_s": (0.040, 0.010, 0.003)
     },
     "wave-a0.05-f0.75": {
-        "amplitude_m": 0.05, "frequency_hz": 0.75, "dvl_std_mps": (0.011, 0.010, 0.003)
+        "amplitude_m": 0.05, "frequency_hz": 0.75, "dvl_std_m_s": (0.011, 0.010, 0.003)
     },
 }  # fmt: skip
 

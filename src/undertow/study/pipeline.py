@@ -115,7 +115,7 @@ def _trajectory_metrics(traj, ground_truth) -> dict:
             "x_m": float(std[:, 0].mean()),
             "y_m": float(std[:, 1].mean()),
             "yaw_rad": float(std[:, 5].mean()),
-            "vx_mps": float(std[:, 6].mean()),
+            "vx_m_s": float(std[:, 6].mean()),
         },
     }
 
@@ -168,7 +168,7 @@ def _rock_survey(name: str, seed: int, calibration, profile, art: Artifacts) -> 
 def _table1_row(row: dict) -> dict:
     """Scalars, with per-axis values as {vx, vy, vz} (aggregation works on named leaves)."""
     out = {k: row[k] for k in ("amplitude_m", "frequency_hz", "depth_std_m")}
-    for key in ("dvl_std_mps", "dvl_extra_std_mps"):
+    for key in ("dvl_std_m_s", "dvl_extra_std_m_s"):
         out[key] = dict(zip(("vx", "vy", "vz"), row[key], strict=True))
     return to_plain(out)
 
@@ -191,15 +191,15 @@ CLAIMS = {
     "added_noise_reduces_velocity_error": (
         "added noise improves the velocity error (vx RMSE: an < baseline)",
         lambda c: (
-            c["localization"]["an"]["rmse"]["vx_mps"]
-            < c["localization"]["baseline"]["rmse"]["vx_mps"]
+            c["localization"]["an"]["rmse"]["vx_m_s"]
+            < c["localization"]["baseline"]["rmse"]["vx_m_s"]
         ),
     ),
     "added_noise_widens_covariance": (
         "added noise widens the covariance in waves (mean vx std: an > baseline)",
         lambda c: (
-            c["localization"]["an"]["mean_std"]["vx_mps"]
-            > c["localization"]["baseline"]["mean_std"]["vx_mps"]
+            c["localization"]["an"]["mean_std"]["vx_m_s"]
+            > c["localization"]["baseline"]["mean_std"]["vx_m_s"]
         ),
     ),
     "x_error_not_removed_by_filter": (
@@ -300,7 +300,7 @@ TABLE1_CLAIMS = {
     "shorter_waves_more_dvl_noise": (
         "shorter waves give larger DVL noise (vx std: f = 1.00 Hz > f = 0.75 Hz at a = 0.10 m)",
         lambda t: (
-            t["wave-a0.10-f1.00"]["dvl_std_mps"]["vx"] > t["wave-a0.10-f0.75"]["dvl_std_mps"]["vx"]
+            t["wave-a0.10-f1.00"]["dvl_std_m_s"]["vx"] > t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
         ),
         "the simulator's wave noise scales with the orbital velocity at the DVL's depth (an "
         "assumption, coefficient 1), which for the same amplitude is larger for the longer "
@@ -311,7 +311,7 @@ TABLE1_CLAIMS = {
     "smaller_amplitude_less_dvl_noise": (
         "smaller waves give smaller DVL noise (vx std: a = 0.05 m < a = 0.10 m at 0.75 Hz)",
         lambda t: (
-            t["wave-a0.05-f0.75"]["dvl_std_mps"]["vx"] < t["wave-a0.10-f0.75"]["dvl_std_mps"]["vx"]
+            t["wave-a0.05-f0.75"]["dvl_std_m_s"]["vx"] < t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
         ),
         None,
     ),

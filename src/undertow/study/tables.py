@@ -13,8 +13,8 @@ from .stats import aggregate, claim_fraction
 
 AXIS_LABELS = {
     "x_m": "x (m)", "y_m": "y (m)", "z_m": "z (m)", "roll_rad": "roll (rad)",
-    "pitch_rad": "pitch (rad)", "yaw_rad": "yaw (rad)", "vx_mps": "vx (m/s)",
-    "vy_mps": "vy (m/s)", "vz_mps": "vz (m/s)",
+    "pitch_rad": "pitch (rad)", "yaw_rad": "yaw (rad)", "vx_m_s": "vx (m/s)",
+    "vy_m_s": "vy (m/s)", "vz_m_s": "vz (m/s)",
 }  # fmt: skip
 
 
@@ -80,10 +80,10 @@ def table1_markdown(t: dict) -> str:
     rows = []
     for c in t["conditions"]:
         sim, ref = t["table1"][c], paper.TABLE_I.get(c, {})
-        std, extra = sim["dvl_std_mps"], sim["dvl_extra_std_mps"]
+        std, extra = sim["dvl_std_m_s"], sim["dvl_extra_std_m_s"]
         std = [std[a] for a in ("vx", "vy", "vz")]
         extra = [extra[a] for a in ("vx", "vy", "vz")]
-        ref_std = ref.get("dvl_std_mps", (None,) * 3)
+        ref_std = ref.get("dvl_std_m_s", (None,) * 3)
         rows.append(
             [
                 c,
