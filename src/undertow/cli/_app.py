@@ -83,13 +83,9 @@ def _print_json(data) -> None:
 
 
 def _load_log(path: Path, topics: Path | None, settings=None):
-    """Read a log; topic names from --topics, else the settings file's, else the defaults."""
-    from ..io import read_log
-    from ..io.topics import TopicMap
+    from ..jobs.common import load_log
 
-    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics if settings else None
-    log = read_log(path, topics=topic_map)
-    return settings.apply_mounting(log) if settings else log
+    return load_log(path, topics, settings)
 
 
 def _triple(text: str | None, name: str):

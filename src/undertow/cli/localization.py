@@ -85,7 +85,7 @@ def localize(
     from ..estimation.localizer import wave_condition
     from ..estimation.noise import parse_wave
     from ..estimation.run import localize as run_localize
-    from ..estimation.run import save_trajectory
+    from ..io.results import save_trajectory
     from ..settings import Settings
 
     numbers = {"--wave-amplitude": wave_amplitude, "--wave-frequency": wave_frequency}

@@ -159,7 +159,7 @@ def _write_text(path: Path, text: str) -> None:
 
 def _write_runs(root: Path, art: Artifacts) -> None:
     """First seed's runs: simulation outputs, trajectories per variant, maps per method."""
-    from ..estimation.run import save_trajectory
+    from ..io.results import save_trajectory
     from ..mapping.mappers import write_map_ply
     from ..sim import write_simulation
 
