@@ -15,8 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from undertow.estimation import model
-from undertow.estimation.localizer import Localizer
+from undertow.estimation import Localizer, model
 from undertow.estimation.ukf import _weights
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
 from undertow.rotations import rpy_to_matrix
@@ -56,19 +55,18 @@ def _per_step_us(n_steps: int = 20000) -> float:
     `undertow localize` does by default."""
     t = np.arange(1, n_steps + 1) * DT
     kind = np.full(n_steps, model.DVL)
-    z = np.tile(Z_DVL, (n_steps, 1))
-    R = np.tile(R_DVL, (n_steps, 1, 1))
+    meas = model.pack_measurements(t, kind, np.tile(Z_DVL, (n_steps, 1)),
+                                   np.tile(R_DVL, (n_steps, 1, 1)))  # fmt: skip
     wm, wc, lam = _weights(18, ALPHA, BETA, KAPPA)
-    args = (
-        t, kind, z, R, X0, P0, 0.0, wm, wc, lam, Q_ACC, Q_BIAS, MU, np.eye(3),
-        np.ascontiguousarray(DVL_R.T), DVL_ARM, BARO_ARM, 1.0, np.full(4, np.inf), False,
-        np.empty(0), True, n_steps,
-    )  # fmt: skip
+    process = model.ProcessModel(wm, wc, lam, Q_ACC, Q_BIAS, MU, 1.0, False)
+    sensors = model.SensorModel(np.eye(3), np.ascontiguousarray(DVL_R.T), DVL_ARM, BARO_ARM,
+                                np.full(4, np.inf))  # fmt: skip
+    args = (meas, 0.0, X0, P0, process, sensors, None)
     model._run_filter(*args)  # compile / load cache
     best = np.inf
     for _ in range(3):
         t0 = time.perf_counter()
-        out_t, out_x, out_P, _ = model._run_filter(*args)
+        out_t, out_x, out_P, _, _ = model._run_filter(*args)
         best = min(best, time.perf_counter() - t0)
     assert out_t.size == n_steps and np.all(np.isfinite(out_P))
     return best / n_steps * 1e6

@@ -1,11 +1,24 @@
-"""Shared fixtures: where the real DVL recordings live.
+"""Shared fixtures: where the real DVL recordings live, and simulated runs computed once.
 
 The recordings are in the project's shared folder (``../shared/data/real`` next to the
 checkout). Set UNDERTOW_REAL_DATA to point elsewhere.
+
+Simulated runs are deterministic per (scenario, seed), so several test files share one
+simulation per session: ``simulation(name, seed)`` gives the :class:`SimulationResult` (its
+arrays read-only: a test that needs to change one copies it), ``simulated_run(name, seed)`` the
+run folder ``undertow simulate NAME --seed SEED`` writes (tests must not write into it; copy it
+with :func:`shutil.copytree` to change it).
+
+Tests marked ``slow`` (heavy fixtures, clusters, long logs, end-to-end command chains) are left
+out by ``make test-fast`` (``pytest -m "not slow"``); ``make test`` runs everything.
 """
 
+import dataclasses
 import os
 from pathlib import Path
+
+import numpy as np
+import pytest
 
 
 def _find_real_data() -> Path:
@@ -21,3 +34,47 @@ def _find_real_data() -> Path:
 
 
 REAL_DATA = _find_real_data()
+
+
+def _freeze(obj) -> None:
+    """Make every numpy array held by ``obj`` (a dataclass, at any depth) read-only."""
+    if isinstance(obj, np.ndarray):
+        obj.flags.writeable = False
+    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        for f in dataclasses.fields(obj):
+            _freeze(getattr(obj, f.name))
+
+
+@pytest.fixture(scope="session")
+def simulation():
+    """``simulation(name, seed=0)``: the built-in scenario ``name`` simulated with ``seed``, once
+    per session; its arrays are read-only."""
+    from undertow.sim import load_scenario, simulate
+
+    cache = {}
+
+    def get(name: str, seed: int = 0):
+        if (name, seed) not in cache:
+            result = simulate(load_scenario(name), seed=seed)
+            _freeze(result)
+            cache[name, seed] = result
+        return cache[name, seed]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def simulated_run(tmp_path_factory, simulation):
+    """``simulated_run(name, seed=0)``: the folder ``undertow simulate name --seed seed`` writes
+    (log/, ground_truth.tum, ground_truth.ply, scenario.yaml), once per session. Read only."""
+    from undertow.sim import write_simulation
+
+    root = tmp_path_factory.mktemp("simulated_runs")
+    cache = {}
+
+    def get(name: str, seed: int = 0) -> Path:
+        if (name, seed) not in cache:
+            cache[name, seed] = write_simulation(simulation(name, seed), root / f"{name}_{seed}")
+        return cache[name, seed]
+
+    return get

@@ -68,6 +68,7 @@ def test_threads_gives_the_same_results():
     assert sorted(calls) == list(range(1, len(SEEDS) + 1))
 
 
+@pytest.mark.slow
 def test_process_cluster_gives_the_same_results(cluster_address):
     calls = []
     out = run_batch(seeded_metrics, SEEDS, scheduler=cluster_address, args=(2.0,),
@@ -78,7 +79,9 @@ def test_process_cluster_gives_the_same_results(cluster_address):
     assert sorted(calls) == [(k, len(SEEDS)) for k in range(1, len(SEEDS) + 1)]
 
 
-@pytest.mark.parametrize("scheduler", ["sync", "threads", "cluster"])
+@pytest.mark.parametrize(
+    "scheduler", ["sync", "threads", pytest.param("cluster", marks=pytest.mark.slow)]
+)
 def test_failing_seed_is_reported_and_the_others_kept(scheduler, request):
     if scheduler == "cluster":
         scheduler = request.getfixturevalue("cluster_address")
@@ -91,12 +94,14 @@ def test_failing_seed_is_reported_and_the_others_kept(scheduler, request):
     assert not out.ok
 
 
+@pytest.mark.slow
 def test_local_cluster_created_and_closed_inside_the_call():
     out = run_batch(seeded_metrics, [7, 8], scheduler="local")
     assert out.scheduler.startswith("local") and 1 <= out.workers <= 2
     assert out.results == expected([7, 8])
 
 
+@pytest.mark.slow
 def test_unreachable_scheduler_is_one_line_error_quickly():
     with socket.socket() as sock:  # a free port nobody listens on
         sock.bind(("127.0.0.1", 0))

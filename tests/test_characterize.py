@@ -34,6 +34,7 @@ def test_quadrature_subtraction_of_calm_noise():
     np.testing.assert_allclose(wave_noise(wavy, calm), [0.008, 0.0, 0.0], atol=1e-12)
 
 
+@pytest.mark.slow
 def test_recovers_the_simulators_waves_and_noise():
     """Characterize a simulated carriage run: wave amplitude and frequency within a few percent
     of the scenario, DVL sigmas within sampling error of the configured ones (base beam noise
@@ -112,6 +113,7 @@ def simulated():
     return {name: simulate(load_scenario(name), seed=5) for name in ("calm", "wave-a0.10-f0.75")}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["calm", "wave-a0.10-f0.75"])
 def test_without_ground_truth_agrees_with_ground_truth(simulated, name):
     """Hiding the ground truth changes the reference (the DVL's own running mean inside its
@@ -130,6 +132,7 @@ def test_without_ground_truth_agrees_with_ground_truth(simulated, name):
     assert without.depth_std_m == pytest.approx(with_gt.depth_std_m, rel=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["calm", "wave-a0.10-f0.75"])
 def test_barometer_depth_noise_matches_its_closed_form(simulated, name):
     """The simulated barometer reads p = p_atm + rho g d + rho g a K_p(d) cos(theta) + n_p with
@@ -172,6 +175,7 @@ def test_a_run_without_a_constant_speed_segment_says_so():
     assert "fewer than 10" not in str(info.value)
 
 
+@pytest.mark.slow
 def test_characterize_without_a_calm_run_warns():
     from undertow.estimation.characterize import characterize
 

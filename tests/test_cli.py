@@ -1,7 +1,9 @@
 """The command line: thin commands, one clear line for user errors, JSON that parses."""
 
 import json
+import shutil
 
+import pytest
 from conftest import REAL_DATA
 from typer.testing import CliRunner
 
@@ -32,6 +34,7 @@ def test_help_has_examples():
     assert result.exit_code == 0 and "undertow simulate" in result.output
 
 
+@pytest.mark.slow
 def test_simulate_localize_evaluate_map_end_to_end(tmp_path):
     """The README's workflow through the bag on disk, checked against the ground truth files."""
     run = tmp_path / "run"
@@ -114,24 +117,20 @@ def test_unknown_scenario_lists_the_builtins():
     assert result.exit_code == 1 and "wave-a0.10-f1.00" in result.output
 
 
-def test_characterize_writes_a_profile_that_localize_reads(tmp_path):
-    for name in ("calm", "wave-a0.10-f1.00"):
-        r = runner.invoke(
-            app, ["simulate", name, "--out", str(tmp_path / name), "-q", "--seed", "2"]
-        )
-        assert r.exit_code == 0, r.output
+@pytest.mark.slow
+def test_characterize_writes_a_profile_that_localize_reads(tmp_path, simulated_run):
+    calm, wave = simulated_run("calm", 2), simulated_run("wave-a0.10-f1.00", 2)
     profile = tmp_path / "profile.yaml"
     r = runner.invoke(
         app,
-        ["characterize", str(tmp_path / "calm" / "log"), str(tmp_path / "wave-a0.10-f1.00" / "log"),
-         "--out", str(profile), "--json"],
-    )  # fmt: skip
+        ["characterize", str(calm / "log"), str(wave / "log"), "--out", str(profile), "--json"],
+    )
     assert r.exit_code == 0, r.output
     rows = json.loads(r.stdout)["runs"]
     assert abs(rows[1]["amplitude_m"] - 0.10) < 0.005 and abs(rows[1]["frequency_hz"] - 1.0) < 0.01
     r = runner.invoke(
         app,
-        ["localize", str(tmp_path / "wave-a0.10-f1.00" / "log"), "--profile", str(profile),
+        ["localize", str(wave / "log"), "--profile", str(profile),
          "--wave-amplitude", "0.1", "--wave-frequency", "1.0", "--smooth",
          "--out", str(tmp_path / "est"), "-q"],
     )  # fmt: skip
@@ -149,11 +148,11 @@ def _one_error_line(result) -> str:
     return lines[0]
 
 
-def test_outputs_never_clobber_a_folder_or_a_file(tmp_path):
+@pytest.mark.slow
+def test_outputs_never_clobber_a_folder_or_a_file(tmp_path, simulated_run):
     """calibrate/characterize --out on a run folder, localize --out on a non-empty folder or a
     file, simulate --out under a path that cannot exist: one line each, nothing touched."""
-    run = tmp_path / "run"
-    assert runner.invoke(app, ["simulate", "calm", "--out", str(run), "-q"]).exit_code == 0
+    run = shutil.copytree(simulated_run("calm"), tmp_path / "run")
     before = sorted(p.name for p in run.iterdir())
     gt = str(run / "ground_truth.tum")
     line = _one_error_line(
@@ -185,9 +184,8 @@ def test_errors_inside_long_work_are_still_one_line_without_quiet(tmp_path):
     assert _one_error_line(r).startswith("error:") and r.output.startswith("error:")
 
 
-def test_out_holding_the_input_is_refused_even_with_overwrite(tmp_path):
-    run = tmp_path / "run"
-    assert runner.invoke(app, ["simulate", "calm", "--out", str(run), "-q"]).exit_code == 0
+def test_out_holding_the_input_is_refused_even_with_overwrite(tmp_path, simulated_run):
+    run = shutil.copytree(simulated_run("calm"), tmp_path / "run")
     again = ["simulate", str(run / "scenario.yaml"), "--out", str(run), "--overwrite", "-q"]
     assert "holds the input" in _one_error_line(runner.invoke(app, again))
     assert (run / "log").is_dir() and (run / "scenario.yaml").is_file()

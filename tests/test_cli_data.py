@@ -45,6 +45,7 @@ def _noise(log):
     }
 
 
+@pytest.mark.slow
 def test_a_written_scenario_yaml_reproduces_its_run_and_an_explicit_seed_wins(tmp_path):
     (tmp_path / "short.yaml").write_text(SHORT)
     s3 = tmp_path / "s3"
@@ -97,3 +98,64 @@ def test_info_warns_about_a_topic_of_the_users_file_that_the_bag_lacks(tmp_path)
     assert result.exit_code == 0, result.output
     warned = [ln for ln in result.stderr.splitlines() if "topic map" in ln]
     assert len(warned) == 1 and "imu" in warned[0] and "/mavros/imu/data" in warned[0]
+
+
+@pytest.mark.slow
+def test_the_python_jobs_give_what_the_commands_print(tmp_path, simulated_run):
+    """`undertow simulate calm --seed 0` writes the same files as the library (the session's
+    shared run is written by it), and `undertow info --json` prints `info_file(...).to_dict()`,
+    warnings included (a topic of the user's map that the bag lacks)."""
+    import json
+
+    from undertow.jobs.data import RUN_FILES, info_file, simulate_to_folder
+
+    cli = tmp_path / "cli"
+    result = runner.invoke(app, ["simulate", "calm", "--seed", "0", "--out", str(cli)])
+    assert result.exit_code == 0, result.output
+    assert " ".join(result.stderr.split()) == f"wrote {cli}/{', '.join(RUN_FILES)}"
+    lib = simulated_run("calm", 0)
+    for name in ("ground_truth.tum", "ground_truth.ply", "scenario.yaml", "log/log.mcap"):
+        assert (cli / name).read_bytes() == (lib / name).read_bytes(), name
+    labels = []
+    again = simulate_to_folder(lib / "scenario.yaml", tmp_path / "py", on_start=labels.append)
+    assert labels == ["simulating calm (seed 0)"] and again.seed == 0
+    assert sorted(p.name for p in again.out_dir.iterdir()) == sorted(RUN_FILES)
+    assert (again.out_dir / "log/log.mcap").read_bytes() == (lib / "log/log.mcap").read_bytes()
+
+    printed = runner.invoke(app, ["info", str(cli / "log"), "--json"])
+    assert printed.exit_code == 0, printed.output
+    assert json.loads(printed.stdout) == json.loads(json.dumps(info_file(cli / "log").to_dict()))
+
+    from conftest import REAL_DATA
+
+    topics = tmp_path / "topics.yaml"
+    topics.write_text("imu: /mavros/imu/data\n")
+    bag = REAL_DATA / "a50_ros1_circle.bag"
+    printed = runner.invoke(app, ["info", str(bag), "--json", "--topics", str(topics)])
+    with pytest.warns(UserWarning, match="/mavros/imu/data"):
+        info = info_file(bag, topics=topics)
+    assert json.loads(printed.stdout) == info.to_dict()
+    assert [w for w in info.warnings if "/mavros/imu/data" in w]
+    assert all(f"warning: {w}" in printed.stderr for w in info.warnings)
+
+
+def test_info_settings_file_topics_and_the_table(tmp_path):
+    """`--config` reads the topic names from the settings file (as `--topics` does); the table
+    has one row per stream."""
+    from conftest import REAL_DATA
+
+    from undertow.cli.data import summary_table
+    from undertow.jobs.data import info_file
+    from undertow.settings import Settings
+
+    settings = tmp_path / "settings.yaml"
+    settings.write_text("topics: {imu: [/mavros/imu/data]}\n")
+    bag = REAL_DATA / "a50_ros1_circle.bag"
+    printed = runner.invoke(app, ["info", str(bag), "--config", str(settings)])
+    assert printed.exit_code == 0, printed.output
+    assert "/mavros/imu/data" in printed.stderr
+    with pytest.warns(UserWarning, match="/mavros/imu/data"):
+        info = info_file(bag, settings=Settings.from_yaml(settings))
+    table = summary_table(info.summary)
+    assert table.row_count == len(info.summary.streams) == 1
+    assert "dvl" in printed.stdout and "378" in printed.stdout

@@ -16,11 +16,10 @@ runner = CliRunner()
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
+def run(tmp_path_factory, simulated_run):
     """The calm carriage run, localized once (no smoothing)."""
     root = tmp_path_factory.mktemp("calm")
-    r = runner.invoke(app, ["simulate", "calm", "--out", str(root / "run"), "-q"])
-    assert r.exit_code == 0, r.output
+    (root / "run").symlink_to(simulated_run("calm", 0))  # `undertow simulate calm`'s folder
     r = runner.invoke(
         app, ["localize", str(root / "run" / "log"), "--out", str(root / "est"), "-q"]
     )
@@ -65,6 +64,7 @@ def test_invalid_settings_value_is_one_line(run, tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_gate_option_reaches_the_filter(run):
     r = _localize(run, "--gate", "0.999", "--output-rate", "5")
     assert r.exit_code == 0, r.output
@@ -87,6 +87,7 @@ def _npz(run, tmp_path, name, change):
     return str(path)
 
 
+@pytest.mark.slow
 def test_evaluate_refuses_empty_or_nan_time_trajectories(run, tmp_path):
     gt = str(run / "run" / "ground_truth.tum")
 
@@ -120,6 +121,7 @@ def test_evaluate_zero_covariance_warns_and_reports_no_nees(run, tmp_path):
     assert data["rmse"]["z_m"] < 0.05
 
 
+@pytest.mark.slow
 def test_rounded_ground_truth_times_warn_and_give_the_same_answer(run, tmp_path):
     """Ground truth rounded to 0.01 s (20 repeats per time at 2000 Hz): one warning line; RMSE
     and calibration as with the original file (what moves in 5 ms at 0.8 m/s is 4 mm)."""
@@ -160,6 +162,7 @@ def _warnings(output: str) -> list[str]:
     return [ln for ln in output.splitlines() if ln.startswith("warning:")]
 
 
+@pytest.mark.slow
 def test_calibrate_without_the_imu_says_so_and_localize_does_not_pretend(run, tmp_path):
     """A topic map hiding the IMU: the gyro bias keeps its default with one warning line, the
     YAML records what was estimated, and localize --calibration names what it did not get."""
@@ -188,6 +191,7 @@ def test_calibrate_without_the_imu_says_so_and_localize_does_not_pretend(run, tm
     assert used["calibration"]["estimated"] == saved["estimated"]
 
 
+@pytest.mark.slow
 def test_a_bare_bag_file_is_localized_as_calm_and_says_so(run, tmp_path):
     bare = tmp_path / "bare"
     bare.mkdir()
@@ -214,15 +218,63 @@ def test_help_documents_quiet_and_the_default_wave():
     assert "undertow.yaml, else calm" in _help("localize")
 
 
-def test_conflicting_wave_options_and_smooth_with_output_rate_are_refused_up_front(run):
+def test_conflicting_wave_options_and_smooth_with_output_rate_are_refused_up_front(run, tmp_path):
     line = _error_line(_localize(run, "--wave", "calm", "--wave-amplitude", "0.1",
                                  "--wave-frequency", "1"))  # fmt: skip
     assert "--wave and --wave-amplitude / --wave-frequency conflict" in line
     # before reading the log: a missing log would be the error otherwise
     r = runner.invoke(app, ["localize", str(run / "missing"), "--out", str(run / "y"),
                             "--output-rate", "1", "--smooth"])  # fmt: skip
-    assert "--smooth needs the filter output at every measurement" in _error_line(r)
+    line = _error_line(r)
+    assert "smoothing (--smooth) needs the filter output at every measurement" in line
+    assert "output_rate_hz=1.0 (--output-rate" in line
     assert not (run / "y").exists()
+    settings = tmp_path / "s.yaml"  # the same clash from the settings file
+    settings.write_text("localizer: {output_rate_hz: 2.0}\n")
+    r = runner.invoke(app, ["localize", str(run / "missing"), "--out", str(run / "y"),
+                            "--config", str(settings), "--smooth"])  # fmt: skip
+    assert "output_rate_hz=2.0" in _error_line(r)
+    assert not (run / "y").exists()
+
+
+@pytest.mark.slow
+def test_a_python_user_gets_what_the_commands_print(run, tmp_path):
+    """calibrate_file, localize_file and evaluate_trajectory_file (what the commands call)
+    from Python: the same calibration, trajectory, wave condition and warnings as the CLI."""
+    from undertow.jobs.localize import calibrate_file, evaluate_trajectory_file, localize_file
+
+    topics = tmp_path / "topics.yaml"
+    topics.write_text("imu: [/nothing]\n")  # calibrate warns: no gyro bias; localize warns too
+    log, gt = run / "run" / "log", run / "run" / "ground_truth.tum"
+    cli = runner.invoke(app, ["calibrate", str(log), str(gt), "--topics", str(topics),
+                              "--out", str(tmp_path / "cli.yaml")])  # fmt: skip
+    assert cli.exit_code == 0, cli.output
+    py = calibrate_file(log, gt, topics=topics, out=tmp_path / "py.yaml")
+    assert [f"warning: {w}" for w in py.warnings] == _warnings(cli.output) != []
+    assert (tmp_path / "py.yaml").read_text() == (tmp_path / "cli.yaml").read_text()
+    assert py.calibration.to_dict() == json.loads(cli.stdout)
+
+    cli = runner.invoke(app, ["localize", str(log), "--variant", "be", "--out",
+                              str(tmp_path / "cli"), "--calibration", str(tmp_path / "cli.yaml")]
+                        )  # fmt: skip
+    assert cli.exit_code == 0, cli.output
+    py = localize_file(log, variant="be", calibration=tmp_path / "py.yaml",
+                       out_dir=tmp_path / "py")  # fmt: skip
+    assert [f"warning: {w}" for w in py.warnings] == _warnings(cli.output) != []
+    assert f"wave condition: {py.wave} (from {py.wave_source}; --wave overrides; the be " in (
+        cli.output
+    )
+    assert not py.wave_noise_added and py.counts["used_dvl"] > 0
+    on_disk = np.load(tmp_path / "cli" / "trajectory.npz")
+    for key in ("t", "x", "P"):
+        np.testing.assert_array_equal(getattr(py.trajectory, key), on_disk[key])
+    for name in ("trajectory.tum", "config.yaml"):
+        cli_text = (tmp_path / "cli" / name).read_text().replace("cli.yaml", "py.yaml")
+        assert (tmp_path / "py" / name).read_text() == cli_text
+
+    cli = runner.invoke(app, ["evaluate", "trajectory", str(tmp_path / "cli"), str(gt), "--json"])
+    assert cli.exit_code == 0, cli.output
+    assert evaluate_trajectory_file(py.out_dir, gt).to_dict() == json.loads(cli.stdout)
 
 
 def test_evaluate_against_a_ground_truth_covering_little_of_the_run(run, tmp_path):
@@ -244,6 +296,7 @@ def test_evaluate_against_a_ground_truth_covering_little_of_the_run(run, tmp_pat
     assert f"samples: {used} used, {dropped} outside the ground truth (dropped)" in r.output
 
 
+@pytest.mark.slow
 def test_wrong_files_are_one_line_naming_what_they_should_be(run, tmp_path):
     gt = str(run / "run" / "ground_truth.tum")
     line = _error_line(runner.invoke(app, ["evaluate", "trajectory", gt, gt]))

@@ -16,14 +16,12 @@ runner = CliRunner()
 
 
 @pytest.fixture(scope="module")
-def run(tmp_path_factory):
+def run(tmp_path_factory, simulation, simulated_run):
     """A simulated calm carriage run on disk, and its ground truth as a trajectory (18 states,
     a small position variance growing along the run) instead of a filter's output."""
-    from undertow.sim import load_scenario, simulate, write_simulation
-
     root = tmp_path_factory.mktemp("cli_mapping")
-    sim = simulate(load_scenario("calm"), seed=0)
-    write_simulation(sim, root / "run")
+    sim = simulation("calm", 0)
+    (root / "run").symlink_to(simulated_run("calm", 0))
     gt = sim.log.ground_truth
     keep = slice(None, None, 20)  # 100 Hz is plenty for interpolation
     t = gt.t[keep]
@@ -53,6 +51,7 @@ def _one_error_line(result):
     return lines[0]
 
 
+@pytest.mark.slow
 def test_config_records_the_normalization_and_variance_bounds_fix_it(run, tmp_path):
     r = _map(run, tmp_path / "session", "--trajectory", str(run / "est"))
     assert r.exit_code == 0, r.output
@@ -89,6 +88,7 @@ def test_config_records_the_normalization_and_variance_bounds_fix_it(run, tmp_pa
     assert "variance_bounds" in line
 
 
+@pytest.mark.slow
 def test_a_trajectory_of_another_time_span_is_an_error_and_a_partial_one_warns(run, tmp_path):
     line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(run / "shifted")))
     assert "no range measurement falls inside the trajectory's time span" in line
@@ -113,7 +113,7 @@ def test_wrong_kinds_of_input_files_say_what_was_expected(run, tmp_path):
     line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(run / "est"),
                                 "--prior", str(settings)))  # fmt: skip
     assert line == (
-        f"error: --prior {settings}: a YAML file, expected a map.npz written by `undertow map` "
+        f"error: prior {settings}: a YAML file, expected a map.npz written by `undertow map` "
         "(or its folder)"
     )
     line = _one_error_line(runner.invoke(app, ["evaluate", "map", str(tum), str(ply)]))
@@ -123,6 +123,7 @@ def test_wrong_kinds_of_input_files_say_what_was_expected(run, tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_evaluate_map_threshold_and_empty_clouds(run, tmp_path):
     out = tmp_path / "map"
     assert _map(run, out, "--trajectory", str(run / "est")).exit_code == 0
@@ -130,11 +131,11 @@ def test_evaluate_map_threshold_and_empty_clouds(run, tmp_path):
     for bad in ("1.5", "0", "1", "-0.2"):
         line = _one_error_line(runner.invoke(app, ["evaluate", "map", str(out), gt,
                                                    "--threshold", bad]))  # fmt: skip
-        assert "--threshold must be in (0, 1)" in line
+        assert line == f"error: threshold must be in (0, 1), got {float(bad)}"
     line = _one_error_line(
         runner.invoke(app, ["evaluate", "map", str(out / "map.ply"), gt, "--threshold", "0.7"])
     )
-    assert "--threshold applies to a map.npz" in line
+    assert line.startswith("error: threshold applies to a map.npz; ")
     # the map's PLY and its map.npz at the default threshold are the same points
     from_ply = runner.invoke(app, ["evaluate", "map", str(out / "map.ply"), gt, "--json"])
     from_npz = runner.invoke(app, ["evaluate", "map", str(out), gt, "--json"])
@@ -158,6 +159,7 @@ def test_evaluate_map_threshold_and_empty_clouds(run, tmp_path):
     assert data["occupied_cells"] == 0 and data["c2c_mean_m"] is None
 
 
+@pytest.mark.slow
 def test_a_resolution_too_fine_for_memory_is_refused_in_one_line(run, tmp_path):
     """1e-4 m cells: one sample's kernel support alone is ~10^8 chunks (hundreds of GB), refused
     at once instead of eating the machine; a modest resolution over a small limit is refused
@@ -180,8 +182,9 @@ def test_a_resolution_too_fine_for_memory_is_refused_in_one_line(run, tmp_path):
         assert message in line
 
 
+@pytest.mark.slow
 def test_evaluate_map_uses_the_threshold_the_map_was_made_with(run, tmp_path):
-    from undertow.mapping.grid import OccupancyMap
+    from undertow.occupancy import OccupancyMap
 
     settings = tmp_path / "strict.yaml"
     settings.write_text("mapping: {occupied_threshold: 0.999999}\n")
@@ -203,12 +206,14 @@ def test_evaluate_map_uses_the_threshold_the_map_was_made_with(run, tmp_path):
     old = OccupancyMap.load(out)
     legacy = tmp_path / "legacy.npz"
     meta = {k: v for k, v in old.metadata.items() if k != "occupied_threshold"}
-    OccupancyMap(old.cells, old.alpha, old.beta, old.resolution, metadata=meta).save(legacy)
+    OccupancyMap(old.cells, old.alpha, old.beta, old.resolution, old.alpha0, old.beta0,
+                 metadata=meta).save(legacy)  # fmt: skip
     data = json.loads(runner.invoke(app, ["evaluate", "map", str(legacy), gt, "--json"]).stdout)
     assert data["threshold"] == 0.5 and data["threshold_from"].startswith("default 0.5")
     assert data["occupied_cells"] == json.loads(given.stdout)["occupied_cells"]
 
 
+@pytest.mark.slow
 def test_prior_may_be_a_map_folder(run, tmp_path):
     est = ["--trajectory", str(run / "est")]
     assert _map(run, tmp_path / "first", *est, "--method", "csm").exit_code == 0
@@ -221,9 +226,12 @@ def test_prior_may_be_a_map_folder(run, tmp_path):
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--method", "csm", "--length-scale", "0.3"], "--length-scale applies to the bki method"),
-        (["--length-scale", "0.3"], "--length-scale applies to the bki method, not adaptive"),
-        (["--method", "bki", "--variance-bounds", "0,0,0,1,1,1"], "--variance-bounds applies"),
+        (["--method", "csm", "--length-scale", "0.3"], "length_scale applies to the bki method"),
+        (["--length-scale", "0.3"], "length_scale applies to the bki method, not adaptive"),
+        (
+            ["--method", "bki", "--variance-bounds", "0,0,0,1,1,1"],
+            "variance_bounds applies to the adaptive method, not bki",
+        ),
     ],
 )
 def test_options_of_another_method_are_errors(run, tmp_path, args, message):
@@ -239,3 +247,32 @@ def test_both_range_streams_disabled_says_so(run, tmp_path):
     )
     assert "use_dvl and use_sonar are both false in the config" in line
     assert "the log has none" not in line
+
+
+@pytest.mark.slow
+def test_a_python_user_gets_the_map_and_warnings_of_the_cli(run, tmp_path):
+    """`map_file` / `evaluate_map_file` (what the commands call) from Python: the same map,
+    result facts and warnings as `undertow map`, the same numbers as `undertow evaluate map`."""
+    from undertow.jobs.map import evaluate_map_file, map_file
+    from undertow.occupancy import OccupancyMap
+
+    r = _map(run, tmp_path / "cli", "--trajectory", str(run / "third"), "--method", "bki")
+    assert r.exit_code == 0, r.output
+    cli_warnings = [ln.removeprefix("warning: ") for ln in r.output.splitlines()
+                    if ln.startswith("warning:")]  # fmt: skip
+    result = map_file(run / "run" / "log", run / "third", method="bki", out_dir=tmp_path / "py")
+    assert len(cli_warnings) == 1 and result.warnings == cli_warnings
+    doc = yaml.safe_load((tmp_path / "cli" / "config.yaml").read_text())
+    assert doc == {"mapping": result.config.model_dump(mode="json"), "result": result.metadata}
+    assert (tmp_path / "py" / "config.yaml").read_text() == (
+        tmp_path / "cli" / "config.yaml"
+    ).read_text()
+    assert (tmp_path / "py" / "map.ply").read_bytes() == (tmp_path / "cli" / "map.ply").read_bytes()
+    for written in (OccupancyMap.load(tmp_path / "cli"), OccupancyMap.load(tmp_path / "py")):
+        for name in ("cells", "alpha", "beta"):
+            np.testing.assert_array_equal(getattr(written, name), getattr(result.map, name))
+        assert written.metadata == result.map.metadata
+    gt = run / "run" / "ground_truth.ply"
+    cli = runner.invoke(app, ["evaluate", "map", str(tmp_path / "cli"), str(gt), "--json"])
+    assert cli.exit_code == 0, cli.output
+    assert evaluate_map_file(tmp_path / "cli", gt).to_dict() == json.loads(cli.stdout)

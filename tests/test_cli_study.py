@@ -74,16 +74,15 @@ def test_one_seed_says_the_scheduler_is_not_used(tmp_path, monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
-    from undertow.sim import load_scenario, simulate, write_simulation
-
+def runs(tmp_path_factory, simulated_run):
     root = tmp_path_factory.mktemp("cli_characterize")
     for name in ("calm", "wave-a0.10-f0.75"):
-        write_simulation(simulate(load_scenario(name), seed=2), root / name)
+        (root / name).symlink_to(simulated_run(name, 2))
     (root / "no_gt.yaml").write_text("ground_truth: [/not/recorded]\n")
     return root
 
 
+@pytest.mark.slow
 def test_characterize_without_ground_truth_prints_its_notes_and_agrees(runs):
     """A topic map that hides the ground truth: the calm run is still calm (no 13 Hz wave), the
     DVL noise comes from the DVL itself within sampling error of the ground-truth numbers, the
@@ -106,6 +105,7 @@ def test_characterize_without_ground_truth_prints_its_notes_and_agrees(runs):
     assert any("calm run" in w for w in warnings)
 
 
+@pytest.mark.slow
 def test_characterize_without_a_calm_run_warns_through_the_warning_line(runs):
     r = runner.invoke(app, ["characterize", str(runs / "wave-a0.10-f0.75" / "log"), "--json"])
     assert r.exit_code == 0, r.output
@@ -133,3 +133,37 @@ def test_quiet_has_help(command):
     assert r.exit_code == 0
     text = " ".join(r.output.replace("│", " ").split())  # rich wraps help inside a box
     assert "--quiet" in text and "No progress or summary on stderr." in text
+
+
+@pytest.mark.slow
+def test_characterize_from_python_gives_what_the_command_prints(runs, tmp_path):
+    """`characterize_files` is the command without the printing: the same rows and profile,
+    the same warnings (the command prints each as one `warning:` line), the same file."""
+    from undertow._util.plain import json_safe
+    from undertow.jobs.study import characterize_files
+
+    logs = [str(runs / n / "log") for n in ("calm", "wave-a0.10-f0.75")]
+    topics = str(runs / "no_gt.yaml")
+    result = characterize_files(logs, topics=topics, out=tmp_path / "python.yaml")
+    cli = runner.invoke(
+        app,
+        ["characterize", *logs, "--json", "--topics", topics, "--out", str(tmp_path / "c.yaml")],
+    )
+    assert cli.exit_code == 0, cli.output
+    assert json.loads(cli.stdout) == json.loads(
+        json.dumps(json_safe(result.to_dict()), default=float)
+    )
+    printed = [ln for ln in cli.stderr.splitlines() if ln.startswith("warning:")]
+    assert printed == [f"warning: {w}" for w in result.warnings] and len(printed) >= 3
+    assert result.profile_path.read_text() == (tmp_path / "c.yaml").read_text()
+
+
+def test_reproduce_from_python_checks_its_arguments_as_the_command_does(tmp_path):
+    from undertow.errors import UndertowError
+    from undertow.jobs import study
+
+    with pytest.raises(UndertowError, match="--seeds must be at least 1"):
+        study.reproduce(tmp_path / "r", seeds=0)
+    with pytest.raises(UndertowError, match="--first-seed must be >= 0, got -1"):
+        study.reproduce(tmp_path / "r", first_seed=-1)
+    assert not (tmp_path / "r").exists()

@@ -5,7 +5,7 @@ from typer.testing import CliRunner
 
 from undertow.cli import app
 from undertow.errors import ConfigError
-from undertow.estimation.localizer import LocalizerConfig
+from undertow.estimation import LocalizerConfig
 from undertow.mapping.config import MappingConfig
 from undertow.settings import Settings
 
@@ -62,12 +62,13 @@ def test_mounting_override_keeps_fields_it_does_not_name(tmp_path):
         Settings.from_yaml(path)
 
 
+@pytest.mark.slow
 def test_imu_logged_in_ros_flu_is_fixed_by_a_mounting_rotation(tmp_path):
     """REP-103 IMUs (e.g. mavros) report rates in forward-left-up: p, -q, -r of our FRD body.
     Declaring the IMU frame rolled by pi gives the same estimate as the FRD log."""
     import numpy as np
 
-    from undertow.estimation.run import localize
+    from undertow.estimation import localize
     from undertow.evaluation.trajectory import trajectory_rmse
     from undertow.log import Imu
     from undertow.sim import load_scenario, simulate

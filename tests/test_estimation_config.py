@@ -11,8 +11,8 @@ import yaml
 from test_estimation_localize import make_log
 
 from undertow.errors import ConfigError
+from undertow.estimation import Localizer, LocalizerConfig
 from undertow.estimation.calibration import Calibration
-from undertow.estimation.localizer import Localizer, LocalizerConfig
 from undertow.log import Dvl, Imu
 
 NAN = float("nan")
@@ -24,7 +24,7 @@ NAN = float("nan")
         ("beta", NAN, "finite"),
         ("alpha", NAN, "finite"),
         ("kappa", -16.0, "greater than or equal to 0"),  # Julier's 3 - n: big negative W_0
-        ("alpha", 1e-3, "greater than or equal to 0.5"),  # NOTES.md section 3
+        ("alpha", 1e-3, "greater than or equal to 0.5"),  # W^m_0 ~ -1e6 for n = 18
         ("dr_bias_drift_rad_s", (NAN, 0.0, 0.0), "finite"),
         ("accel_density", (-0.01, 0.01, 0.01), "greater than 0"),
         ("angular_accel_density", (0.0, 0.01, 0.01), "greater than 0"),

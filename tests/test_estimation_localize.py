@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError, MissingStreamError
-from undertow.estimation.localizer import Localizer
+from undertow.estimation import Localizer
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
@@ -190,8 +190,8 @@ def test_calibrated_gyro_bias_is_the_initial_bias_state():
     """`undertow calibrate`'s IMU gyro bias starts the bias state of be / proposed: with a
     tight initial bias std and no DR, the yaw rate is then right from the start; the baseline
     has no bias states (the paper's definition) and ignores it."""
+    from undertow.estimation import localize
     from undertow.estimation.calibration import Calibration
-    from undertow.estimation.run import localize
 
     bias = np.array([0.002, -0.003, 0.02])
     log = make_log(duration=3.0, u=0.2, imu_bias=bias).replace(dead_reckoning=None)
@@ -228,15 +228,16 @@ def test_wave_condition_and_where_it_came_from_are_recorded():
 
 def test_smoothing_a_decimated_run_is_refused_before_filtering():
     """An empty log would fail in the filter: the option clash must be found first."""
-    from undertow.estimation.run import localize
+    from undertow.estimation import localize
 
-    with pytest.raises(ConfigError, match="smoothing needs the filter output at every"):
+    with pytest.raises(ConfigError, match="smoothing .* needs the filter output at every"):
         localize(Log(), smooth=True, output_rate_hz=1.0)
 
 
 def test_calibration_applies_only_what_was_estimated_and_says_so():
+    from undertow.estimation import LocalizerConfig
     from undertow.estimation.calibration import Calibration
-    from undertow.estimation.run import _apply_calibration
+    from undertow.estimation.localizer import _calibration_fields
 
     cal = Calibration(
         dr_bias_drift_rad_s=(0.0, 0.0, 1e-4),
@@ -244,10 +245,35 @@ def test_calibration_applies_only_what_was_estimated_and_says_so():
         estimated=("dr_bias_drift_rad_s", "dvl_scale_factor"),
         left_at_default={"gyro_bias_rad_s": "the log has no imu stream"},
     )
-    params = {}
     with pytest.warns(RuntimeWarning, match=r"gyro_bias_rad_s \(the log has no imu"):
-        _apply_calibration(cal, "proposed", params)
-    assert params == {"dvl_scale_factor": 1.02, "dr_bias_drift_rad_s": (0.0, 0.0, 1e-4)}
-    params = {}
-    _apply_calibration(cal, "baseline", params)  # uses no bias parameter: nothing to say
-    assert params == {"dvl_scale_factor": 1.02}
+        fields = _calibration_fields(cal, LocalizerConfig(variant="proposed"))
+    assert fields == {"dvl_scale_factor": 1.02, "dr_bias_drift_rad_s": (0.0, 0.0, 1e-4)}
+    # baseline uses no bias parameter: nothing to say
+    assert _calibration_fields(cal, LocalizerConfig(variant="baseline")) == {
+        "dvl_scale_factor": 1.02
+    }
+
+
+def test_explicit_settings_win_over_the_log_and_the_calibration():
+    """localize() fills a field from the log or the calibration only when the caller left it
+    unset: an explicit start position, scale or density is used as given."""
+    from undertow.estimation import localize
+    from undertow.estimation.calibration import Calibration
+    from undertow.log import GroundTruth
+
+    log = make_log(duration=2.0, u=0.2)
+    t = log.imu.t
+    gt = GroundTruth(t=t, position=np.tile([5.0, -2.0, 1.0], (t.size, 1)),
+                     orientation=np.zeros((t.size, 3)))  # fmt: skip
+    log = log.replace(ground_truth=gt, metadata={"water_density_kg_m3": 1025.0})
+    cal = Calibration(dvl_scale_factor=1.1)
+    filled = localize(log, "baseline", calibration=cal).metadata["config"]
+    assert filled["initial_position"] == (5.0, -2.0, 1.0)
+    assert filled["water_density_kg_m3"] == 1025.0 and filled["dvl_scale_factor"] == 1.1
+    explicit = {"initial_position": (0.0, 0.0, 1.0), "water_density_kg_m3": 997.0,
+                "dvl_scale_factor": 1.0}  # fmt: skip
+    given = localize(log, "baseline", calibration=cal, **explicit).metadata["config"]
+    assert given["initial_position"] == (0.0, 0.0, 1.0)
+    assert given["water_density_kg_m3"] == 997.0 and given["dvl_scale_factor"] == 1.0
+    origin = localize(log, "baseline", initial_position=None).metadata["config"]
+    assert origin["initial_position"] is None

@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 import pytest
 
-from undertow.estimation.localizer import Localizer
+from undertow.estimation import Localizer
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
 from undertow.rotations import wrap_angle
 
@@ -92,6 +92,7 @@ def log():
     return adversarial_log()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "params",
     [

@@ -4,10 +4,10 @@ for a consistent filter NIS = nu^T S^-1 nu ~ chi2(dim z), so E[NIS] = dim z)."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.stats import chi2
 
-from undertow.estimation import model
-from undertow.estimation.localizer import Localizer, LocalizerConfig
+from undertow.estimation import Localizer, LocalizerConfig, model
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
@@ -78,11 +78,12 @@ def simulate(cfg: LocalizerConfig, duration=40.0, seed=0, noise_scale=1.0):
     return log, grid / 1000.0, truth
 
 
+@pytest.mark.slow
 def test_nis_mean_matches_dimension_when_data_follow_the_model():
     cfg = LocalizerConfig(variant="be", **PARAMS)
     for seed in (0, 1):
         log, _, _ = simulate(cfg, seed=seed)
-        nis = Localizer.from_config(cfg).run(log).metadata["nis"]
+        nis = Localizer(**cfg.model_dump()).run(log).metadata["nis"]
         assert set(nis) == set(model.KIND_NAMES)
         for name, dim in zip(model.KIND_NAMES, model.KIND_DIM, strict=True):
             s = nis[name]
@@ -96,7 +97,7 @@ def test_nis_mean_matches_dimension_when_data_follow_the_model():
 def test_nis_large_when_noise_is_underestimated():
     cfg = LocalizerConfig(variant="be", **PARAMS)
     log, _, _ = simulate(cfg, seed=2, noise_scale=4.0)
-    nis = Localizer.from_config(cfg).run(log).metadata["nis"]
+    nis = Localizer(**cfg.model_dump()).run(log).metadata["nis"]
     for name, dim in zip(model.KIND_NAMES, model.KIND_DIM, strict=True):
         assert nis[name]["mean"] > 3 * dim, (name, nis[name])
         assert nis[name]["fraction_in_95"] < 0.8
@@ -106,6 +107,6 @@ def test_chi2_bounds_and_no_nis_without_stream():
     np.testing.assert_allclose(model.CHI2_95, chi2.ppf(0.95, model.KIND_DIM), rtol=1e-12)
     cfg = LocalizerConfig(variant="be", **PARAMS)
     log, _, _ = simulate(cfg, duration=3.0)
-    nis = Localizer.from_config(cfg).run(log.replace(pressure=None)).metadata["nis"]
+    nis = Localizer(**cfg.model_dump()).run(log.replace(pressure=None)).metadata["nis"]
     assert nis["pressure"] == {"mean": None, "dof": 1, "fraction_in_95": None, "count": 0}
     assert nis["imu"]["count"] == len(log.imu)

@@ -4,8 +4,7 @@ own 3-sigma, and the smoother never worse than the filter."""
 import numpy as np
 import pytest
 
-from undertow.estimation import calibrate, smooth
-from undertow.estimation.run import localize
+from undertow.estimation import calibrate, localize, smooth
 from undertow.evaluation.trajectory import trajectory_rmse
 from undertow.sim import load_scenario, simulate
 

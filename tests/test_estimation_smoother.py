@@ -11,8 +11,7 @@ from test_estimation_nis import PARAMS, simulate
 
 from undertow._util.plain import to_plain
 from undertow.errors import ConfigError, DataError
-from undertow.estimation import ukf
-from undertow.estimation.localizer import Localizer, LocalizerConfig
+from undertow.estimation import Localizer, LocalizerConfig, ukf
 from undertow.estimation.smoother import _rts_step, _rts_workspace, smooth
 from undertow.log import Imu
 from undertow.rotations import wrap_angle
@@ -76,7 +75,7 @@ NO_BIAS = dict(PARAMS, dr_bias_walk_density=(0.0,) * 3, gyro_bias_walk_density=(
 def test_smoothed_covariance_never_larger(variant):
     cfg = LocalizerConfig(variant=variant, **(PARAMS if variant == "be" else NO_BIAS))
     log, _, _ = simulate(cfg, duration=20.0, seed=5)
-    filt = Localizer.from_config(cfg).run(log)
+    filt = Localizer(**cfg.model_dump()).run(log)
     sm = smooth(filt)
     assert sm.metadata["smoothed"] is True and "smoothed" not in filt.metadata
     assert sm.metadata["smoother_counts"]["nonfinite_kept_filtered"] == 0
@@ -95,6 +94,7 @@ def test_smoothed_covariance_never_larger(variant):
         np.testing.assert_allclose(ds[:, 12:], 1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("variant", ["be", "baseline"])
 def test_smoothed_error_not_larger_monte_carlo(variant):
     """Mean squared error over 12 runs drawn from the filter's model: the smoother (the
@@ -103,7 +103,7 @@ def test_smoothed_error_not_larger_monte_carlo(variant):
     mse_f = mse_s = 0.0
     for seed in range(12):
         log, grid, truth = simulate(cfg, duration=10.0, seed=100 + seed)
-        filt = Localizer.from_config(cfg).run(log)
+        filt = Localizer(**cfg.model_dump()).run(log)
         mse_f = mse_f + np.mean(errors(filt, grid, truth) ** 2, axis=0)
         mse_s = mse_s + np.mean(errors(smooth(filt), grid, truth) ** 2, axis=0)
     groups = [slice(2, 3), slice(3, 6), slice(6, 9), slice(9, 12)]
@@ -123,7 +123,7 @@ def test_smoother_never_nan_on_adversarial_log():
     w = np.array(log.imu.angular_velocity)
     w[::37] = 1e3
     log = log.replace(imu=Imu(log.imu.t, w))
-    filt = Localizer.from_config(cfg).run(log)
+    filt = Localizer(**cfg.model_dump()).run(log)
     sm = smooth(filt)
     assert np.all(np.isfinite(sm.x)) and np.all(np.isfinite(sm.P))
     assert np.all(np.diagonal(sm.P, axis1=1, axis2=2) > 0)
@@ -132,10 +132,10 @@ def test_smoother_never_nan_on_adversarial_log():
 def test_smoother_refuses_decimated_or_unknown_input():
     cfg = LocalizerConfig(variant="be", **PARAMS)
     log, _, _ = simulate(cfg, duration=3.0)
-    dec = Localizer.from_config(cfg.model_copy(update={"output_rate_hz": 10.0})).run(log)
+    dec = Localizer(**{**cfg.model_dump(), "output_rate_hz": 10.0}).run(log)
     with pytest.raises(ConfigError, match="decimated"):
         smooth(dec)
-    filt = Localizer.from_config(cfg).run(log)
+    filt = Localizer(**cfg.model_dump()).run(log)
     with pytest.raises(ConfigError, match="already smoothed"):
         smooth(smooth(filt))
     bare = filt.replace(metadata={})
@@ -151,7 +151,7 @@ def test_saved_trajectory_keeps_its_metadata_and_can_be_smoothed(tmp_path):
     the filter's own config and gives what it gives on the trajectory in memory."""
     cfg = LocalizerConfig(**PARAMS, variant="proposed")
     log, _, _ = simulate(cfg, duration=3.0)
-    traj = Localizer.from_config(cfg).run(log)
+    traj = Localizer(**cfg.model_dump()).run(log)
     back = Trajectory.load_npz(traj.save_npz(tmp_path / "trajectory.npz"))
     assert back.metadata["config"] == json.loads(json.dumps(to_plain(traj.metadata["config"])))
     assert back.metadata["counts"] == traj.metadata["counts"] and back.variant == "proposed"

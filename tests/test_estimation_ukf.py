@@ -55,7 +55,8 @@ def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
     imu_Rt = np.ascontiguousarray(rpy_to_matrix([np.pi, 0.0, 0.02]).T)
     dvl_Rt = np.ascontiguousarray(rpy_to_matrix([0.0, 0.0, 0.05]).T)
     arm, baro = np.array([0.164, 0.004, 0.284]), np.zeros(3)
-    H = model._jacobians(imu_Rt, dvl_Rt, arm, baro)
+    sensors = model.SensorModel(imu_Rt, dvl_Rt, arm, baro, np.full(4, np.inf))
+    H = model._jacobians(sensors)
     wm, wc, lam = ukf._weights(18, 1.0, 2.0, 0.0)
     R = np.diag([1e-3, 2e-3, 5e-4])
     for kind in (model.IMU, model.DVL, model.DR):
@@ -68,7 +69,7 @@ def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
         ukf._sigma_points(x, P, lam, model.STATE_ANGLES, L, chi)
         Zs, col, Rw = np.empty((37, 3)), np.empty(3), np.empty((3, 3))
         for i in range(37):
-            model._h(kind, chi[i], imu_Rt, dvl_Rt, arm, baro, col, Rw)
+            model._h(kind, chi[i], sensors, col, Rw)
             Zs[i] = col
         ukf._update(x, P, chi, Zs, z, R, wm, wc, model.STATE_ANGLES, angles, np.inf)
         x_lin, P_lin = x0.copy(), P0.copy()
@@ -117,17 +118,18 @@ def test_full_model_agrees_with_filterpy():
         z[k, :m] = ref.hx(x0, kinds[k]) + rng.normal(0, 0.02, m)
         Rm[k, :m, :m] = np.diag(rng.uniform(1e-4, 1e-3, m))
     wm, wc, lam = ukf._weights(n, alpha, beta, kappa)
-    out_t, out_x, out_P, counts = model._run_filter(
-        t, kinds, z, Rm, x0, P0, 0.0, wm, wc, lam, Q_ACC, Q_B, MU, np.ascontiguousarray(R_IMU.T),
-        np.ascontiguousarray(R_DVL.T), R_DVL_ARM, BARO_ARM, dt_max, np.full(4, np.inf), False,
-        np.empty(0), True, N,
-    )  # fmt: skip
+    process = model.ProcessModel(wm, wc, lam, Q_ACC, Q_B, MU, dt_max, False)
+    sensors = model.SensorModel(np.ascontiguousarray(R_IMU.T), np.ascontiguousarray(R_DVL.T),
+                                R_DVL_ARM, BARO_ARM, np.full(4, np.inf))  # fmt: skip
+    meas = model.pack_measurements(t, kinds, z, Rm)
+    out_t, out_x, out_P, counts, _ = model._run_filter(meas, 0.0, x0, P0, process, sensors, None)
     rows = []
     for k in range(N):
         x, P = ref.step(t[k], kinds[k], z[k], Rm[k])
         if k == N - 1 or t[k + 1] != t[k]:
             rows.append((t[k], x.copy(), P.copy()))
-    assert counts[:4].sum() == N and counts[9] == 1  # all used, one dt capped
+    used = [model.USED + kind for kind in range(4)]
+    assert counts[used].sum() == N and counts[model.DT_CAPPED] == 1  # all used, one dt capped
     np.testing.assert_allclose(out_t, [r[0] for r in rows])
     for (_, xr, Pr), xk, Pk in zip(rows, out_x, out_P, strict=True):
         np.testing.assert_allclose(wrap_angle(xk - xr), 0, atol=1e-9)

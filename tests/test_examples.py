@@ -4,9 +4,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
+@pytest.mark.slow
 def test_localize_and_map_example_runs_and_reports_sane_numbers():
     out = subprocess.run(
         [sys.executable, str(EXAMPLES / "localize_and_map.py"), "wave-a0.05-f0.75", "3"],

@@ -7,7 +7,6 @@ import warnings
 
 import numpy as np
 from conftest import REAL_DATA
-from rich.table import Table
 from rosbags.highlevel import AnyReader
 
 from undertow.io import read_log, summarize
@@ -30,7 +29,6 @@ def test_summary_of_ros1_bag():
     assert dvl.rate_hz == 1.0 / np.median(np.diff(np.sort(stamps)))
     data = json.loads(json.dumps(summary.to_dict()))
     assert data["streams"][0]["rate_hz"] == dvl.rate_hz
-    assert isinstance(summary.to_rich_table(), Table)
 
 
 def test_summary_of_v1_text_log():

@@ -7,6 +7,7 @@ import pytest
 
 from undertow.errors import ReaderError
 from undertow.io import read_ply, read_tum, write_ply, write_tum
+from undertow.log import GroundTruth
 from undertow.rotations import rpy_to_quaternion
 
 
@@ -20,10 +21,11 @@ def test_tum_round_trip_and_format(tmp_path):
     np.testing.assert_array_equal(rows[:, 0], t)
     np.testing.assert_array_equal(rows[:, 1:4], pos)
     np.testing.assert_allclose(rows[:, 4:8], rpy_to_quaternion(rpy), atol=0)
-    t2, pos2, rpy2 = read_tum(path)
-    np.testing.assert_array_equal(t2, t)
-    np.testing.assert_array_equal(pos2, pos)
-    np.testing.assert_allclose(rpy2, rpy, atol=1e-12)
+    poses = read_tum(path)
+    assert isinstance(poses, GroundTruth) and poses.velocity is None
+    np.testing.assert_array_equal(poses.t, t)
+    np.testing.assert_array_equal(poses.position, pos)
+    np.testing.assert_allclose(poses.orientation, rpy, atol=1e-12)
 
 
 def test_tum_malformed_line(tmp_path):

@@ -4,11 +4,12 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError, ReaderError
+from undertow.io.ply import write_map_ply
 from undertow.log import Dvl, Log, Mounting, SonarRange
-from undertow.mapping.config import MappingConfig, mapper_from_config, samples_from_config
-from undertow.mapping.grid import OccupancyMap
-from undertow.mapping.mappers import make_mapper, write_map_ply
-from undertow.mapping.samples import Samples, build_samples
+from undertow.mapping.config import MappingConfig
+from undertow.mapping.mappers import make_mapper, mapper_from_config
+from undertow.mapping.samples import Samples, build_samples, samples_from_config
+from undertow.occupancy import OccupancyMap
 from undertow.rotations import rpy_to_matrix
 from undertow.trajectory import Trajectory
 
@@ -152,6 +153,25 @@ def test_ply_written_with_mean_and_variance(tmp_path):
     assert len(rows) == len(k)
     np.testing.assert_allclose(rows["z"], k.centres[:, 2], rtol=1e-6)
     np.testing.assert_allclose(rows["mean"], k.mean, rtol=1e-6)
+
+
+def test_save_map_writes_the_result_folder_at_once(tmp_path):
+    import yaml
+
+    from undertow.io.results import save_map
+
+    m = make_mapper("csm")
+    m.integrate(Samples.from_points([[0.05, 0.05, 0.05], [0.05, 0.05, 0.15]], [1.0, 0.0]))
+    occ = m.occupancy()
+    out = save_map(occ, {"method": "csm"}, {"cells": 2}, tmp_path / "m", threshold=0.5)
+    assert sorted(p.name for p in out.iterdir()) == ["config.yaml", "map.npz", "map.ply"]
+    doc = yaml.safe_load((out / "config.yaml").read_text())
+    assert doc == {"mapping": {"method": "csm"}, "result": {"cells": 2}}
+    np.testing.assert_array_equal(OccupancyMap.load(out).cells, occ.cells)
+    with pytest.raises(ConfigError, match="not empty"):
+        save_map(occ, {}, {}, out, threshold=0.5)
+    save_map(occ, {}, {}, out, overwrite=True, threshold=0.5)
+    assert yaml.safe_load((out / "config.yaml").read_text()) == {"mapping": {}, "result": {}}
 
 
 def test_loading_another_kind_of_file_as_a_map_says_what_was_expected(tmp_path):

@@ -71,13 +71,20 @@ def test_adaptive_kernel_along_axes_is_1d_kernel_and_factorizes():
     assert _mass_by_cell(b.occupancy())[(1, 1, 0)][0] != pytest.approx(got[(1, 1, 0)][0])
 
 
+def _adaptive(variance_bounds):
+    """The constructor takes every value explicitly (checked by MappingConfig, no defaults)."""
+    return AdaptiveBkiMapper(l_min=(0.1, 0.1, 0.05), l_max=(0.18, 0.18, 0.08),
+                             variance_bounds=variance_bounds, resolution=RES, alpha0=1e-10,
+                             beta0=1e-10, max_memory_gb=None)  # fmt: skip
+
+
 def test_adaptive_length_scales_from_normalized_variance():
-    m = AdaptiveBkiMapper(l_min=(0.1, 0.1, 0.05), l_max=(0.18, 0.18, 0.08))
+    m = _adaptive(None)
     var = np.array([[1.0, 2.0, 5.0], [3.0, 2.0, 5.0], [2.0, 2.0, 5.0]])
     ls = m.length_scales(var)
     np.testing.assert_allclose(ls[:, 0], [0.10, 0.18, 0.14])  # min, max, midpoint
     np.testing.assert_allclose(ls[:, 1:], [[0.1, 0.05]] * 3)  # max == min on y, z: l_min
-    fixed = AdaptiveBkiMapper(variance_bounds=((0, 0, 0), (1, 1, 1)))
+    fixed = _adaptive(((0, 0, 0), (1, 1, 1)))
     np.testing.assert_allclose(fixed.length_scales([[2.0, -1.0, 0.5]]), [[0.18, 0.10, 0.065]])
     assert fixed.normalization == "fixed" and m.normalization == "session"
     assert m.metadata()["normalization"] == "session"
@@ -150,16 +157,25 @@ def test_csm_hit_cells_match_octomap():
 
 
 def test_invalid_inputs_rejected_with_clear_message():
-    with pytest.raises(ConfigError, match="resolution must be finite and > 0"):
+    """make_mapper checks its settings in MappingConfig (the one place they are checked)."""
+    with pytest.raises(ConfigError, match="mapping.resolution: Input should be greater than 0"):
         make_mapper("bki", resolution=-0.1)
-    with pytest.raises(ConfigError, match="l_min .* must not exceed l_max"):
+    with pytest.raises(ConfigError, match=r"need 0 < l_min <= l_max per axis, got \(0.2, "):
         make_mapper("adaptive", l_min=(0.2, 0.1, 0.05), l_max=(0.18, 0.18, 0.08))
-    with pytest.raises(ConfigError, match="l_max must be three"):
+    with pytest.raises(ConfigError, match=r"mapping.l_max: .*expected three values \(x, y, z\)"):
         make_mapper("adaptive", l_max=(0.18, 0.18))
-    with pytest.raises(ConfigError, match="unknown mapping method"):
+    with pytest.raises(ConfigError, match="mapping.method: Input should be 'csm', 'bki' or"):
         make_mapper("octree")
-    with pytest.raises(ConfigError, match="variance_bounds"):
+    with pytest.raises(ConfigError, match="variance_bounds need 0 <= min <= max"):
         make_mapper("adaptive", variance_bounds=((1, 1, 1), (0, 0, 0)))
+    for name, value in (("alpha0", float("inf")), ("l_max", (0.18, 0.18, float("inf"))),
+                        ("max_memory_gb", float("nan")), ("length_scale", float("inf")),
+                        ("variance_bounds", ((0, 0, 0), (1, 1, float("nan")))),
+                        ("max_memory_gb", 0)):  # fmt: skip
+        with pytest.raises(ConfigError, match=f"mapping.{name}"):
+            make_mapper("adaptive", **{name: value})
+    with pytest.raises(TypeError, match="required keyword-only"):
+        AdaptiveBkiMapper()  # constructors hold no defaults of their own
     with pytest.raises(DataError, match="expected \\(N, 3\\)"):
         Samples.from_points(np.zeros((4, 2)), np.zeros(4))
     with pytest.raises(DataError, match="label: shape"):
@@ -170,6 +186,13 @@ def test_invalid_inputs_rejected_with_clear_message():
         make_mapper("csm").integrate(np.zeros((3, 3)))
     with pytest.raises(DataError, match="beyond"):  # would alias chunk keys
         make_mapper("bki").integrate(Samples.from_points([[1e6, 0.0, 0.0]], [1.0]))
+
+
+def test_numpy_arrays_are_accepted_as_settings():
+    bounds = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]])
+    m = make_mapper("adaptive", l_min=np.array([0.1, 0.1, 0.05]), variance_bounds=bounds)
+    np.testing.assert_array_equal(m.l_min, [0.1, 0.1, 0.05])
+    np.testing.assert_array_equal(np.array(m.variance_bounds), bounds)
 
 
 @pytest.mark.parametrize("method", ["csm", "bki", "adaptive"])

@@ -11,20 +11,19 @@ import pytest
 from matplotlib.image import imread
 
 from undertow.errors import DataError
-from undertow.estimation.run import localize
+from undertow.estimation import localize
 from undertow.mapping.config import MappingConfig
-from undertow.mapping.mappers import AdaptiveBkiMapper
+from undertow.mapping.mappers import make_mapper
 from undertow.mapping.run import map_log
 from undertow.report import figures, figures_map, figures_traj
 from undertow.report.figures import DPI
-from undertow.sim import load_scenario, simulate
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
-def run():
-    sim = simulate(load_scenario("rock-survey"), seed=0)
+def run(simulation):
+    sim = simulation("rock-survey", 0)
     trajs = {v: localize(sim.log, variant=v) for v in ("baseline", "proposed")}
     maps = {
         m: map_log(sim.log, trajs["proposed"], MappingConfig(method=m)).map
@@ -43,15 +42,17 @@ def check_png(path, width_in, height_in):
     assert leftovers == []  # atomic write cleaned up
 
 
+@pytest.mark.slow
 def test_trajectories_png(run, tmp_path):
     sim, trajs, _ = run
-    out = figures.plot_trajectories(tmp_path / "traj.png", sim.log.ground_truth, trajs)
+    out = figures_traj.plot_trajectories(tmp_path / "traj.png", sim.log.ground_truth, trajs)
     check_png(out, 10, 7)
 
 
+@pytest.mark.slow
 def test_trajectory_errors_png(run, tmp_path):
     sim, trajs, _ = run
-    out = figures.plot_trajectory_errors(tmp_path / "err.png", sim.log.ground_truth, trajs)
+    out = figures_traj.plot_trajectory_errors(tmp_path / "err.png", sim.log.ground_truth, trajs)
     check_png(out, 10, 7.5)
 
 
@@ -59,26 +60,32 @@ def test_trajectory_errors_reject_trajectory_outside_ground_truth(run, tmp_path)
     sim, trajs, _ = run
     late = dataclasses.replace(trajs["proposed"], t=trajs["proposed"].t + 1e4)
     with pytest.raises(DataError, match="overlap"):
-        figures.plot_trajectory_errors(tmp_path / "e.png", sim.log.ground_truth, {"late": late})
+        figures_traj.plot_trajectory_errors(
+            tmp_path / "e.png", sim.log.ground_truth, {"late": late}
+        )
     assert not (tmp_path / "e.png").exists()
 
 
+@pytest.mark.slow
 def test_map_distance_png(run, tmp_path):
     sim, _, maps = run
-    out = figures.plot_map_distance(tmp_path / "d.png", maps["adaptive"].points(), sim.floor_cloud)
+    out = figures_map.plot_map_distance(
+        tmp_path / "d.png", maps["adaptive"].points(), sim.floor_cloud
+    )
     check_png(out, 11, 7)
 
 
 def test_map_distance_rejects_bad_cloud(tmp_path):
     with pytest.raises(DataError, match=r"\(N, 3\)"):
-        figures.plot_map_distance(tmp_path / "d.png", np.zeros((4, 2)), np.zeros((4, 3)))
+        figures_map.plot_map_distance(tmp_path / "d.png", np.zeros((4, 2)), np.zeros((4, 3)))
 
 
+@pytest.mark.slow
 def test_map_slice_png(run, tmp_path):
     sim, _, maps = run
     rock = sim.scenario.tank.rock
     y = (rock.center_y_m - 0.1, rock.center_y_m + 0.1)
-    out = figures.plot_map_slice(tmp_path / "s.png", maps, sim.floor_cloud, y)
+    out = figures_map.plot_map_slice(tmp_path / "s.png", maps, sim.floor_cloud, y)
     check_png(out, 11, 1.2 + 2.2 * len(maps))
 
 
@@ -96,14 +103,16 @@ def test_dvl_body_velocity_matches_ground_truth(run):
     assert np.median(np.abs(v[:, 0] - truth[:, 0])) < 0.05
 
 
+@pytest.mark.slow
 def test_disturbance_png(run, tmp_path):
     sim, _, _ = run
     check_png(figures.plot_disturbance(tmp_path / "w.png", sim.log), 10, 7)
 
 
+@pytest.mark.slow
 def test_kernel_shapes_png(run, tmp_path):
     _, trajs, _ = run
-    ls = AdaptiveBkiMapper().length_scales(trajs["proposed"].position_variance)
+    ls = make_mapper("adaptive").length_scales(trajs["proposed"].position_variance)
     out = figures.plot_kernel_shapes(tmp_path / "k.png", ls.min(axis=0), ls.max(axis=0))
     check_png(out, 10, 7.5)
 
@@ -113,17 +122,22 @@ def test_kernel_shapes_reject_non_positive_length(tmp_path):
         figures.plot_kernel_shapes(tmp_path / "k.png", 0.1, (0.2, 0.0, 0.1))
 
 
+@pytest.mark.slow
 def test_rock_map_png_from_tuple_and_model(run, tmp_path):
     sim, _, maps = run
     rock = sim.scenario.tank.rock
     as_tuple = (rock.center_x_m, rock.center_y_m, rock.length_m, rock.width_m, rock.height_m)
     depth = sim.scenario.water.depth_m
-    check_png(figures.plot_rock_map(tmp_path / "r.png", maps["adaptive"], as_tuple, depth), 12, 5)
-    check_png(figures.plot_rock_map(tmp_path / "r2.png", maps["adaptive"], rock, depth), 12, 5)
+    check_png(
+        figures_map.plot_rock_map(tmp_path / "r.png", maps["adaptive"], as_tuple, depth), 12, 5
+    )
+    check_png(figures_map.plot_rock_map(tmp_path / "r2.png", maps["adaptive"], rock, depth), 12, 5)
 
 
-def test_figures_module_reexports_split_modules():
-    assert figures.plot_trajectories is figures_traj.plot_trajectories
-    assert figures.plot_map_slice is figures_map.plot_map_slice
-    with pytest.raises(AttributeError):
-        figures.no_such_figure  # noqa: B018
+def test_the_report_package_exports_every_figure_from_its_module():
+    import undertow.report as report
+
+    assert report.plot_trajectories is figures_traj.plot_trajectories
+    assert report.plot_map_slice is figures_map.plot_map_slice
+    assert report.plot_velocity is figures.plot_velocity
+    assert not hasattr(figures, "plot_trajectories")  # no re-export shim in figures.py

@@ -13,7 +13,7 @@ import yaml
 from scipy.spatial import cKDTree
 
 from undertow.errors import DataError
-from undertow.estimation.run import localize
+from undertow.estimation import localize
 from undertow.mapping.config import MappingConfig
 from undertow.mapping.run import map_log
 from undertow.report import figures, markdown_to_html, write_report
@@ -95,6 +95,7 @@ def report(tmp_path_factory):
                 cloud=sim.floor_cloud, config=config)  # fmt: skip
 
 
+@pytest.mark.slow
 def test_page_is_well_formed_html(report):
     c = report["checker"]
     assert report["page"].startswith("<!DOCTYPE html>")
@@ -103,6 +104,7 @@ def test_page_is_well_formed_html(report):
     assert [t for t, _ in c.attrs].count("html") == 1
 
 
+@pytest.mark.slow
 def test_page_is_self_contained(report):
     page = report["page"]
     assert "http://" not in page and "https://" not in page
@@ -114,6 +116,7 @@ def test_page_is_self_contained(report):
     assert [t for t, _ in report["checker"].attrs].count("link") == 0  # no external CSS
 
 
+@pytest.mark.slow
 def test_figures_embedded_byte_for_byte_with_captions(report):
     imgs = [a["src"] for t, a in report["checker"].attrs if t == "img"]
     assert len(imgs) == len(report["figs"])
@@ -123,6 +126,7 @@ def test_figures_embedded_byte_for_byte_with_captions(report):
         assert html.escape(caption) in report["page"]
 
 
+@pytest.mark.slow
 def test_tables_rendered(report):
     page = report["page"]
     assert "<h1>Results</h1>" in page and "<h2>Table II: RMSE</h2>" in page
@@ -139,6 +143,7 @@ def _no_nan(name):
     raise ValueError(f"invalid JSON constant {name}")
 
 
+@pytest.mark.slow
 def test_viewer_data_subsampled_and_faithful(report):
     data = json.loads(report["checker"].scripts["viewer-data"], parse_constant=_no_nan)
     mp = np.reshape(data["map"], (-1, 3)) + data["centre"]
@@ -153,6 +158,7 @@ def test_viewer_data_subsampled_and_faithful(report):
     assert '<canvas id="viewer">' in report["page"]
 
 
+@pytest.mark.slow
 def test_config_and_versions(report):
     pre = re.findall(r"<pre>(.*?)</pre>", report["page"], re.S)
     assert any(yaml.safe_load(html.unescape(p)) == report["config"] for p in pre)

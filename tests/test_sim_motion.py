@@ -86,5 +86,5 @@ def test_towed_into_oncoming_waves_the_mount_shakes_at_the_encounter_frequency()
     spectrum = np.abs(np.fft.rfft((x - x.mean()) * np.hanning(t.size)))
     freqs = np.fft.rfftfreq(t.size, 0.01)
     f_e = f + k * c.cruise_speed_m_s / (2 * np.pi)
-    assert f_e == pytest.approx(1.64, abs=0.01)  # k = 4.02 /m at 1 Hz in 3 m (NOTES 2)
+    assert f_e == pytest.approx(1.64, abs=0.01)  # omega^2 = g k tanh(k h): k = 4.02 /m
     assert freqs[np.argmax(spectrum)] == pytest.approx(f_e, abs=1.5 / (t[-1] - t[0]))

@@ -106,8 +106,8 @@ def test_carriage_run_is_36_6_m_along_x_with_trapezoid_speed():
     assert meta["wave"] == {"amplitude_m": 0.0, "frequency_hz": 1.0}
 
 
-def test_default_scenario_rates_and_floor_cloud():
-    r = simulate(load_scenario("wave-a0.10-f1.00"), seed=0)
+def test_default_scenario_rates_and_floor_cloud(simulation):
+    r = simulation("wave-a0.10-f1.00", 0)
     log = r.log
     assert log.ground_truth.rate_hz == pytest.approx(2000.0)
     assert log.imu.rate_hz == pytest.approx(100.0)
@@ -123,8 +123,8 @@ def test_default_scenario_rates_and_floor_cloud():
     assert cloud[:, 2].min() == pytest.approx(3.0 - rock.height_m)
 
 
-def test_rock_survey_vehicle_moves_with_the_waves_over_the_rock():
-    r = simulate(load_scenario("rock-survey"), seed=0)
+def test_rock_survey_vehicle_moves_with_the_waves_over_the_rock(simulation):
+    r = simulation("rock-survey", 0)
     gt = r.log.ground_truth
     rock = r.scenario.tank.rock
     assert gt.position[:, 0].min() < rock.center_x_m < gt.position[:, 0].max()
@@ -228,7 +228,7 @@ def test_breaking_limit_is_h_over_lambda_one_seventh_with_the_dispersion_relatio
     omega = 2 * np.pi * f
     k = brentq(lambda k: g * k * np.tanh(k * h) - omega**2, 1e-6, 100.0, xtol=1e-14)
     a_max = 2 * np.pi / k / 14
-    assert a_max == pytest.approx(0.111, abs=1e-3)  # NOTES 2: lambda = 1.56 m at 1 Hz
+    assert a_max == pytest.approx(0.111, abs=1e-3)  # lambda = 2 pi / k = 1.56 m at 1 Hz in 3 m
     Scenario(wave={"amplitude_m": a_max * (1 - 1e-6), "frequency_hz": f})
     with pytest.raises(ValueError, match=r"breaking wave: steepness .* 1/7") as info:
         Scenario(wave={"amplitude_m": a_max * (1 + 1e-6), "frequency_hz": f})

@@ -110,6 +110,7 @@ def test_sonar_sees_the_rock_top_first():
     assert np.median(log.sonar.range[over]) == pytest.approx(expected, abs=0.03)
 
 
+@pytest.mark.slow
 def test_imu_gyro_white_noise_and_bias_walk_follow_the_densities():
     s = scenario(**AT_REST, imu={"gyro_bias_random_walk": 0.0, "gyro_initial_bias_sigma": 0.0})
     imu = simulate(s, seed=4).log.imu

@@ -1,4 +1,6 @@
-"""Airy wave model against closed forms (NOTES.md section 2)."""
+"""Airy (linear) wave model against closed forms: dispersion omega^2 = g k tanh(k h), orbital
+velocities and pressure response (Dean & Dalrymple, "Water Wave Mechanics for Engineers and
+Scientists", 1991, ch. 3-4)."""
 
 import numpy as np
 import pytest

@@ -10,6 +10,7 @@ from undertow.io.tum import read_tum
 from undertow.sim import Scenario, load_scenario, simulate, write_simulation
 
 
+@pytest.mark.slow
 def test_write_simulation_round_trip(tmp_path):
     s = load_scenario("wave-a0.05-f0.75").to_yaml_dict()
     s["motion"]["carriage"]["run_length_m"] = 3.0
@@ -19,7 +20,8 @@ def test_write_simulation_round_trip(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == [
         "ground_truth.ply", "ground_truth.tum", "log", "scenario.yaml",
     ]  # fmt: skip
-    t, pos, _ = read_tum(out / "ground_truth.tum")
+    tum = read_tum(out / "ground_truth.tum")
+    t, pos = tum.t, tum.position
     gt = result.log.ground_truth
     assert t.size == len(gt) and np.median(np.diff(t)) == pytest.approx(1 / 2000.0)
     np.testing.assert_allclose(pos, gt.position, atol=1e-9)

@@ -82,13 +82,13 @@ def test_empty_input_and_structure_clash():
         aggregate([{"a": 1.0}, [1.0]])
 
 
-def test_claim_fraction_counts_and_excludes_unevaluable_seeds():
-    seeds = [{"x": 1}, {"x": 5}, {"x": 7}, {}, {"y": 2}, {"x": 2}]
-    out = claim_fraction(seeds, lambda r: r["x"] > 3)
-    assert out == {"holds": 2, "n": 4, "fraction": 0.5}
-    assert claim_fraction([{}], lambda r: r["x"] > 3) == {"holds": 0, "n": 0, "fraction": None}
-    with pytest.raises(ZeroDivisionError):  # a bug in the predicate is not hidden
-        claim_fraction([{"x": 1}], lambda r: r["x"] / 0)
+def test_claim_fraction_counts_the_verdicts():
+    assert claim_fraction([True, False, True, True]) == {"holds": 3, "n": 4, "fraction": 0.75}
+    assert claim_fraction(np.array([True, False])) == {"holds": 1, "n": 2, "fraction": 0.5}
+    # no verdict (a claim whose conditions were not run): no fraction
+    assert claim_fraction([]) == {"holds": 0, "n": 0, "fraction": None}
+    with pytest.raises(DataError, match="booleans"):  # a missing value is not a verdict
+        claim_fraction([True, None])
 
 
 def test_format_cell():

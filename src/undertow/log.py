@@ -29,8 +29,8 @@ from .rotations import world_to_body, wrap_angle
 G0 = 9.80665  # standard gravity, m/s^2
 P_ATM = 101_325.0  # standard atmosphere, Pa
 #: Default water density (kg/m^3) of every depth conversion and of the simulator: fresh water at
-#: the basin's temperature, about 20 C (998.2 kg/m^3; 999.1 at 15 C; NOTES.md section 1 gives
-#: 997-1000 for fresh water, about 1025 for sea water). Pass 1025 for a sea-water log.
+#: the basin's temperature, about 20 C (pure water: 998.2 kg/m^3 at 20 C, 999.1 at 15 C, CRC
+#: Handbook of Chemistry and Physics; sea water is about 1025). Pass 1025 for a sea-water log.
 FRESH_WATER_DENSITY = 998.0
 
 
@@ -364,7 +364,8 @@ def a50_beam_units(tilt_deg: float = 22.5) -> np.ndarray:
     """Unit vectors of the A50's four beams in the DVL frame, rows for protocol ids 0..3.
 
     b_i = (sin(tilt) cos(az_i), sin(tilt) sin(az_i), cos(tilt)), az = +135, -135, -45, +45 deg
-    (NOTES.md section 1): horizontal part 0.383, vertical 0.924 for the 22.5 deg tilt.
+    about +z from +x (Water Linked DVL documentation, "Axes": x forward, y right, z down; protocol
+    ids 0..3 are transducers 1..4): horizontal part 0.383, vertical 0.924 for the 22.5 deg tilt.
     """
     tilt = np.deg2rad(tilt_deg)
     az = np.deg2rad([135.0, -135.0, -45.0, 45.0])
@@ -398,7 +399,8 @@ def _bluerov2_sonar() -> SensorMount:
 
 @dataclass(frozen=True)
 class Mounting:
-    """Sensor mounting on the body (defaults: the BlueROV2 URDF values of NOTES.md section 1).
+    """Sensor mounting on the body (defaults: a public BlueROV2 URDF of the paper's lab: DVL at
+    (0.164, 0.004, 0.284) m turned 0.05 rad about z, Ping sonar at (0.164, 0.106, 0.306) m).
 
     The sonar frame's +z is its acoustic axis (looking down when the rotation is zero).
     """

@@ -1,7 +1,7 @@
 """One settings file for every stage: ``topics``, ``mounting``, ``localizer``, ``mapping``.
 
 Each section is the stage's own pydantic model (:class:`~undertow.io.topics.TopicMap`,
-:class:`~undertow.estimation.localizer.LocalizerConfig`,
+:class:`~undertow.estimation.config.LocalizerConfig`,
 :class:`~undertow.mapping.config.MappingConfig`); every field has a default, so an empty file (or
 no file) runs, and a file sets only what differs::
 
@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from ._util.validate import read_yaml, validate
 from .errors import ConfigError
-from .estimation.localizer import LocalizerConfig
+from .estimation.config import LocalizerConfig
 from .io.topics import TopicMap
 from .log import Log
 from .mapping.config import MappingConfig

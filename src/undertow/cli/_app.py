@@ -1,5 +1,5 @@
-"""The `undertow` typer app and what its commands share: one-line user errors, progress bars,
-JSON output, reading a log with the topic map and settings file."""
+"""The `undertow` typer app and what its commands share: one-line user errors and warnings,
+progress bars, JSON output, option types."""
 
 from __future__ import annotations
 
@@ -37,7 +37,13 @@ err = Console(stderr=True)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
-    err.print(f"[yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+    _print_warnings([str(message)])
+
+
+def _print_warnings(lines) -> None:
+    """One ``warning: ...`` line on stderr per warning (a result's ``warnings``)."""
+    for line in lines:
+        err.print(f"[yellow]warning:[/] {line}", highlight=False, soft_wrap=True)
 
 
 @app.callback()
@@ -82,12 +88,6 @@ def _print_json(data) -> None:
     sys.stdout.write(text + "\n")
 
 
-def _load_log(path: Path, topics: Path | None, settings=None):
-    from ..jobs.common import load_log
-
-    return load_log(path, topics, settings)
-
-
 def _triple(text: str | None, name: str):
     if text is None:
         return None
@@ -110,14 +110,6 @@ ConfigOption = Annotated[
     Path | None,
     typer.Option(help="Settings YAML with topics / localizer / mapping sections (see README)."),
 ]
-
-
-def _read_ground_truth(path: Path):
-    from ..io.tum import read_tum
-    from ..log import GroundTruth
-
-    t, position, rpy = read_tum(path)
-    return GroundTruth(t=t, position=position, orientation=rpy)
 
 
 def _fmt(value, digits: int = 3) -> str:

@@ -1,4 +1,5 @@
-"""Commands on logs and the simulator: info, simulate."""
+"""Commands on logs and the simulator: info, simulate (parse, call :mod:`undertow.jobs.data`,
+print)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,10 @@ from typing import Annotated
 
 import typer
 
-from .._util.atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
+    ConfigOption,
+    TopicsOption,
     _print_json,
     _progress,
     app,
@@ -24,24 +26,43 @@ from ._app import (
 def info(
     path: Annotated[Path, typer.Argument(help="ROS 1 bag, ROS 2 bag directory, or A50 JSON log.")],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
-    topics: Annotated[
-        Path | None, typer.Option(help="YAML topic map overriding the BlueROV2 defaults.")
-    ] = None,
+    topics: TopicsOption = None,
+    config: ConfigOption = None,
 ) -> None:
     """Streams found, message counts, rates, time span and invalid data, in measurement terms.
 
     Example: `undertow info runs/calm/log --json`
     """
-    from ..io import read_log
-    from ..io.info import summarize
-    from ..io.topics import TopicMap
+    from ..jobs.data import info_file
+    from ..settings import Settings
 
-    topic_map = TopicMap.from_yaml(topics) if topics else None
-    summary = summarize(read_log(path, topics=topic_map))
+    settings = Settings.from_yaml(config) if config else None
+    result = info_file(path, topics=topics, settings=settings)
     if as_json:
-        _print_json(summary.to_dict())
+        _print_json(result.to_dict())
     else:
-        console.print(summary.to_rich_table())
+        console.print(summary_table(result.summary))
+
+
+def summary_table(summary):
+    """A rich Table of a :class:`~undertow.io.info.LogSummary`, one row per stream."""
+    from rich.table import Table
+
+    table = Table(title=f"{summary.source or 'log'}: {summary.duration_s:.1f} s")
+    table.add_column("stream", no_wrap=True)
+    for col in ("messages", "rate Hz", "span s", "invalid", "missing values"):
+        table.add_column(col, justify="right")
+    for s in summary.streams:
+        detail = ", ".join(f"{k} {v}" for k, v in s.missing_detail.items() if v)
+        table.add_row(
+            s.name,
+            str(s.messages),
+            f"{s.rate_hz:.2f}",
+            f"{s.start_s:.3f} - {s.end_s:.3f}",
+            str(s.invalid),
+            f"{s.missing_values}" + (f" ({detail})" if detail else ""),
+        )
+    return table
 
 
 @app.command()
@@ -68,23 +89,23 @@ def simulate(
 
     Re-run it exactly: `undertow simulate runs/a10f075/scenario.yaml --out runs/again`
     """
-    from ..sim import list_scenarios, load_scenario, write_simulation
-    from ..sim import simulate as run_simulation
+    from ..jobs.data import RUN_FILES, builtin_scenarios, simulate_to_folder
 
     if list_:
-        for name in list_scenarios():
-            console.print(f"[bold]{name}[/]  {load_scenario(name).description}", highlight=False)
+        for name, description in builtin_scenarios():
+            console.print(f"[bold]{name}[/]  {description}", highlight=False)
         return
     if scenario is None or out_dir is None:
         raise UndertowError("simulate needs a SCENARIO and --out DIR (or --list)")
     if seed is not None and seed < 0:
         raise UndertowError(f"--seed {seed}: must be a non-negative integer")
-    spec = load_scenario(scenario)
-    check_output_folder(out_dir, overwrite, inputs=[scenario] if Path(scenario).exists() else [])
-    seed = spec.seed if seed is None else seed  # given wins; else the scenario's own (default 0)
     with _progress(quiet) as progress:
-        progress.add_task(f"simulating {spec.name} (seed {seed})", total=None)
-        result = run_simulation(spec, seed=seed)
-        write_simulation(result, out_dir, overwrite=overwrite)
+        simulate_to_folder(
+            scenario,
+            out_dir,
+            seed,
+            overwrite,
+            on_start=lambda label: progress.add_task(label, total=None),
+        )
     if not quiet:
-        err.print(f"wrote {out_dir}/log, ground_truth.tum, ground_truth.ply, scenario.yaml")
+        err.print(f"wrote {out_dir}/{', '.join(RUN_FILES)}")

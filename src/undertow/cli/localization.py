@@ -7,16 +7,14 @@ from typing import Annotated
 
 import typer
 
-from .._util.atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
     OverwriteOption,
     TopicsOption,
-    _load_log,
     _print_json,
+    _print_warnings,
     _progress,
-    _read_ground_truth,
     _triple,
     app,
     console,
@@ -82,70 +80,57 @@ def localize(
     Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
     --calibration calm_cal.yaml --out runs/a10/proposed`
     """
-    from ..estimation.localizer import wave_condition
-    from ..estimation.noise import parse_wave
-    from ..estimation.run import localize as run_localize
-    from ..io.results import save_trajectory
-    from ..settings import Settings
+    from ..jobs.localize import localize_file
 
-    numbers = {"--wave-amplitude": wave_amplitude, "--wave-frequency": wave_frequency}
-    by_number = [name for name, value in numbers.items() if value is not None]
-    if wave is not None and by_number:
+    condition = _wave_option(wave, wave_amplitude, wave_frequency)
+    options = {
+        "variant": variant,
+        "output_rate_hz": output_rate,
+        "gate_probability": gate,
+        "initial_position": _triple(initial_position, "--initial-position"),
+    }
+    with _progress(quiet) as progress:
+        progress.add_task(f"localizing{f' ({variant})' if variant else ''}", total=None)
+        result = localize_file(
+            log_path, config, topics=topics, out_dir=out_dir, overwrite=overwrite,
+            profile=profile, calibration=calibration, extrapolate=extrapolate, smooth=smooth,
+            wave=condition,
+            **{name: value for name, value in options.items() if value is not None},
+        )  # fmt: skip
+    _print_warnings(result.warnings)
+    if not quiet:
+        err.print(f"wave condition: {result.wave} ({_wave_source(result, wave)})",
+                  highlight=False, soft_wrap=True)  # fmt: skip
+        err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
+
+
+def _wave_option(name: str | None, amplitude: float | None, frequency: float | None):
+    """The wave condition given by name or by both numbers (None: not given)."""
+    numbers = {"--wave-amplitude": amplitude, "--wave-frequency": frequency}
+    by_number = [option for option, value in numbers.items() if value is not None]
+    if name is not None and by_number:
         raise UndertowError(
             f"--wave and {' / '.join(by_number)} conflict: give the condition by name (--wave) "
             "or by --wave-amplitude and --wave-frequency, not both"
         )
     if len(by_number) == 1:
         raise UndertowError("give both --wave-amplitude and --wave-frequency (or --wave NAME)")
-    condition = (wave_amplitude, wave_frequency) if wave_amplitude is not None else wave
-    settings = Settings.from_yaml(config)
-    params = settings.localizer_params()
-    variant = variant or params.pop("variant", "proposed")
-    params.pop("variant", None)
-    if output_rate is not None:
-        params["output_rate_hz"] = output_rate
-    if gate is not None:
-        params["gate_probability"] = gate
-    if smooth and params.get("output_rate_hz") is not None:
-        given = "--output-rate" if output_rate is not None else f"output_rate_hz in {config}"
-        raise UndertowError(
-            f"--smooth needs the filter output at every measurement: drop {given} "
-            f"({params['output_rate_hz']} Hz) or --smooth"
-        )
-    check_output_folder(out_dir, overwrite, inputs=[log_path, profile, calibration, config, topics])
-    with _progress(quiet) as progress:
-        progress.add_task(f"localizing ({variant})", total=None)
-        log = _load_log(log_path, topics, settings)
-        used, source = wave_condition(condition, log)
-        if not quiet:
-            how = {
-                "given": "--wave" if wave is not None else "--wave-amplitude/--wave-frequency",
-                "default": "default: none given, none recorded in the log; set it with --wave",
-            }.get(source, f"from {source}; --wave overrides")
-            unused = (
-                f"; the {variant} variant adds no wave noise"
-                if variant in ("baseline", "be")
-                else ""
-            )
-            err.print(
-                f"wave condition: {parse_wave(used)[0]} ({how}{unused})",
-                highlight=False,
-                soft_wrap=True,
-            )
-        trajectory = run_localize(
-            log,
-            variant=variant,
-            profile=profile,
-            wave=condition,
-            calibration=calibration,
-            initial_position=_triple(initial_position, "--initial-position") or "auto",
-            extrapolate=extrapolate,
-            smooth=smooth,
-            **params,
-        )
-        save_trajectory(trajectory, out_dir, overwrite)
-    if not quiet:
-        err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
+    return (amplitude, frequency) if by_number else name
+
+
+def _wave_source(result, by_name: str | None) -> str:
+    """Where the wave condition of ``result`` came from, and the option that sets it."""
+    from ..estimation.localizer import WAVE_DEFAULT, WAVE_GIVEN
+
+    if result.wave_source == WAVE_GIVEN:
+        how = "--wave" if by_name is not None else "--wave-amplitude/--wave-frequency"
+    elif result.wave_source == WAVE_DEFAULT:
+        how = "default: none given, none recorded in the log; set it with --wave"
+    else:
+        how = f"from {result.wave_source}; --wave overrides"
+    if not result.wave_noise_added:
+        how += f"; the {result.variant} variant adds no wave noise"
+    return how
 
 
 @app.command()
@@ -168,20 +153,16 @@ def calibrate(
 
     Example: `undertow calibrate runs/calm/log runs/calm/ground_truth.tum --out calm_cal.yaml`
     """
-    from ..estimation.calibration import calibrate as run_calibration
-    from ..settings import Settings
+    from ..jobs.localize import calibrate_file
 
     with _progress(quiet) as progress:
         progress.add_task("calibrating", total=None)
-        log = _load_log(log_path, topics, Settings.from_yaml(config))
-        if ground_truth is not None:
-            log = log.replace(ground_truth=_read_ground_truth(ground_truth))
-        result = run_calibration(log)
-        result.save_yaml(out)
-    _print_json(result.to_dict())
+        result = calibrate_file(log_path, ground_truth, config, topics=topics, out=out)
+    _print_warnings(result.warnings)
+    _print_json(result.calibration.to_dict())
     if not quiet:
         err.print(
-            f"wrote {out} (estimated: {', '.join(result.estimated)})",
+            f"wrote {out} (estimated: {', '.join(result.calibration.estimated)})",
             highlight=False,
             soft_wrap=True,
         )
@@ -201,10 +182,11 @@ def evaluate_trajectory(
     """
     from rich.table import Table
 
-    from ..evaluation.trajectory import trajectory_rmse
-    from ..trajectory import Trajectory
+    from ..jobs.localize import evaluate_trajectory_file
 
-    result = trajectory_rmse(Trajectory.load_npz(estimate), _read_ground_truth(ground_truth), align)
+    evaluation = evaluate_trajectory_file(estimate, ground_truth, align)
+    _print_warnings(evaluation.warnings)
+    result = evaluation.errors
     if as_json:
         _print_json(result.to_dict())
         return

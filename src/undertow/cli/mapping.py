@@ -7,13 +7,11 @@ from typing import Annotated
 
 import typer
 
-from .._util.atomic import check_output_folder
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
     OverwriteOption,
     TopicsOption,
-    _load_log,
     _print_json,
     _progress,
     app,
@@ -59,37 +57,16 @@ def map_command(
     Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --method adaptive
     --out runs/a10/map`
     """
-    from ..mapping.config import MappingConfig
-    from ..mapping.run import map_log, save_map
-    from ..settings import Settings
-    from ..trajectory import Trajectory
+    from ..jobs.map import map_file
 
-    check_output_folder(out_dir, overwrite, inputs=[log_path, trajectory, prior, config, topics])
-    trajectory_file = trajectory / "trajectory.npz" if trajectory.is_dir() else trajectory
-    _check_npz(trajectory_file, "a trajectory.npz written by `undertow localize` (or its folder)")
-    if prior is not None:
-        prior = prior / "map.npz" if prior.is_dir() else prior
-        _check_npz(prior, "a map.npz written by `undertow map` (or its folder)", "--prior ")
-    settings = Settings.from_yaml(config)
-    options = {
-        "method": method,
-        "resolution": resolution,
-        "length_scale": length_scale,
-        "variance_bounds": _variance_bounds(variance_bounds),
-    }
+    options = {"method": method, "resolution": resolution, "length_scale": length_scale,
+               "variance_bounds": _variance_bounds(variance_bounds)}  # fmt: skip
     given = {k: v for k, v in options.items() if v is not None}  # options win over the file
-    cfg = MappingConfig.from_dict({**settings.mapping.model_dump(), **given})
-    for option, value, applies in (
-        ("--length-scale", length_scale, "bki"),
-        ("--variance-bounds", variance_bounds, "adaptive"),
-    ):
-        if value is not None and cfg.method != applies:
-            raise UndertowError(f"{option} applies to the {applies} method, not {cfg.method}")
     with _progress(quiet) as progress:
-        progress.add_task(f"mapping ({cfg.method})", total=None)
-        log = _load_log(log_path, topics, settings)
-        result = map_log(log, Trajectory.load_npz(trajectory_file), cfg, prior=prior)
-        save_map(result, out_dir, overwrite)
+        progress.add_task(f"mapping ({method})" if method else "mapping", total=None)
+        result = map_file(log_path, trajectory, config, topics=topics, prior=prior,
+                          out_dir=out_dir, overwrite=overwrite, **given)  # fmt: skip
+    _print_warnings(result.warnings)
     if not quiet:
         normalization = result.metadata["mapper"].get("normalization")
         how = f", {normalization} normalization" if normalization else ""
@@ -99,14 +76,9 @@ def map_command(
         )
 
 
-def _check_npz(path: Path, expected: str, prefix: str = "") -> None:
-    """A wrong kind of file (a .tum, .ply, .yaml) named as an .npz input: one clear line."""
-    from ..errors import ReaderError
-    from ..mapping.grid import not_an_npz
-
-    problem = not_an_npz(path, expected)
-    if problem:
-        raise ReaderError(prefix + problem)
+def _print_warnings(lines: list[str]) -> None:
+    for line in lines:
+        err.print(f"[yellow]warning:[/] {line}", highlight=False, soft_wrap=True)
 
 
 def _variance_bounds(text: str | None):
@@ -144,39 +116,11 @@ def evaluate_map_command(
 
     Example: `undertow evaluate map runs/a10/map runs/a10/ground_truth.ply --json`
     """
-    from ..errors import DataError
-    from ..evaluation.cloud import evaluate_map, map_threshold
-    from ..io.ply import read_ply
-    from ..mapping.grid import OccupancyMap
+    from ..jobs.map import evaluate_map_file
 
-    if threshold is not None and not 0.0 < threshold < 1.0:
-        raise UndertowError(f"--threshold must be in (0, 1), got {threshold}")
-    if map_path.is_dir():
-        map_path = map_path / "map.npz"
-    resolution, threshold_from = None, "the map.ply (thresholded when it was written)"
-    if map_path.suffix.lower() == ".ply":
-        if threshold is not None:
-            raise UndertowError(
-                f"--threshold applies to a map.npz; {map_path} holds the cells already "
-                "thresholded when it was written (give the map.npz, or leave --threshold out)"
-            )
-        points = read_ply(map_path)[0]
-        if len(points) == 0:
-            err.print(
-                f"[yellow]warning:[/] {map_path}: the map has no points",
-                highlight=False,
-                soft_wrap=True,
-            )
-    else:
-        occupancy = OccupancyMap.load(map_path)
-        threshold, threshold_from = map_threshold(occupancy, threshold)
-        points = occupancy.points(threshold)
-        resolution = occupancy.resolution
-    gt_points = read_ply(ground_truth)[0]
-    if len(gt_points) == 0:
-        raise DataError(f"{ground_truth}: the ground-truth cloud has no points")
-    result = evaluate_map(points, gt_points, resolution=resolution)
-    values = {**result.to_dict(), "threshold": threshold, "threshold_from": threshold_from}
+    result = evaluate_map_file(map_path, ground_truth, threshold)
+    _print_warnings(result.warnings)
+    values = result.to_dict()
     if as_json:
         _print_json(values)
         return

@@ -7,12 +7,10 @@ from typing import Annotated
 
 import typer
 
-from ..errors import UndertowError
 from ._app import (
     ConfigOption,
     TopicsOption,
     _fmt,
-    _load_log,
     _print_json,
     _progress,
     app,
@@ -44,27 +42,28 @@ def characterize_command(
 
     Example: `undertow characterize runs/calm/log runs/a10/log runs/a05/log --out profile.yaml`
     """
-    from rich.table import Table
+    from ..jobs.study import characterize_files
 
-    from ..estimation.characterize import characterize
-    from ..settings import Settings
-
-    settings = Settings.from_yaml(config)
     with _progress(quiet) as progress:
         progress.add_task("characterizing", total=None)
-        result = characterize([_load_log(p, topics, settings) for p in logs])
-    if out is not None:
-        result.profile.to_yaml(out)
-    for run in result.runs:
-        for note in run.notes:
-            err.print(f"[yellow]warning:[/] {run.source}: {note}", highlight=False, soft_wrap=True)
+        result = characterize_files(logs, config, topics=topics, out=out)
+    for warning in result.warnings:
+        err.print(f"[yellow]warning:[/] {warning}", highlight=False, soft_wrap=True)
     if as_json:
-        _print_json({"runs": result.table(), "profile": result.profile.to_dict()})
+        _print_json(result.to_dict())
         return
+    console.print(_characterize_table(result.rows()))
+    if out is not None and not quiet:
+        err.print(f"wrote {out}")
+
+
+def _characterize_table(rows: list[dict]):
+    from rich.table import Table
+
     table = Table(title="Wave characterization (DVL std in the DVL frame, m/s)")
     for col in ("run", "a (m)", "f (Hz)", "vx", "vy", "vz", "extra vx", "depth std (m)"):
         table.add_column(col, justify="right")
-    for row in result.table():
+    for row in rows:
         table.add_row(
             row["source"],
             _fmt(row["amplitude_m"]),
@@ -73,9 +72,7 @@ def characterize_command(
             _fmt(row["dvl_extra_std_m_s"][0]),
             _fmt(row["depth_std_m"]),
         )
-    console.print(table)
-    if out is not None and not quiet:
-        err.print(f"wrote {out}")
+    return table
 
 
 @app.command()
@@ -103,33 +100,10 @@ def reproduce(
 
     Example: `undertow reproduce --seeds 10 --out results_mc`
     """
-    from ..study.pipeline import StudySettings
-    from ..study.runner import run_study
+    from ..jobs import study
 
-    if seeds < 1:
-        raise UndertowError("--seeds must be at least 1")
-    if first_seed < 0:
-        raise UndertowError(f"--first-seed must be >= 0, got {first_seed}")
-    settings = StudySettings(rock_survey="rock-survey" if rock_survey else None)
-    with _progress(quiet) as progress:
-        task = progress.add_task("starting", total=None)
-        result = run_study(
-            out_dir,
-            seeds=list(range(first_seed, first_seed + seeds)),
-            scheduler=scheduler,
-            settings=settings,
-            progress=lambda msg: progress.update(task, description=msg),
-        )
-    if not quiet:
-        from rich.markdown import Markdown
-
-        console.print(Markdown(result.markdown))
-        for seed, message in result.failures.items():
-            err.print(f"[red]seed {seed} failed:[/] {message}", highlight=False)
-        err.print(
-            f"results in {out_dir}/ (tables.md, tables.json, figures/, runs/); report: "
-            f"{result.report} ({result.wall_s:.0f} s)"
-        )
+    _run_study(study.reproduce, out_dir, quiet, seeds=seeds, first_seed=first_seed,
+               scheduler=scheduler, rock_survey=rock_survey)  # fmt: skip
 
 
 @app.command()
@@ -138,4 +112,25 @@ def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="Results folder.")] = Path("results"),
 ) -> None:
     """The main job with its defaults: `undertow reproduce --seeds 1 --out results`."""
-    reproduce(out_dir=out_dir, seeds=1, first_seed=0, scheduler=None, rock_survey=True, quiet=False)
+    from ..jobs import study
+
+    _run_study(study.demo, out_dir, quiet=False)
+
+
+def _run_study(job, out_dir: Path, quiet: bool, **options) -> None:
+    """Run a study job under a progress line, then print its tables and where it wrote."""
+    from rich.markdown import Markdown
+
+    with _progress(quiet) as progress:
+        task = progress.add_task("starting", total=None)
+        result = job(out_dir, progress=lambda msg: progress.update(task, description=msg),
+                     **options)  # fmt: skip
+    if quiet:
+        return
+    console.print(Markdown(result.markdown))
+    for seed, message in result.failures.items():
+        err.print(f"[red]seed {seed} failed:[/] {message}", highlight=False)
+    err.print(
+        f"results in {out_dir}/ (tables.md, tables.json, figures/, runs/); report: "
+        f"{result.report} ({result.wall_s:.0f} s)"
+    )

@@ -5,9 +5,12 @@
   orientation error e(t) = wrap(DR(t) - truth(t)), e(t) ~ e_0 + mu_b t.
 - IMU gyro bias (rad/s): mean of z_IMU - omega_true, omega_true from the ground-truth attitude
   (Euler-rate kinematics omega = T(phi, theta)^{-1} d(eta_2)/dt).
-- DVL velocity scale factor s (beyond the paper): v_meas = s v_true, as a sound-speed error
-  gives s = c_set / c_true (NOTES.md section 1), estimated by least squares over valid DVL
-  samples while moving: s = sum(v_meas . v_true) / sum(|v_true|^2), with v_true the ground
+- DVL velocity scale factor s (beyond the paper): v_meas = s v_true. A DVL turns the Doppler
+  shift f_D of each beam into a velocity with the sound speed it is set to, v = c f_D /
+  (2 f_0 cos(beam angle)), so a wrong setting (e.g. salinity) scales every velocity by
+  s = c_set / c_true (Teledyne RD Instruments, "Acoustic Doppler Current Profiler Principles of
+  Operation: A Practical Primer"). Estimated by least squares over valid DVL samples while
+  moving: s = sum(v_meas . v_true) / sum(|v_true|^2), with v_true the ground
   truth body velocity expressed in the DVL frame, v_true^DVL = R_DVL^T (v^B + omega x r_DVL).
   This is the persistent along-track offset the paper reports but does not model.
 """
@@ -16,7 +19,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal, get_args
 
@@ -30,24 +33,39 @@ from ..errors import ConfigError, DataError
 from ..log import Log
 from ..rotations import world_to_body, wrap_angle
 
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Parameter = Literal["dr_bias_drift_rad_s", "gyro_bias_rad_s", "dvl_scale_factor"]
+PARAMETERS: tuple[str, ...] = get_args(Parameter)
 
-@dataclass(frozen=True)
-class Calibration:
-    """Calibration parameters (units in the names) and how well each was determined."""
 
-    dr_bias_drift_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gyro_bias_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    dvl_scale_factor: float = 1.0
-    dvl_scale_factor_std: float = float("nan")
-    samples: dict | None = None
+class Calibration(BaseModel):
+    """Calibration parameters (units in the names), how well each was determined and which were
+    estimated: what :func:`calibrate` returns and a calibration YAML holds (checked here)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    dr_bias_drift_rad_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    gyro_bias_rad_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
+    dvl_scale_factor: float = Field(1.0, gt=0, allow_inf_nan=False)
+    dvl_scale_factor_std: float | None = float("nan")  # NaN / null: not determined
+    samples: dict[str, int] | None = None
     source: str = ""
     # the parameters estimated from data (None: not recorded, a file from an older version);
     # the others hold their defaults, with the reason in ``left_at_default``
-    estimated: tuple[str, ...] | None = None
-    left_at_default: dict[str, str] | None = None
+    estimated: tuple[Parameter, ...] | None = None
+    left_at_default: dict[Parameter, str] | None = None
+
+    @field_validator("dvl_scale_factor_std")
+    @classmethod
+    def _std(cls, value):
+        if value is None or math.isnan(value):
+            return float("nan")
+        if not (0 <= value < math.inf):
+            raise ValueError("must be a finite number >= 0 (or .nan: not determined)")
+        return value
 
     def to_dict(self) -> dict:
-        d = asdict(self)
+        d = self.model_dump()
         d["dr_bias_drift_rad_s"] = [float(v) for v in self.dr_bias_drift_rad_s]
         d["gyro_bias_rad_s"] = [float(v) for v in self.gyro_bias_rad_s]
         if self.estimated is not None:
@@ -73,49 +91,16 @@ class Calibration:
         if not isinstance(data, dict):
             raise ConfigError(
                 f"{path}: not a calibration file (expected a mapping of "
-                f"{', '.join(_CalibrationFile.model_fields)}, got a {type(data).__name__})"
+                f"{', '.join(cls.model_fields)}, got a {type(data).__name__})"
             )
         refuse_renamed(data, f"{path}: calibration field ")
-        unknown = sorted(str(k) for k in data if k not in _CalibrationFile.model_fields)
+        unknown = sorted(str(k) for k in data if k not in cls.model_fields)
         if unknown:
             raise ConfigError(
                 f"{path}: not a calibration file of `undertow calibrate`: unknown keys "
                 f"{', '.join(unknown)}"
             )
-        checked = validate(_CalibrationFile, data, f"{path}: calibration field ")
-        fields = checked.model_dump()
-        if fields["estimated"] is not None:
-            fields["estimated"] = tuple(fields["estimated"])
-        return cls(**fields)
-
-
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Parameter = Literal["dr_bias_drift_rad_s", "gyro_bias_rad_s", "dvl_scale_factor"]
-PARAMETERS: tuple[str, ...] = get_args(Parameter)
-
-
-class _CalibrationFile(BaseModel):
-    """What a calibration YAML may hold (all optional; defaults as :class:`Calibration`)."""
-
-    model_config = ConfigDict(extra="forbid")
-
-    dr_bias_drift_rad_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
-    gyro_bias_rad_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
-    dvl_scale_factor: float = Field(1.0, gt=0, allow_inf_nan=False)
-    dvl_scale_factor_std: float | None = float("nan")  # NaN / null: not determined
-    samples: dict[str, int] | None = None
-    source: str = ""
-    estimated: list[Parameter] | None = None
-    left_at_default: dict[Parameter, str] | None = None
-
-    @field_validator("dvl_scale_factor_std")
-    @classmethod
-    def _std(cls, value):
-        if value is None or math.isnan(value):
-            return float("nan")
-        if not (0 <= value < math.inf):
-            raise ValueError("must be a finite number >= 0 (or .nan: not determined)")
-        return value
+        return validate(cls, data, f"{path}: calibration field ")
 
 
 def _euler_rates_to_body(rpy: np.ndarray, rpy_dot: np.ndarray) -> np.ndarray:
@@ -157,89 +142,22 @@ def calibrate(
     DataError says what overlaps when none can be estimated.
     """
     log.require("ground_truth", stage="calibrate")
-    gt = log.ground_truth.usable("calibrate")
-    v_world = gt.differentiated_velocity(smoothing_s)
-    rpy_dot_full = np.gradient(np.unwrap(gt.orientation, axis=0), gt.t, axis=0)
-    omega_full = _euler_rates_to_body(gt.orientation, rpy_dot_full)
-    counts: dict[str, int] = {}
-    found: dict[str, int] = {}  # samples available per parameter, estimated or not
-    result = {}
-    span = f"[{gt.t[0]:.3f}, {gt.t[-1]:.3f}] s"
-    need = f"need at least {min_samples}"
-    why_not: dict[str, str] = {}  # parameter -> why it keeps its default
-
-    def inside(t):
-        return (t >= gt.t[0]) & (t <= gt.t[-1])
-
-    dr = log.dead_reckoning
-    if dr is None or not len(dr):
-        why_not["dr_bias_drift_rad_s"] = "the log has no dead_reckoning stream"
-    else:
-        keep = inside(dr.t) & np.all(np.isfinite(dr.orientation), axis=1)
-        n = found["dr_bias_drift_rad_s (dead_reckoning)"] = int(keep.sum())
-        if n < max(min_samples, 3):
-            why_not["dr_bias_drift_rad_s"] = (
-                f"{n} finite dead_reckoning samples inside the ground truth {span}, {need}"
-            )
-        elif np.ptp(dr.t[keep]) == 0:
-            why_not["dr_bias_drift_rad_s"] = "all dead_reckoning samples at one time"
-        else:
-            _, rpy, _ = gt.interpolate(dr.t[keep])
-            e = np.unwrap(wrap_angle(dr.orientation[keep] - rpy), axis=0)
-            result["dr_bias_drift_rad_s"] = tuple(
-                _line_slope(dr.t[keep], e[:, i]) for i in range(3)
-            )
-            counts["dead_reckoning"] = n
-    imu = log.imu
-    if imu is None or not len(imu):
-        why_not["gyro_bias_rad_s"] = "the log has no imu stream"
-    else:
-        keep = inside(imu.t) & np.all(np.isfinite(imu.angular_velocity), axis=1)
-        n = found["gyro_bias_rad_s (imu)"] = int(keep.sum())
-        if n < max(min_samples, 1):
-            why_not["gyro_bias_rad_s"] = (
-                f"{n} finite imu samples inside the ground truth {span}, {need}"
-            )
-        else:
-            omega = np.column_stack(
-                [np.interp(imu.t[keep], gt.t, omega_full[:, i]) for i in range(3)]
-            )
-            result["gyro_bias_rad_s"] = tuple(
-                float(v) for v in np.mean(imu.angular_velocity[keep] - omega, axis=0)
-            )
-            counts["imu"] = n
-    dvl = log.dvl
-    if dvl is None or not len(dvl):
-        why_not["dvl_scale_factor"] = "the log has no dvl stream"
-    else:
-        keep = inside(dvl.t) & dvl.valid & np.all(np.isfinite(dvl.velocity), axis=1)
-        _, rpy, vel = gt.interpolate(dvl.t[keep], v_world)
-        omega = np.column_stack([np.interp(dvl.t[keep], gt.t, omega_full[:, i]) for i in range(3)])
-        v_body = world_to_body(rpy, vel)
-        mount = log.mounting.dvl
-        v_true = (v_body + np.cross(omega, np.asarray(mount.translation))) @ mount.rotation_matrix()
-        moving = np.linalg.norm(v_true, axis=1) > min_speed_m_s
-        n = found["dvl_scale_factor (dvl, valid and moving)"] = int(moving.sum())
-        if n < max(min_samples, 3):
-            why_not["dvl_scale_factor"] = (
-                f"{n} valid dvl samples moving faster than {min_speed_m_s} m/s inside the "
-                f"ground truth {span}, {need}"
-            )
-        else:
-            vt, vm = v_true[moving], dvl.velocity[keep][moving]
-            s = float(np.sum(vm * vt) / np.sum(vt * vt))
-            resid = vm - s * vt
-            s_std = float(np.sqrt(np.sum(resid**2) / (resid.size - 1) / np.sum(vt * vt)))
-            result["dvl_scale_factor"] = s
-            result["dvl_scale_factor_std"] = s_std
-            counts["dvl_moving"] = n
-    overlap = ", ".join(f"{n} samples for {what}" for what, n in found.items()) or "no samples"
+    truth = _Truth(log.ground_truth.usable("calibrate"), smoothing_s, min_samples)
+    fits = {
+        "dr_bias_drift_rad_s": _fit_dr_drift(log, truth),
+        "gyro_bias_rad_s": _fit_gyro_bias(log, truth),
+        "dvl_scale_factor": _fit_dvl_scale(log, truth, min_speed_m_s),
+    }
+    found = dict(fit.found for fit in fits.values() if fit.found is not None)
+    counts = dict(fit.samples for fit in fits.values() if fit.values)
     if not counts:
+        overlap = ", ".join(f"{n} samples for {what}" for what, n in found.items()) or "no samples"
         raise DataError(
-            f"calibrate: the ground truth {span} ({len(gt)} poses) overlaps {overlap}; "
-            f"need at least {min_samples} for a parameter"
+            f"calibrate: the ground truth {truth.span} ({len(truth.gt)} poses) overlaps "
+            f"{overlap}; need at least {min_samples} for a parameter"
             + ("" if found else " (the log has no dead_reckoning, imu or dvl stream)")
         )
+    why_not = {name: fit.why_not for name, fit in fits.items() if fit.why_not is not None}
     defaults = Calibration()
     for name, reason in why_not.items():
         warnings.warn(
@@ -249,12 +167,115 @@ def calibrate(
             stacklevel=2,
         )
     return Calibration(
-        **result,
+        **{k: v for fit in fits.values() for k, v in fit.values.items()},
         samples=counts,
         source=log.source,
-        estimated=tuple(p for p in PARAMETERS if p in result),
+        estimated=tuple(p for p in PARAMETERS if fits[p].values),
         left_at_default=why_not or None,
     )
+
+
+class _Truth:
+    """The usable ground truth and what every fit reads from it: its span, its world velocity
+    (differentiated, smoothed over ``smoothing_s``) and its body rates omega = T^-1 eta_2'."""
+
+    def __init__(self, gt, smoothing_s: float, min_samples: int) -> None:
+        self.gt = gt
+        self.min_samples = min_samples
+        self.v_world = gt.differentiated_velocity(smoothing_s)
+        rpy_dot = np.gradient(np.unwrap(gt.orientation, axis=0), gt.t, axis=0)
+        self.omega = _euler_rates_to_body(gt.orientation, rpy_dot)
+        self.span = f"[{gt.t[0]:.3f}, {gt.t[-1]:.3f}] s"
+        self.need = f"need at least {min_samples}"
+
+    def inside(self, t: np.ndarray) -> np.ndarray:
+        return (t >= self.gt.t[0]) & (t <= self.gt.t[-1])
+
+    def omega_at(self, t: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(t, self.gt.t, self.omega[:, i]) for i in range(3)])
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """One parameter's fit: its values (empty when left at the default, with ``why_not``), the
+    samples it used (key, count) and those available (label, count; None without the stream)."""
+
+    values: dict
+    samples: tuple[str, int] | None = None
+    found: tuple[str, int] | None = None
+    why_not: str | None = None
+
+
+def _finite_inside(stream, name: str, field: str, parameter: str, truth: _Truth, minimum: int):
+    """(keep, found): the rows of ``stream`` whose ``field`` is finite inside the ground-truth
+    span and found = (label, their count); or a _Fit leaving ``parameter`` at its default when
+    the log lacks the stream or has fewer than max(min_samples, ``minimum``) such rows."""
+    if stream is None or not len(stream):
+        return _Fit({}, why_not=f"the log has no {name} stream")
+    keep = truth.inside(stream.t) & np.all(np.isfinite(getattr(stream, field)), axis=1)
+    n = int(keep.sum())
+    found = (f"{parameter} ({name})", n)
+    if n < max(truth.min_samples, minimum):
+        why_not = f"{n} finite {name} samples inside the ground truth {truth.span}, {truth.need}"
+        return _Fit({}, found=found, why_not=why_not)
+    return keep, found
+
+
+def _fit_dr_drift(log: Log, truth: _Truth) -> _Fit:
+    """mu_b: slope of the line through e(t) = wrap(DR(t) - truth(t)), unwrapped, per axis."""
+    dr = log.dead_reckoning
+    rows = _finite_inside(dr, "dead_reckoning", "orientation", "dr_bias_drift_rad_s", truth, 3)
+    if isinstance(rows, _Fit):
+        return rows
+    keep, found = rows
+    if np.ptp(dr.t[keep]) == 0:
+        return _Fit({}, found=found, why_not="all dead_reckoning samples at one time")
+    _, rpy, _ = truth.gt.interpolate(dr.t[keep])
+    e = np.unwrap(wrap_angle(dr.orientation[keep] - rpy), axis=0)
+    drift = tuple(_line_slope(dr.t[keep], e[:, i]) for i in range(3))
+    return _Fit({"dr_bias_drift_rad_s": drift}, ("dead_reckoning", found[1]), found)
+
+
+def _fit_gyro_bias(log: Log, truth: _Truth) -> _Fit:
+    """IMU gyro bias: mean of z_IMU - omega_true over the IMU samples inside the ground truth."""
+    imu = log.imu
+    rows = _finite_inside(imu, "imu", "angular_velocity", "gyro_bias_rad_s", truth, 1)
+    if isinstance(rows, _Fit):
+        return rows
+    keep, found = rows
+    omega = truth.omega_at(imu.t[keep])
+    bias = tuple(float(v) for v in np.mean(imu.angular_velocity[keep] - omega, axis=0))
+    return _Fit({"gyro_bias_rad_s": bias}, ("imu", found[1]), found)
+
+
+def _fit_dvl_scale(log: Log, truth: _Truth, min_speed_m_s: float) -> _Fit:
+    """s = sum(v_meas . v_true) / sum(|v_true|^2) over the valid DVL samples moving faster than
+    ``min_speed_m_s``, v_true^DVL = R_DVL^T (v^B + omega x r_DVL); its standard error from the
+    residuals v_meas - s v_true."""
+    dvl = log.dvl
+    if dvl is None or not len(dvl):
+        return _Fit({}, why_not="the log has no dvl stream")
+    keep = truth.inside(dvl.t) & dvl.valid & np.all(np.isfinite(dvl.velocity), axis=1)
+    _, rpy, vel = truth.gt.interpolate(dvl.t[keep], truth.v_world)
+    omega = truth.omega_at(dvl.t[keep])
+    v_body = world_to_body(rpy, vel)
+    mount = log.mounting.dvl
+    v_true = (v_body + np.cross(omega, np.asarray(mount.translation))) @ mount.rotation_matrix()
+    moving = np.linalg.norm(v_true, axis=1) > min_speed_m_s
+    n = int(moving.sum())
+    found = ("dvl_scale_factor (dvl, valid and moving)", n)
+    if n < max(truth.min_samples, 3):
+        why_not = (
+            f"{n} valid dvl samples moving faster than {min_speed_m_s} m/s inside the "
+            f"ground truth {truth.span}, {truth.need}"
+        )
+        return _Fit({}, found=found, why_not=why_not)
+    vt, vm = v_true[moving], dvl.velocity[keep][moving]
+    s = float(np.sum(vm * vt) / np.sum(vt * vt))
+    resid = vm - s * vt
+    s_std = float(np.sqrt(np.sum(resid**2) / (resid.size - 1) / np.sum(vt * vt)))
+    values = {"dvl_scale_factor": s, "dvl_scale_factor_std": s_std}
+    return _Fit(values, ("dvl_moving", n), found)
 
 
 def _plain_value(value) -> str:

@@ -36,12 +36,21 @@ models are linear in the state, h(x) = H x (the paper writes all four as H x), a
 h the unscented update is exact in closed form (ukf._update_linear): those three update without
 drawing sigma points, with H read off _h itself (:func:`_jacobians`). The barometer's lever arm
 makes its model nonlinear in the angles: it updates through sigma points drawn again from the
-predicted (x, P). The loop :func:`_run_filter` walks a merged, time-sorted measurement array: it
+predicted (x, P).
+
+The filter's boundary (:func:`_run_filter`) is a few named things: the merged, time-sorted
+measurements as one structured array (:data:`MEASUREMENT`: t, kind, z, R), the process model
+and the unscented weights as one record (:class:`ProcessModel`), the sensors' mounting and
+gates as another (:class:`SensorModel`), the start (t0, x0, P0) and the output times. The loop
 predicts to each measurement's time (no prediction when dt <= 0, dt capped at dt_max) and
-updates; see :mod:`undertow.estimation.localizer` for the Python side.
+updates; counters are indexed by the names in :data:`COUNT_NAMES`. The records are built from a
+:class:`~undertow.estimation.config.LocalizerConfig` by its ``process_model`` and
+``sensor_model``; :mod:`undertow.estimation.localizer` is the Python side.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -57,22 +66,68 @@ from .ukf import (
 )
 
 N_STATE = 18
+N_SIGMA = 2 * N_STATE + 1
 IMU, DVL, DR, BARO = 0, 1, 2, 3
 KIND_NAMES = ("imu", "dvl", "dead_reckoning", "pressure")
 KIND_DIM = (3, 3, 3, 1)
 STATE_ANGLES = np.zeros(N_STATE, dtype=np.bool_)
 STATE_ANGLES[3:6] = True
-# counters returned by _run_filter (after 4 "used" and 4 "gated" counters, one per kind)
+
+# one merged measurement: time (s), kind (IMU, DVL, DR, BARO), z (the first KIND_DIM[kind]
+# entries used) and its noise covariance R (the leading KIND_DIM[kind] square block used)
+MEASUREMENT = np.dtype(
+    [("t", np.float64), ("kind", np.int64), ("z", np.float64, (3,)), ("R", np.float64, (3, 3))]
+)
+
+# counters returned by _run_filter: "used" and "gated" one per kind (index USED + kind,
+# GATED + kind), then the others, each indexed by its constant below
 COUNT_NAMES = (
     "used_imu", "used_dvl", "used_dead_reckoning", "used_pressure",
     "gated_imu", "gated_dvl", "gated_dead_reckoning", "gated_pressure",
     "nonfinite_rejected", "dt_capped", "no_predict_dt_nonpositive", "cholesky_repairs",
     "numerical_reverts",
 )  # fmt: skip
-# NIS accumulators (optional last argument of _run_filter), one row per kind:
+USED = COUNT_NAMES.index("used_imu")
+GATED = COUNT_NAMES.index("gated_imu")
+NONFINITE_REJECTED = COUNT_NAMES.index("nonfinite_rejected")
+DT_CAPPED = COUNT_NAMES.index("dt_capped")
+NO_PREDICT = COUNT_NAMES.index("no_predict_dt_nonpositive")
+REPAIRS = COUNT_NAMES.index("cholesky_repairs")
+REVERTS = COUNT_NAMES.index("numerical_reverts")
+# NIS accumulators returned by _run_filter, one row per kind:
 # [sum of nu^T S^-1 nu, innovations evaluated, innovations with nis <= CHI2_95[kind]]
 NIS_FIELDS = ("nis_sum", "count", "in_95")
 CHI2_95 = np.array([7.814727903251179, 7.814727903251179, 7.814727903251179, 3.841458820694124])
+
+
+class ProcessModel(NamedTuple):
+    """eq:dynamics_model's parameters and the unscented transform's weights, one record."""
+
+    wm: np.ndarray  # (2n+1,) mean weights W^m
+    wc: np.ndarray  # (2n+1,) covariance weights W^c
+    lam: float  # lambda = alpha^2 (n + kappa) - n
+    q_acc: np.ndarray  # (6,) acceleration densities: linear (m/s^2)^2/Hz, angular (rad/s^2)^2/Hz
+    q_bias: np.ndarray  # (6,) bias-walk densities Gamma_b: b^g rad^2/s, b-bar^g (rad/s)^2/s
+    mu_bias: np.ndarray  # (6,) mean bias drifts (mu_b, mu-bar_b); zeros when freeze_bias
+    dt_max: float  # longest prediction step, s
+    freeze_bias: bool  # no bias states: held at 0 with a tiny variance and no correlation
+
+
+class SensorModel(NamedTuple):
+    """Mounting of the sensors (eq:imu_meas_model .. eq:bar_meas_model) and the gates."""
+
+    imu_Rt: np.ndarray  # (3, 3) R_imu^T, body -> IMU frame
+    dvl_Rt: np.ndarray  # (3, 3) R_dvl^T, body -> DVL frame
+    dvl_r: np.ndarray  # (3,) DVL lever arm r_dvl, body frame, m
+    baro_r: np.ndarray  # (3,) barometer lever arm r_bar, body frame, m
+    gate: np.ndarray  # (4,) per kind: largest NIS applied (inf: no gate)
+
+
+def pack_measurements(t, kind, z, R) -> np.ndarray:
+    """The structured :data:`MEASUREMENT` array of (t (N,), kind (N,), z (N, 3), R (N, 3, 3))."""
+    meas = np.empty(len(t), MEASUREMENT)
+    meas["t"], meas["kind"], meas["z"], meas["R"] = t, kind, z, R
+    return meas
 
 
 @njit(cache=True)
@@ -149,25 +204,28 @@ def _process_noise(x, dt, q_acc, q_bias, Q, R, T):
 
 
 @njit(cache=True)
-def _h(kind, x, imu_Rt, dvl_Rt, dvl_r, baro_r, out, R):
+def _h(kind, x, sensors, out, R):
     """Measurement functions eq:imu_meas_model, eq:dvl_meas_model, eq:dr_meas_model,
     eq:bar_meas_model for one state x (noise-free part)."""
     if kind == IMU:
+        Rt = sensors.imu_Rt
         for i in range(3):
-            out[i] = imu_Rt[i, 0] * x[9] + imu_Rt[i, 1] * x[10] + imu_Rt[i, 2] * x[11] + x[15 + i]
+            out[i] = Rt[i, 0] * x[9] + Rt[i, 1] * x[10] + Rt[i, 2] * x[11] + x[15 + i]
     elif kind == DVL:
+        Rt, r_dvl = sensors.dvl_Rt, sensors.dvl_r
         p, q, r = x[9], x[10], x[11]
-        v0 = x[6] + q * dvl_r[2] - r * dvl_r[1]
-        v1 = x[7] + r * dvl_r[0] - p * dvl_r[2]
-        v2 = x[8] + p * dvl_r[1] - q * dvl_r[0]
+        v0 = x[6] + q * r_dvl[2] - r * r_dvl[1]
+        v1 = x[7] + r * r_dvl[0] - p * r_dvl[2]
+        v2 = x[8] + p * r_dvl[1] - q * r_dvl[0]
         for i in range(3):
-            out[i] = dvl_Rt[i, 0] * v0 + dvl_Rt[i, 1] * v1 + dvl_Rt[i, 2] * v2
+            out[i] = Rt[i, 0] * v0 + Rt[i, 1] * v1 + Rt[i, 2] * v2
     elif kind == DR:
         for i in range(3):
             out[i] = _wrap(x[3 + i] + x[12 + i])
     else:
+        r_bar = sensors.baro_r
         _rotation(x[3], x[4], x[5], R)
-        out[0] = x[2] + R[2, 0] * baro_r[0] + R[2, 1] * baro_r[1] + R[2, 2] * baro_r[2]
+        out[0] = x[2] + R[2, 0] * r_bar[0] + R[2, 1] * r_bar[1] + R[2, 2] * r_bar[2]
 
 
 @njit(cache=True)
@@ -178,7 +236,7 @@ def _all_finite(a):
 
 
 @njit(cache=True)
-def _jacobians(imu_Rt, dvl_Rt, dvl_r, baro_r):
+def _jacobians(sensors):
     """H (3, 18) of the linear models IMU, DVL, DR, column j = h(e_j): (3, 3, 18), indexed by
     kind (the barometer's row is unused: it is not linear)."""
     H = np.zeros((3, 3, N_STATE))
@@ -188,7 +246,7 @@ def _jacobians(imu_Rt, dvl_Rt, dvl_r, baro_r):
     for kd in (IMU, DVL, DR):
         for j in range(N_STATE):
             e[j] = 1.0
-            _h(kd, e, imu_Rt, dvl_Rt, dvl_r, baro_r, col, R)
+            _h(kd, e, sensors, col, R)
             e[j] = 0.0
             for a in range(3):
                 H[kd, a, j] = col[a]
@@ -207,11 +265,23 @@ def _freeze_bias(x, P):
 
 
 @njit(cache=True)
-def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
-    """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place.
+def _predict_workspace():
+    """Scratch arrays of :func:`_predict`: chi, f(chi), residuals, L, Q, R, T, a state."""
+    n, npts = N_STATE, N_SIGMA
+    return (
+        np.empty((npts, n)), np.empty((npts, n)), np.empty((n, npts)), np.zeros((n, n)),
+        np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
+    )  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _predict(x, P, dt, process, ws, factored=False):
+    """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place:
+    x = mean_i f(chi_i, dt), P = sum_i W^c_i (f(chi_i) - x)(f(chi_i) - x)^T + Q(x, dt).
 
     ``factored``: the workspace's L already holds the Cholesky factor of P (skip factorizing)."""
     chi, chi_f, D, L, Q, R, T, xi = ws
+    lam = process.lam
     if factored:
         status = 0
         _spread(x, L, lam, STATE_ANGLES, chi)
@@ -224,149 +294,201 @@ def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
             a0, a1, a2 = chi[i, 3], chi[i, 4], chi[i, 5]
             _rotation(a0, a1, a2, R)
             _euler_rate(a0, a1, T)
-        _f(chi[i], dt, mu_bias, chi_f[i], R, T)
-    _process_noise(x, dt, q_acc, q_bias, Q, R, T)
-    _predict_moments(chi_f, wm, wc, Q, STATE_ANGLES, x, P, D)
+        _f(chi[i], dt, process.mu_bias, chi_f[i], R, T)
+    _process_noise(x, dt, process.q_acc, process.q_bias, Q, R, T)
+    _predict_moments(chi_f, process.wm, process.wc, Q, STATE_ANGLES, x, P, D)
     return status
 
 
+class _Work(NamedTuple):
+    """Scratch arrays of the filter loop (allocated once per run)."""
+
+    pred: tuple  # _predict_workspace()
+    H: np.ndarray  # (3, 3, 18) Jacobians of the linear models
+    xb: np.ndarray  # (18,) x before a step, restored when the step fails
+    Pb: np.ndarray  # (18, 18) P before a step
+    z3: np.ndarray  # (3,) z of a three-dimensional measurement
+    z1: np.ndarray  # (1,) z of the barometer
+    R3: np.ndarray  # (3, 3)
+    R1: np.ndarray  # (1, 1)
+    Zs1: np.ndarray  # (2n+1, 1) h(chi_i) of the barometer
+    zi: np.ndarray  # (3,) one h(chi_i)
+    angles3: np.ndarray  # (3,) True: the DR angles are wrapped
+    linear3: np.ndarray  # (3,) False: IMU and DVL
+    linear1: np.ndarray  # (1,) False: the barometer
+
+
 @njit(cache=True)
-def _run_filter(
-    t, kind, z, Rm, x0, P0, t0, wm, wc, lam, q_acc, q_bias, mu_bias,
-    imu_Rt, dvl_Rt, dvl_r, baro_r, dt_max, gate, freeze, out_times, record_all, out_n,
-    nis_stats=None,
-):  # fmt: skip
-    """Walk the merged measurements (t, kind, z (N, 3), Rm (N, 3, 3)) in order: predict to each
-    measurement time (none if dt <= 0, dt capped at dt_max), redraw sigma points, update.
+def _work(sensors):
+    return _Work(
+        _predict_workspace(), _jacobians(sensors), np.empty(N_STATE),
+        np.empty((N_STATE, N_STATE)), np.empty(3), np.empty(1), np.empty((3, 3)),
+        np.empty((1, 1)), np.empty((N_SIGMA, 1)), np.empty(3), np.ones(3, dtype=np.bool_),
+        np.zeros(3, dtype=np.bool_), np.zeros(1, dtype=np.bool_),
+    )  # fmt: skip
 
-    Records (x, P) after the last update at each distinct time (record_all) or, otherwise, at
-    ``out_times`` (the filter predicted to that time; the filter itself is not changed). A
-    recorded P that is not positive definite (rounding after extreme updates) is repaired
-    first, as the next sigma-point draw would do, so every emitted covariance is SPD.
-    Returns (out_t, out_x, out_P, counts) with counts as in COUNT_NAMES.
 
-    ``nis_stats`` (optional, (4, 3) float, zeroed by the caller) accumulates per kind the
-    normalized innovation squared NIS = nu^T S^-1 nu of every innovation evaluated (applied or
-    gated; not when S cannot be factorized): rows as in NIS_FIELDS. For a consistent filter
-    E[NIS] = dim z (KIND_DIM) and NIS <= CHI2_95[kind] with probability 0.95.
+@njit(cache=True)
+def _distinct_times(meas):
+    """Number of distinct consecutive times of the (time-sorted) measurements."""
+    n = 1
+    for k in range(1, meas.size):
+        if meas[k].t != meas[k - 1].t:
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def _run_filter(meas, t0, x0, P0, process, sensors, out_times):
+    """Walk the merged measurements ``meas`` (:data:`MEASUREMENT`, time-sorted) from (t0, x0,
+    P0): predict to each measurement time (none if dt <= 0, dt capped at dt_max), redraw sigma
+    points, update (:func:`_step`).
+
+    Records (x, P) after the last update at each distinct time (``out_times`` None) or at
+    ``out_times`` (predicted on a copy to each; the filter itself is not changed). A recorded P
+    that is not positive definite (rounding after extreme updates) is repaired first, as the
+    next sigma-point draw would do, so every emitted covariance is SPD.
+
+    Returns (out_t, out_x, out_P, counts, nis): counts as in COUNT_NAMES; nis (4, 3) per kind
+    as in NIS_FIELDS, over every innovation evaluated (applied or gated; not when S cannot be
+    factorized), NIS = nu^T S^-1 nu. For a consistent filter E[NIS] = dim z (KIND_DIM) and
+    NIS <= CHI2_95[kind] with probability 0.95.
     """
-    n = N_STATE
-    npts = 2 * n + 1
     x = x0.copy()
     P = P0.copy()
-    if freeze:
+    if process.freeze_bias:
         _freeze_bias(x, P)
     counts = np.zeros(len(COUNT_NAMES), dtype=np.int64)
-    out_t = np.empty(out_n)
-    out_x = np.empty((out_n, n))
-    out_P = np.empty((out_n, n, n))
-    ws = (
-        np.empty((npts, n)), np.empty((npts, n)), np.empty((n, npts)), np.zeros((n, n)),
-        np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
-    )  # fmt: skip
-    chi, L, R = ws[0], ws[3], ws[5]
-    H = _jacobians(imu_Rt, dvl_Rt, dvl_r, baro_r)
-    Zs1 = np.empty((npts, 1))
-    zk3 = np.empty(3)
-    zk1 = np.empty(1)
-    Rk3 = np.empty((3, 3))
-    Rk1 = np.empty((1, 1))
-    zi = np.empty(3)
-    zmask_angle = np.ones(3, dtype=np.bool_)
-    zmask_lin = np.zeros(3, dtype=np.bool_)
-    zmask_lin1 = np.zeros(1, dtype=np.bool_)
-    no_mu = np.zeros(6)
-    mu = no_mu if freeze else mu_bias
-    xb = np.empty(n)
-    Pb = np.empty((n, n))
+    nis = np.zeros((4, len(NIS_FIELDS)))
+    if out_times is None:
+        n_out = _distinct_times(meas)
+    else:
+        n_out = out_times.size
+    out = (np.empty(n_out), np.empty((n_out, N_STATE)), np.empty((n_out, N_STATE, N_STATE)))
+    work = _work(sensors)
+    L = work.pred[3]
     t_cur = t0
     factored = False  # L holds the Cholesky factor of the current P
     k_out = 0
-    j_out = 0
-    N = t.size
+    N = meas.size
     for k in range(N + 1):
-        tk = t[k] if k < N else np.inf
-        while not record_all and j_out < out_times.size and out_times[j_out] < tk:
-            if k_out < out_n:
-                xb[:] = x
-                Pb[:, :] = P
-                dt = min(out_times[j_out] - t_cur, dt_max)
-                if dt > 0:
-                    counts[11] += max(_predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws), 0)
-                counts[11] += max(_cholesky_repair(Pb, L), 0)  # emit only a PD covariance
-                factored = False  # L now belongs to Pb
-                out_t[k_out] = out_times[j_out]
-                out_x[k_out] = xb
-                out_P[k_out] = Pb
-                k_out += 1
-            j_out += 1
+        tk = meas[k].t if k < N else np.inf
+        if out_times is not None:
+            k_out = _record_until(tk, out_times, k_out, x, P, t_cur, process, work, out, counts)
         if k == N:
             break
-        kd = kind[k]
-        m = 1 if kd == BARO else 3
-        zk = zk1 if m == 1 else zk3
-        Rk = Rk1 if m == 1 else Rk3
-        for a in range(m):
-            zk[a] = z[k, a]
-            for b in range(m):
-                Rk[a, b] = Rm[k, a, b]
-        if not (_all_finite(zk) and _all_finite(Rk)):
-            counts[8] += 1
-        else:
-            dt = tk - t_cur
-            if dt > 0:
-                if dt > dt_max:
-                    dt = dt_max
-                    counts[9] += 1
-                xb[:] = x
-                Pb[:, :] = P
-                counts[11] += max(
-                    _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, ws, factored), 0
-                )
-                if not (_all_finite(x) and _all_finite(P)):
-                    x[:] = xb
-                    P[:, :] = Pb
-                    counts[12] += 1
-                if freeze:
-                    _freeze_bias(x, P)
-                t_cur = tk
-            else:
-                counts[10] += 1
+        processed, t_cur = _step(meas[k], x, P, t_cur, process, sensors, work, factored, counts,
+                                 nis)  # fmt: skip
+        if processed:
             factored = False
-            xb[:] = x
-            Pb[:, :] = P
-            zmask = zmask_angle if kd == DR else (zmask_lin1 if m == 1 else zmask_lin)
-            if kd == BARO:
-                counts[11] += max(_sigma_points(x, P, lam, STATE_ANGLES, L, chi), 0)
-                for i in range(npts):
-                    _h(kd, chi[i], imu_Rt, dvl_Rt, dvl_r, baro_r, zi, R)
-                    Zs1[i, 0] = zi[0]
-                status, nis = _update(x, P, chi, Zs1, zk, Rk, wm, wc, STATE_ANGLES, zmask, gate[kd])
-            else:
-                status, nis = _update_linear(x, P, H[kd], zk, Rk, STATE_ANGLES, zmask, gate[kd])
-            if nis_stats is not None and status < 2 and np.isfinite(nis):
-                nis_stats[kd, 0] += nis
-                nis_stats[kd, 1] += 1.0
-                if nis <= CHI2_95[kd]:
-                    nis_stats[kd, 2] += 1.0
-            if status == 0 and _all_finite(x) and _all_finite(P):
-                counts[kd] += 1
-            else:
-                if status == 1:
-                    counts[4 + kd] += 1
-                else:
-                    counts[12] += 1
-                x[:] = xb
-                P[:, :] = Pb
-            if freeze:
-                _freeze_bias(x, P)
-        if record_all and k_out < out_n and (k == N - 1 or t[k + 1] != tk):
+        if out_times is None and k_out < n_out and (k == N - 1 or meas[k + 1].t != tk):
             # the repair the next sigma-point draw would make, done now: every emitted
             # covariance is symmetric positive definite (the next draw then needs none)
-            counts[11] += max(_cholesky_repair(P, L), 0)
+            counts[REPAIRS] += max(_cholesky_repair(P, L), 0)
             factored = True
-            out_t[k_out] = tk
-            out_x[k_out] = x
-            out_P[k_out] = P
+            _store(out, k_out, tk, x, P)
             k_out += 1
-    return out_t[:k_out], out_x[:k_out], out_P[:k_out], counts
+    return out[0][:k_out], out[1][:k_out], out[2][:k_out], counts, nis
+
+
+@njit(cache=True, inline="always")
+def _store(out, k, t, x, P):
+    out[0][k] = t
+    out[1][k] = x
+    out[2][k] = P
+
+
+@njit(cache=True, inline="always")
+def _record_until(tk, out_times, k_out, x, P, t_cur, process, work, out, counts):
+    """Record every output time before tk: (x, P) predicted on a copy from t_cur (dt capped at
+    dt_max), its covariance repaired to SPD. Returns the next output index."""
+    xb, Pb, L = work.xb, work.Pb, work.pred[3]
+    while k_out < out_times.size and out_times[k_out] < tk:
+        xb[:] = x
+        Pb[:, :] = P
+        dt = min(out_times[k_out] - t_cur, process.dt_max)
+        if dt > 0:
+            counts[REPAIRS] += max(_predict(xb, Pb, dt, process, work.pred), 0)
+        counts[REPAIRS] += max(_cholesky_repair(Pb, L), 0)  # emit only a PD covariance
+        _store(out, k_out, out_times[k_out], xb, Pb)
+        k_out += 1
+    return k_out
+
+
+@njit(cache=True, inline="always")
+def _step(m, x, P, t_cur, process, sensors, work, factored, counts, nis):
+    """One measurement m: rejected when z or R is not finite, else predict from t_cur to m.t
+    (none when dt <= 0, dt capped at dt_max) and update. Returns (processed, the filter's time
+    after it); once processed, the workspace's L no longer factors P."""
+    kd = m.kind
+    dim = 1 if kd == BARO else 3
+    zk = work.z1 if dim == 1 else work.z3
+    Rk = work.R1 if dim == 1 else work.R3
+    for a in range(dim):
+        zk[a] = m.z[a]
+        for b in range(dim):
+            Rk[a, b] = m.R[a, b]
+    if not (_all_finite(zk) and _all_finite(Rk)):
+        counts[NONFINITE_REJECTED] += 1
+        return False, t_cur
+    dt = m.t - t_cur
+    if dt > 0:
+        if dt > process.dt_max:
+            dt = process.dt_max
+            counts[DT_CAPPED] += 1
+        _predict_step(x, P, dt, process, work, factored, counts)
+        t_cur = m.t
+    else:
+        counts[NO_PREDICT] += 1
+    _update_step(kd, zk, Rk, x, P, process, sensors, work, counts, nis)
+    return True, t_cur
+
+
+@njit(cache=True, inline="always")
+def _predict_step(x, P, dt, process, work, factored, counts):
+    """Predict (x, P) over dt; a prediction that leaves them non-finite is undone (counted)."""
+    xb, Pb = work.xb, work.Pb
+    xb[:] = x
+    Pb[:, :] = P
+    counts[REPAIRS] += max(_predict(x, P, dt, process, work.pred, factored), 0)
+    if not (_all_finite(x) and _all_finite(P)):
+        x[:] = xb
+        P[:, :] = Pb
+        counts[REVERTS] += 1
+    if process.freeze_bias:
+        _freeze_bias(x, P)
+
+
+@njit(cache=True, inline="always")
+def _update_step(kd, zk, Rk, x, P, process, sensors, work, counts, nis):
+    """Update (x, P) with z of kind kd: in closed form for the linear IMU, DVL and DR models,
+    through sigma points for the barometer. A gated, failed or non-finite update is undone
+    (counted); every innovation evaluated adds to the NIS accumulators."""
+    xb, Pb = work.xb, work.Pb
+    xb[:] = x
+    Pb[:, :] = P
+    gate = sensors.gate[kd]
+    if kd == BARO:
+        chi, L, R = work.pred[0], work.pred[3], work.pred[5]
+        counts[REPAIRS] += max(_sigma_points(x, P, process.lam, STATE_ANGLES, L, chi), 0)
+        for i in range(N_SIGMA):
+            _h(kd, chi[i], sensors, work.zi, R)
+            work.Zs1[i, 0] = work.zi[0]
+        status, v = _update(x, P, chi, work.Zs1, zk, Rk, process.wm, process.wc, STATE_ANGLES,
+                            work.linear1, gate)  # fmt: skip
+    else:
+        zmask = work.angles3 if kd == DR else work.linear3
+        status, v = _update_linear(x, P, work.H[kd], zk, Rk, STATE_ANGLES, zmask, gate)
+    if status < 2 and np.isfinite(v):
+        nis[kd, 0] += v
+        nis[kd, 1] += 1.0
+        if v <= CHI2_95[kd]:
+            nis[kd, 2] += 1.0
+    if status == 0 and _all_finite(x) and _all_finite(P):
+        counts[USED + kd] += 1
+    else:
+        counts[GATED + kd if status == 1 else REVERTS] += 1
+        x[:] = xb
+        P[:, :] = Pb
+    if process.freeze_bias:
+        _freeze_bias(x, P)

@@ -27,17 +27,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .._util.validate import validate
 from ..errors import ConfigError, DataError
 from ..trajectory import Trajectory
 from . import model
-from .localizer import LocalizerConfig
+from .config import LocalizerConfig
 from .ukf import (
     _cholesky_repair,
     _gain,
     _residuals,
     _symmetrize,
     _weighted_outer,
-    _weights,
     _wrap,
 )
 
@@ -99,38 +99,34 @@ def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, 
 
 
 @njit(cache=True)
-def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze):
-    """URTS backward pass of the 18-state model over filtered (t, xf (N, 18), Pf (N, 18, 18)).
+def _run_smoother(t, xf, Pf, process):
+    """URTS backward pass of the 18-state model over filtered (t, xf (N, 18), Pf (N, 18, 18))
+    with the filter's :class:`~undertow.estimation.model.ProcessModel`.
 
     Returns (xs, Ps, counts) with counts as in SMOOTHER_COUNT_NAMES.
     """
     n = model.N_STATE
-    npts = 2 * n + 1
     N = t.size
     xs = xf.copy()
     Ps = Pf.copy()
     counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
-    ws = (
-        np.empty((npts, n)), np.empty((npts, n)), np.empty((n, npts)), np.zeros((n, n)),
-        np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
-    )  # fmt: skip
+    ws = model._predict_workspace()
     ws_rts = _rts_workspace(n)
-    no_mu = np.zeros(6)
-    mu = no_mu if freeze else mu_bias
+    freeze = process.freeze_bias
     m = np.empty(n)
     Pm = np.empty((n, n))
     x = np.empty(n)
     P = np.empty((n, n))
     for k in range(N - 2, -1, -1):
-        dt = min(t[k + 1] - t[k], dt_max)
+        dt = min(t[k + 1] - t[k], process.dt_max)
         m[:] = xf[k]
         Pm[:, :] = Pf[k]
-        status = model._predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu, ws)
+        status = model._predict(m, Pm, dt, process, ws)
         if freeze:
             model._freeze_bias(m, Pm)
         x[:] = xf[k]
         P[:, :] = Pf[k]
-        flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], wc,
+        flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], process.wc,
                          model.STATE_ANGLES, ws_rts)  # fmt: skip
         if status < 0 or flag < 0 or not (model._all_finite(x) and model._all_finite(P)):
             counts[1] += 1
@@ -157,7 +153,7 @@ def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Tra
         if "config" not in meta:
             raise ConfigError("smooth: the trajectory carries no filter config; pass the "
                               "LocalizerConfig it was filtered with")  # fmt: skip
-        config = LocalizerConfig(**meta["config"])
+        config = validate(LocalizerConfig, meta["config"], "smooth: the trajectory's config: ")
     rate = meta.get("config", {}).get("output_rate_hz", config.output_rate_hz)
     if rate is not None or config.output_rate_hz is not None:
         raise ConfigError(f"smooth: the trajectory was decimated (output_rate_hz={rate}); run the "
@@ -165,15 +161,8 @@ def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Tra
     t = trajectory.t
     if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
         raise DataError("smooth: trajectory times must be finite and strictly increasing")
-    cfg = config
-    wm, wc, lam = _weights(model.N_STATE, cfg.alpha, cfg.beta, cfg.kappa)
-    xs, Ps, counts = _run_smoother(
-        t, np.ascontiguousarray(trajectory.x), np.ascontiguousarray(trajectory.P), wm, wc,
-        float(lam), np.array(cfg.accel_density + cfg.angular_accel_density, float),
-        np.array(cfg.dr_bias_walk_density + cfg.gyro_bias_walk_density, float),
-        np.array(cfg.dr_bias_drift_rad_s + cfg.gyro_bias_drift_rad_s2, float),
-        float(cfg.max_dt_s), not cfg.estimates_bias,
-    )  # fmt: skip
+    x, P = np.ascontiguousarray(trajectory.x), np.ascontiguousarray(trajectory.P)
+    xs, Ps, counts = _run_smoother(t, x, P, config.process_model())
     metadata = {
         **meta,
         "smoothed": True,

@@ -7,8 +7,9 @@ Scaled unscented transform (Julier/Uhlmann, Wan/van der Merwe) for a state of di
     W^m_0 = lambda / (n + lambda),  W^c_0 = W^m_0 + 1 - alpha^2 + beta,  W_i = 1 / (2 (n + lambda))
 
 The default alpha = 1, beta = 2, kappa = 0 gives lambda = 0, a zero centre mean weight and
-sigma points at +-sqrt(n) standard deviations; it is well conditioned for n = 18 (NOTES.md
-section 3: alpha = 1e-3 gives W_0 ~ -1e6 and breaks angle means and covariances).
+sigma points at +-sqrt(n) standard deviations; it is well conditioned for n = 18, where the
+often suggested alpha = 1e-3 gives W^m_0 = 1 - n / (alpha^2 (n + kappa)) ~ -1e6 and breaks the
+angle means and the positive definiteness of the covariances.
 
 Angles are handled by masks (``True`` = angle, wrapped to [-pi, pi)):
 

@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import DataError
+from ..occupancy import OCCUPIED_THRESHOLD
 
 
 @dataclass(frozen=True)
@@ -56,14 +57,17 @@ def _footprint_mask(map_xy: np.ndarray, gt_xy: np.ndarray, cell: float) -> np.nd
 
 def map_threshold(occupancy_map, threshold: float | None = None) -> tuple[float, str]:
     """The occupancy threshold to evaluate a map at, and where it came from: the given one,
-    else the one the map was made with (``metadata["occupied_threshold"]``), else 0.5 (maps
-    written before it was recorded)."""
+    else the one the map was made with (``metadata["occupied_threshold"]``), else the paper's
+    0.5 (:data:`~undertow.occupancy.OCCUPIED_THRESHOLD`; maps written before it was recorded)."""
     if threshold is not None:
         return float(threshold), "--threshold"
     stored = occupancy_map.metadata.get("occupied_threshold")
     if stored is not None:
         return float(stored), "the map (mapping.occupied_threshold)"
-    return 0.5, "default 0.5 (the map does not record its threshold)"
+    return (
+        OCCUPIED_THRESHOLD,
+        f"default {OCCUPIED_THRESHOLD:g} (the map does not record its threshold)",
+    )
 
 
 def evaluate_map(map_points, ground_truth_points, resolution: float | None = None) -> MapEvaluation:

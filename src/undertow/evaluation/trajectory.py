@@ -9,11 +9,14 @@
 - Ground truth with repeated timestamps (e.g. rounded to 0.01 s) or non-finite poses: those rows
   are dropped with one warning each (the first pose at a repeated time is kept); fewer than 3
   distinct poses left is a DataError.
-- No alignment by default (NOTES.md section 3: alignment on a straight line is ill-posed and
-  hides the heading drift being measured); ``align="origin"`` moves the estimate rigidly so that
-  its first pose equals the ground truth's (evo's ``--align_origin``), and moves the pose
-  covariance with it: P' = J P J^T with J = diag(R_align, d rpy'/d rpy) (the latter by central
-  differences; the first estimated pose is taken as exact).
+- No alignment by default: a rigid (SE(3), Umeyama) alignment of a straight-line run is
+  ill-posed (the rotation about the line is not observable) and would absorb the heading drift
+  being measured (Zhang and Scaramuzza, "A Tutorial on Quantitative Trajectory Evaluation for
+  Visual(-Inertial) Odometry", IROS 2018, discuss the alignment choices). ``align="origin"``
+  moves the estimate rigidly so that its first pose equals the ground truth's (evo's
+  ``--align_origin``), and moves the pose covariance with it: P' = J P J^T with
+  J = diag(R_align, d rpy'/d rpy) (the latter by central differences; the first estimated pose
+  is taken as exact).
 - RMSE per axis: sqrt(mean(e_i^2)), angles wrapped to [-pi, pi).
 - NEES of the pose: epsilon_k = e_k^T P_k^{-1} e_k over the 6 pose states; for a consistent filter
   its mean is 6 and 95 % of samples lie below chi2_6(0.95) = 12.59. Samples whose pose
@@ -29,7 +32,6 @@ import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from ..errors import DataError
 from ..log import GroundTruth
@@ -91,21 +93,7 @@ def trajectory_rmse(
     half of them outside it is a warning (the RMSE then describes a part of the run only)."""
     if align not in ("none", "origin"):
         raise DataError(f"align must be 'none' or 'origin', not {align!r}")
-    if len(est) == 0:
-        raise DataError("trajectory has no samples (nothing to evaluate)")
-    if not np.all(np.isfinite(est.t)):
-        raise DataError(f"trajectory: {int(np.sum(~np.isfinite(est.t)))} non-finite times")
-    finite = np.all(np.isfinite(est.x[:, :9]), axis=1)
-    if not finite.all():
-        warnings.warn(
-            f"trajectory: dropped {int(np.sum(~finite))} samples with a non-finite pose or "
-            "velocity",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        if not finite.any():
-            raise DataError("trajectory: no sample has a finite pose and velocity")
-        est = est.replace(t=est.t[finite], x=est.x[finite], P=est.P[finite])
+    est = _finite_samples(est)
     gt = gt.usable("evaluate trajectory")
     inside = (est.t >= gt.t[0]) & (est.t <= gt.t[-1])
     if not np.any(inside):
@@ -128,15 +116,9 @@ def trajectory_rmse(
         f"{a}_{u}": float(np.sqrt(np.mean(err[:, i] ** 2)))
         for i, (a, u) in enumerate(zip(AXES, UNITS, strict=True))
     }
-    usable = positive_definite(P)
-    if not usable.all():
-        warnings.warn(
-            f"trajectory: {int(np.sum(~usable))} of {usable.size} samples have a pose covariance "
-            "that is not positive definite (zero, non-finite or negative); NEES leaves them out",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-    nees = pose_nees(err[usable, :6], P[usable])
+    nees = _usable_nees(err[:, :6], P)
+    from scipy.stats import chi2  # scipy.stats takes a second to import: only when evaluating
+
     return TrajectoryErrors(
         rmse=rmse,
         nees_mean=float(np.mean(nees)) if nees.size else float("nan"),
@@ -149,6 +131,40 @@ def trajectory_rmse(
         align=align,
         nees_samples=int(nees.size),
     )
+
+
+def _finite_samples(est: Trajectory) -> Trajectory:
+    """``est`` without the samples whose pose or velocity is not finite (one warning); a
+    trajectory with no samples, non-finite times or no finite sample is a DataError."""
+    if len(est) == 0:
+        raise DataError("trajectory has no samples (nothing to evaluate)")
+    if not np.all(np.isfinite(est.t)):
+        raise DataError(f"trajectory: {int(np.sum(~np.isfinite(est.t)))} non-finite times")
+    finite = np.all(np.isfinite(est.x[:, :9]), axis=1)
+    if finite.all():
+        return est
+    warnings.warn(
+        f"trajectory: dropped {int(np.sum(~finite))} samples with a non-finite pose or velocity",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+    if not finite.any():
+        raise DataError("trajectory: no sample has a finite pose and velocity")
+    return est.replace(t=est.t[finite], x=est.x[finite], P=est.P[finite])
+
+
+def _usable_nees(err: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Pose NEES of the samples whose covariance is positive definite (one warning about the
+    others, which have none)."""
+    usable = positive_definite(P)
+    if not usable.all():
+        warnings.warn(
+            f"trajectory: {int(np.sum(~usable))} of {usable.size} samples have a pose covariance "
+            "that is not positive definite (zero, non-finite or negative); NEES leaves them out",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return pose_nees(err[usable], P[usable])
 
 
 def _check_overlap(t: np.ndarray, inside: np.ndarray, gt: GroundTruth, min_samples: int) -> None:

@@ -1,6 +1,6 @@
 """Reader of the Water Linked DVL A50 TCP JSON protocol (one JSON object per line).
 
-Supported reports (NOTES.md section 1):
+Supported reports (Water Linked DVL protocol documentation, JSON protocol over TCP port 16171):
 
 - velocity reports: json_v1 (no ``type`` field) and json_v2/v3 (``type: "velocity"``, with a
   3x3 ``covariance`` in (m/s)^2 and ``time_of_validity``/``time_of_transmission`` in Unix

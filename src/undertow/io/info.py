@@ -45,26 +45,6 @@ class LogSummary:
         """JSON-serializable dict (NaN becomes None)."""
         return json_safe(asdict(self))
 
-    def to_rich_table(self):
-        """A rich Table with one row per stream."""
-        from rich.table import Table
-
-        table = Table(title=f"{self.source or 'log'}: {self.duration_s:.1f} s")
-        table.add_column("stream", no_wrap=True)
-        for col in ("messages", "rate Hz", "span s", "invalid", "missing values"):
-            table.add_column(col, justify="right")
-        for s in self.streams:
-            detail = ", ".join(f"{k} {v}" for k, v in s.missing_detail.items() if v)
-            table.add_row(
-                s.name,
-                str(s.messages),
-                f"{s.rate_hz:.2f}",
-                f"{s.start_s:.3f} - {s.end_s:.3f}",
-                str(s.invalid),
-                f"{s.missing_values}" + (f" ({detail})" if detail else ""),
-            )
-        return table
-
 
 def _missing(name: str, stream) -> dict[str, int]:
     if name == "dvl":

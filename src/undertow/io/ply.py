@@ -2,6 +2,7 @@
 
 :func:`write_ply` writes vertices as float32 ``x y z`` plus one float32 property per named
 array (e.g. occupancy probability), binary little-endian by default or ASCII; atomic.
+:func:`write_map_ply` writes an occupancy map's occupied cells that way.
 :func:`read_ply` reads the ``vertex`` element of ``ascii`` and ``binary_little_endian`` files
 (any scalar property types; elements before ``vertex`` must have no list properties).
 """
@@ -14,6 +15,7 @@ import numpy as np
 
 from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
+from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
 from .tum import _atomic_write_text
 
 _TYPES = {
@@ -67,6 +69,13 @@ def write_ply(path, points, properties: dict | None = None, binary: bool = True)
         body = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in table.tolist())
         _atomic_write_text(path, header + body)
     return path
+
+
+def write_map_ply(path, occupancy_map: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD) -> Path:
+    """Occupied cell centres (mean occupancy > ``threshold``) with float ``mean`` and
+    ``variance`` vertex properties, as a binary little-endian PLY (CloudCompare, Open3D)."""
+    occ = occupancy_map.occupied(threshold)
+    return write_ply(path, occ.centres, {"mean": occ.mean, "variance": occ.variance})
 
 
 def _parse_header(path: Path, data: bytes):

@@ -9,7 +9,9 @@ import yaml
 
 from .._util.atomic import output_folder
 from .._util.plain import to_plain
+from ..occupancy import OccupancyMap
 from ..trajectory import Trajectory
+from .ply import write_map_ply
 from .tum import write_tum
 
 
@@ -22,4 +24,18 @@ def save_trajectory(trajectory: Trajectory, out_dir: str | Path, overwrite: bool
         (out / "config.yaml").write_text(
             yaml.safe_dump(to_plain(trajectory.metadata), sort_keys=False)
         )
+    return Path(out_dir)
+
+
+def save_map(occupancy_map: OccupancyMap, config: dict, metadata: dict, out_dir: str | Path,
+             overwrite: bool = False, *, threshold: float) -> Path:  # fmt: skip
+    """Write ``map.npz``, ``map.ply`` (occupied cell centres, mean occupancy > ``threshold``,
+    with mean and variance) and ``config.yaml`` (``mapping``: the mapping ``config`` the map was
+    made with, ``result``: the ``metadata`` of what went into it), all at once (a non-empty
+    folder is replaced only with ``overwrite``)."""
+    with output_folder(out_dir, overwrite) as out:
+        occupancy_map.save(out / "map.npz")
+        write_map_ply(out / "map.ply", occupancy_map, threshold=threshold)
+        doc = {"mapping": config, "result": metadata}
+        (out / "config.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
     return Path(out_dir)

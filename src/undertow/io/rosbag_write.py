@@ -169,108 +169,116 @@ def tf_static_record(log: Log, b: _Builder, topics: TopicMap):
 
 
 def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None, topics: TopicMap):
-    """(stream, record time ns, msgtype, message) for every message of ``log``."""
-    T = b.T
+    """(stream, record time ns, msgtype, message) for every message of ``log``, stream by
+    stream (DVL, IMU, pressure, sonar, wave probe, dead reckoning, ground truth)."""
     frame = {sensor: getattr(topics.frames, sensor)[0] for sensor in SENSOR_NAMES}
     if log.dvl is not None:
         yield from (_dvl_driver if flavor == "driver" else _dvl_standard)(log, b, frame["dvl"])
-    if (s := log.imu) is not None:
-        n = len(s)
-        acc = s.linear_acceleration if s.linear_acceleration is not None else np.zeros((n, 3))
-        q = s.orientation if s.orientation is not None else np.zeros((n, 4))
-        qcov = np.zeros(9) if s.orientation is not None else np.array([-1.0] + [0.0] * 8)
-        acov = np.zeros(9) if s.linear_acceleration is not None else np.array([-1.0] + [0.0] * 8)
-        for i in range(n):
-            h, ns = b.header(s.t[i], frame["imu"])
-            yield (
-                "imu",
-                ns,
-                "sensor_msgs/msg/Imu",
-                T["sensor_msgs/msg/Imu"](
-                    header=h,
-                    orientation=b.quat(q[i]),
-                    orientation_covariance=qcov,
-                    angular_velocity=b.vec(s.angular_velocity[i]),
-                    angular_velocity_covariance=np.zeros(9),
-                    linear_acceleration=b.vec(acc[i]),
-                    linear_acceleration_covariance=acov,
-                ),
-            )
-    if (s := log.pressure) is not None:
-        for i in range(len(s)):
-            h, ns = b.header(s.t[i], frame["barometer"])
-            yield (
-                "pressure",
-                ns,
-                "sensor_msgs/msg/FluidPressure",
-                T["sensor_msgs/msg/FluidPressure"](
-                    header=h, fluid_pressure=float(s.pressure[i]), variance=0.0
-                ),
-            )
-    if (s := log.sonar) is not None:
-        for i in range(len(s)):
-            h, ns = b.header(s.t[i], frame["sonar"])
-            yield (
-                "sonar",
-                ns,
-                "sensor_msgs/msg/Range",
-                T["sensor_msgs/msg/Range"](
-                    header=h,
-                    radiation_type=0,
-                    field_of_view=float(s.field_of_view),
-                    min_range=float(s.min_range),
-                    max_range=float(s.max_range),
-                    range=float(s.range[i]),
-                ),
-            )
-    if (s := log.wave_probe) is not None:
-        for i in range(len(s)):
-            h, ns = b.header(s.t[i], "world")
-            yield (
-                "wave_probe",
-                ns,
-                "geometry_msgs/msg/PointStamped",
-                T["geometry_msgs/msg/PointStamped"](
-                    header=h, point=b.point((s.x, 0.0, s.elevation[i]))
-                ),
-            )
-    if (s := log.dead_reckoning) is not None:
-        std = s.std if s.std is not None else np.full(len(s), np.nan)
-        for i in range(len(s)):
-            h, ns = b.header(s.t[i], "dvl_odom")
-            cov = np.zeros(36)
-            cov[[0, 7, 14]] = std[i] ** 2
-            yield (
-                "dead_reckoning",
-                ns,
-                "geometry_msgs/msg/PoseWithCovarianceStamped",
-                T["geometry_msgs/msg/PoseWithCovarianceStamped"](
-                    header=h, pose=b.pose_cov(s.position[i], s.orientation[i], cov)
-                ),
-            )
-    if (s := log.ground_truth) is not None:
-        vel = s.velocity if s.velocity is not None else np.full((len(s), 3), np.nan)
-        body_vel = world_to_body(s.orientation, vel)
-        twist_t = T["geometry_msgs/msg/TwistWithCovariance"]
-        for i in _decimate(s.t, gt_rate):
-            h, ns = b.header(s.t[i], "world")
-            twist = twist_t(
-                twist=T["geometry_msgs/msg/Twist"](
-                    linear=b.vec(body_vel[i]), angular=b.vec((0, 0, 0))
-                ),
-                covariance=np.zeros(36),
-            )
-            yield (
-                "ground_truth",
-                ns,
-                "nav_msgs/msg/Odometry",
-                T["nav_msgs/msg/Odometry"](
-                    header=h,
-                    child_frame_id="base_link",
-                    pose=b.pose_cov(s.position[i], s.orientation[i], np.zeros(36)),
-                    twist=twist,
-                ),
-            )
+    if log.imu is not None:
+        yield from _imu_messages(log.imu, b, frame["imu"])
+    if log.pressure is not None:
+        yield from _pressure_messages(log.pressure, b, frame["barometer"])
+    if log.sonar is not None:
+        yield from _sonar_messages(log.sonar, b, frame["sonar"])
+    if log.wave_probe is not None:
+        yield from _wave_probe_messages(log.wave_probe, b)
+    if log.dead_reckoning is not None:
+        yield from _dead_reckoning_messages(log.dead_reckoning, b)
+    if log.ground_truth is not None:
+        yield from _ground_truth_messages(log.ground_truth, b, gt_rate)
+
+
+def _imu_messages(s, b: _Builder, frame: str):
+    """``sensor_msgs/Imu``; a missing orientation or acceleration is zeros with covariance
+    element 0 set to -1 ("no estimate", as the sensor_msgs/Imu message definition asks)."""
+    imu_t = b.T["sensor_msgs/msg/Imu"]
+    n = len(s)
+    acc = s.linear_acceleration if s.linear_acceleration is not None else np.zeros((n, 3))
+    q = s.orientation if s.orientation is not None else np.zeros((n, 4))
+    qcov = np.zeros(9) if s.orientation is not None else np.array([-1.0] + [0.0] * 8)
+    acov = np.zeros(9) if s.linear_acceleration is not None else np.array([-1.0] + [0.0] * 8)
+    for i in range(n):
+        h, ns = b.header(s.t[i], frame)
+        msg = imu_t(
+            header=h,
+            orientation=b.quat(q[i]),
+            orientation_covariance=qcov,
+            angular_velocity=b.vec(s.angular_velocity[i]),
+            angular_velocity_covariance=np.zeros(9),
+            linear_acceleration=b.vec(acc[i]),
+            linear_acceleration_covariance=acov,
+        )
+        yield "imu", ns, "sensor_msgs/msg/Imu", msg
+
+
+def _pressure_messages(s, b: _Builder, frame: str):
+    """``sensor_msgs/FluidPressure`` (Pa, variance 0: not reported)."""
+    pressure_t = b.T["sensor_msgs/msg/FluidPressure"]
+    for i in range(len(s)):
+        h, ns = b.header(s.t[i], frame)
+        msg = pressure_t(header=h, fluid_pressure=float(s.pressure[i]), variance=0.0)
+        yield "pressure", ns, "sensor_msgs/msg/FluidPressure", msg
+
+
+def _sonar_messages(s, b: _Builder, frame: str):
+    """``sensor_msgs/Range`` (radiation type 0: ultrasound)."""
+    range_t = b.T["sensor_msgs/msg/Range"]
+    for i in range(len(s)):
+        h, ns = b.header(s.t[i], frame)
+        msg = range_t(
+            header=h,
+            radiation_type=0,
+            field_of_view=float(s.field_of_view),
+            min_range=float(s.min_range),
+            max_range=float(s.max_range),
+            range=float(s.range[i]),
+        )
+        yield "sonar", ns, "sensor_msgs/msg/Range", msg
+
+
+def _wave_probe_messages(s, b: _Builder):
+    """``geometry_msgs/PointStamped`` in ``world``: x = probe x, z = elevation (up)."""
+    point_t = b.T["geometry_msgs/msg/PointStamped"]
+    for i in range(len(s)):
+        h, ns = b.header(s.t[i], "world")
+        msg = point_t(header=h, point=b.point((s.x, 0.0, s.elevation[i])))
+        yield "wave_probe", ns, "geometry_msgs/msg/PointStamped", msg
+
+
+def _dead_reckoning_messages(s, b: _Builder):
+    """``geometry_msgs/PoseWithCovarianceStamped`` in ``dvl_odom``; std^2 on the position
+    diagonal (row-major 6x6: elements 0, 7, 14), NaN when the log has no std."""
+    pose_t = b.T["geometry_msgs/msg/PoseWithCovarianceStamped"]
+    std = s.std if s.std is not None else np.full(len(s), np.nan)
+    for i in range(len(s)):
+        h, ns = b.header(s.t[i], "dvl_odom")
+        cov = np.zeros(36)
+        cov[[0, 7, 14]] = std[i] ** 2
+        msg = pose_t(header=h, pose=b.pose_cov(s.position[i], s.orientation[i], cov))
+        yield "dead_reckoning", ns, "geometry_msgs/msg/PoseWithCovarianceStamped", msg
+
+
+def _ground_truth_messages(s, b: _Builder, gt_rate: float | None):
+    """``nav_msgs/Odometry`` in ``world``, decimated to ``gt_rate``; the twist is the body-frame
+    velocity v_b = R^T v_w (R body to world), as nav_msgs/Odometry puts the twist in the
+    child frame."""
+    T = b.T
+    vel = s.velocity if s.velocity is not None else np.full((len(s), 3), np.nan)
+    body_vel = world_to_body(s.orientation, vel)
+    twist_t = T["geometry_msgs/msg/TwistWithCovariance"]
+    for i in _decimate(s.t, gt_rate):
+        h, ns = b.header(s.t[i], "world")
+        twist = twist_t(
+            twist=T["geometry_msgs/msg/Twist"](linear=b.vec(body_vel[i]), angular=b.vec((0, 0, 0))),
+            covariance=np.zeros(36),
+        )
+        msg = T["nav_msgs/msg/Odometry"](
+            header=h,
+            child_frame_id="base_link",
+            pose=b.pose_cov(s.position[i], s.orientation[i], np.zeros(36)),
+            twist=twist,
+        )
+        yield "ground_truth", ns, "nav_msgs/msg/Odometry", msg
 
 
 def _dvl_driver(log: Log, b: _Builder, frame: str):

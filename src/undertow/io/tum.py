@@ -13,6 +13,7 @@ import numpy as np
 
 from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
+from ..log import GroundTruth
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
 
 
@@ -40,8 +41,10 @@ def write_tum(path, t, position, orientation_rpy) -> Path:
     return path
 
 
-def read_tum(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, position (N,3), orientation roll-pitch-yaw (N,3)) from a TUM file."""
+def read_tum(path) -> GroundTruth:
+    """The poses of a TUM file: t, position (N, 3) and orientation roll-pitch-yaw (N, 3), as a
+    :class:`~undertow.log.GroundTruth` (a TUM file holds poses only: no velocity, no
+    covariance)."""
     path = Path(path)
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
@@ -64,4 +67,5 @@ def read_tum(path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not rows:
         raise ReaderError(f"{path}: no poses in TUM file")
     arr = np.array(rows)
-    return arr[:, 0], arr[:, 1:4], quaternion_to_rpy(arr[:, 4:8])
+    rpy = quaternion_to_rpy(arr[:, 4:8])
+    return GroundTruth(t=arr[:, 0], position=arr[:, 1:4], orientation=rpy)

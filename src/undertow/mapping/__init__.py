@@ -1,15 +1,21 @@
-"""Seafloor occupancy mapping: counting sensor model, BKI and the paper's adaptive BKI."""
+"""Seafloor occupancy mapping: counting sensor model, BKI and the paper's adaptive BKI.
+
+The map itself, :class:`~undertow.occupancy.OccupancyMap`, is the hand-off type other stages
+read; it lives in :mod:`undertow.occupancy`.
+"""
 
 from .config import MappingConfig
-from .grid import OccupancyMap
-from .mappers import make_mapper, write_map_ply
-from .samples import Samples, build_samples
+from .mappers import make_mapper, mapper_from_config
+from .run import MappingResult, map_log
+from .samples import Samples, build_samples, samples_from_config
 
 __all__ = [
     "MappingConfig",
-    "OccupancyMap",
+    "MappingResult",
     "Samples",
     "build_samples",
     "make_mapper",
-    "write_map_ply",
+    "map_log",
+    "mapper_from_config",
+    "samples_from_config",
 ]

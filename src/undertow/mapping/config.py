@@ -1,21 +1,39 @@
-"""Mapping configuration (pydantic). Defaults are the paper's mapping-parameters table.
+"""Mapping configuration (pydantic): the one place the mapping parameters get their defaults
+(the paper's mapping-parameters table) and are checked.
 
-The factory :func:`mapper_from_config` unpacks it into explicit :func:`make_mapper` arguments;
-:func:`samples_from_config` does the same for :func:`build_samples`. Core classes never take
-the config object.
+:func:`~undertow.mapping.mappers.mapper_from_config` and
+:func:`~undertow.mapping.samples.samples_from_config` unpack it into the explicit, already
+checked arguments of the mapper classes and of the sample builder; those hold no defaults of
+their own.
 """
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
 
 from .._util.validate import validate
-from .mappers import L_MAX, L_MIN, Mapper, make_mapper
-from .samples import Samples, build_samples
+from ..occupancy import OCCUPIED_THRESHOLD
 
-Triple = tuple[float, float, float]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+
+
+def _as_sequence(value):
+    """numpy arrays are accepted where a tuple is expected (the model stores tuples)."""
+    return value.tolist() if isinstance(value, np.ndarray) else value
+
+
+def _three(value):
+    value = _as_sequence(value)
+    if isinstance(value, list | tuple) and len(value) != 3:
+        raise ValueError(f"expected three values (x, y, z), got {len(value)}")
+    return value
+
+
+Triple = Annotated[tuple[Finite, Finite, Finite], BeforeValidator(_three)]
+Method = Literal["csm", "bki", "adaptive"]
 
 
 class MappingConfig(BaseModel):
@@ -23,25 +41,30 @@ class MappingConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    method: Literal["csm", "bki", "adaptive"] = "adaptive"
+    method: Method = "adaptive"
     resolution: float = Field(0.1, gt=0, allow_inf_nan=False, description="grid size, m")
-    length_scale: float = Field(0.15, gt=0, description="isotropic l of the bki method, m")
-    l_min: Triple = Field(L_MIN, description="adaptive minimum length scales x, y, z, m")
-    l_max: Triple = Field(L_MAX, description="adaptive maximum length scales x, y, z, m")
-    alpha0: float = Field(1e-10, gt=0)
-    beta0: float = Field(1e-10, gt=0)
-    variance_bounds: tuple[Triple, Triple] | None = Field(
-        None, description="fixed (min, max) position variance per axis, m^2; None: per session"
+    length_scale: float = Field(
+        0.15, gt=0, allow_inf_nan=False, description="isotropic l of the bki method, m"
     )
-    free_resolution: float = Field(0.1, gt=0, description="spacing of free samples, m")
-    sigma0_dvl: float = Field(0.9, gt=0)
-    sigma0_sonar: float = Field(0.6, gt=0)
+    l_min: Triple = Field((0.10, 0.10, 0.05), description="adaptive minimum length scales, m")
+    l_max: Triple = Field((0.18, 0.18, 0.08), description="adaptive maximum length scales, m")
+    alpha0: float = Field(1e-10, gt=0, allow_inf_nan=False)
+    beta0: float = Field(1e-10, gt=0, allow_inf_nan=False)
+    variance_bounds: Annotated[tuple[Triple, Triple] | None, BeforeValidator(_as_sequence)] = Field(
+        None,
+        description="fixed (min, max) position variance per axis, m^2; None: per session",
+    )
+    free_resolution: float = Field(
+        0.1, gt=0, allow_inf_nan=False, description="spacing of free samples, m"
+    )
+    sigma0_dvl: float = Field(0.9, gt=0, allow_inf_nan=False)
+    sigma0_sonar: float = Field(0.6, gt=0, allow_inf_nan=False)
     use_dvl: bool = True
     use_sonar: bool = True
-    occupied_threshold: float = Field(0.5, ge=0, le=1)
+    occupied_threshold: float = Field(OCCUPIED_THRESHOLD, ge=0, le=1)
     max_memory_gb: float | None = Field(
-        None, gt=0, description="refuse a map whose storage would exceed this, GB; None: half "
-        "the machine's RAM"
+        None, gt=0, allow_inf_nan=False, description="refuse a map whose storage would exceed "
+        "this, GB; None: half the machine's RAM"
     )  # fmt: skip
 
     @model_validator(mode="after")
@@ -57,6 +80,8 @@ class MappingConfig(BaseModel):
                 "use_dvl and use_sonar are both false in the config: enable at least one range "
                 "stream"
             )
+        # a length scale under a tenth of a cell puts a sample's kernel mass in at most one
+        # cell centre, or none: the map would lose its samples
         lengths = {"bki": ("length_scale", (self.length_scale,)), "adaptive": ("l_min", self.l_min)}
         name, values = lengths.get(self.method, ("", ()))
         if any(v <= self.resolution / 10 for v in values):
@@ -70,20 +95,3 @@ class MappingConfig(BaseModel):
     def from_dict(cls, data: dict) -> MappingConfig:
         """Validate a dict; errors become one-line :class:`ConfigError`."""
         return validate(cls, data, "mapping.")
-
-
-def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
-    """``make_mapper`` with the config's values."""
-    return make_mapper(
-        config.method, resolution=config.resolution, length_scale=config.length_scale,
-        l_min=config.l_min, l_max=config.l_max, alpha0=config.alpha0, beta0=config.beta0,
-        variance_bounds=config.variance_bounds, prior=prior, max_memory_gb=config.max_memory_gb,
-    )  # fmt: skip
-
-
-def samples_from_config(log, trajectory, config: MappingConfig) -> Samples:
-    """``build_samples`` with the config's values."""
-    return build_samples(
-        log, trajectory, free_resolution=config.free_resolution, sigma0_dvl=config.sigma0_dvl,
-        sigma0_sonar=config.sigma0_sonar, use_dvl=config.use_dvl, use_sonar=config.use_sonar,
-    )  # fmt: skip

@@ -1,28 +1,20 @@
-"""Sparse chunked storage of the Beta concentration parameters, and the OccupancyMap result.
+"""Sparse chunked storage of the Beta concentration parameters.
 
 :class:`ChunkedGrid` holds the evidence mass sum_i k(m_*, m_i) y_i and sum_i k(m_*, m_i)(1 - y_i)
 of ``eq:alpha_param`` / ``eq:beta_param`` in dense 8^3 chunks (float32) found through a hash of
 chunk coordinates, so memory grows with the mapped volume, not with the bounding box. Cell index
 i = floor(p / res), centre (i + 1/2) res. The priors alpha_0, beta_0 are added when the map is
-read out (:class:`OccupancyMap`), so only cells that received kernel mass are reported.
-
-:class:`OccupancyMap` answers ``eq:mean_var`` per cell:
-E[theta_*] = alpha_* / (alpha_* + beta_*),
-V[theta_*] = alpha_* beta_* / ((alpha_* + beta_*)^2 (alpha_* + beta_* + 1)).
+read out (:class:`~undertow.occupancy.OccupancyMap`), so only cells that received kernel mass are
+reported.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import math
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from .._util.atomic import atomic_path
-from ..errors import DataError, ReaderError
+from ..errors import DataError
 from .kernels import _OFFSET as _CHUNK_LIMIT
 from .kernels import (
     CHUNK,
@@ -156,147 +148,3 @@ class ChunkedGrid:
         c, i, j, k = np.nonzero((alpha + beta) > 0)
         cells = self._keys[c] * CHUNK + np.stack([i, j, k], axis=1)
         return cells, alpha[c, i, j, k].astype(float), beta[c, i, j, k].astype(float)
-
-
-@dataclass(frozen=True, eq=False)
-class OccupancyMap:
-    """Posterior Beta(alpha, beta) per mapped cell; ``alpha``/``beta`` include alpha_0/beta_0."""
-
-    cells: np.ndarray
-    alpha: np.ndarray
-    beta: np.ndarray
-    resolution: float
-    alpha0: float = 1e-10
-    beta0: float = 1e-10
-    metadata: dict = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        cells = np.asarray(self.cells, dtype=np.int64).reshape(-1, 3)
-        alpha = np.asarray(self.alpha, dtype=float).reshape(-1)
-        beta = np.asarray(self.beta, dtype=float).reshape(-1)
-        if not (len(cells) == alpha.size == beta.size):
-            raise DataError(
-                f"OccupancyMap: {len(cells)} cells but {alpha.size} alpha / {beta.size} beta"
-            )
-        object.__setattr__(self, "cells", cells)
-        object.__setattr__(self, "alpha", alpha)
-        object.__setattr__(self, "beta", beta)
-
-    def __len__(self) -> int:
-        return int(self.cells.shape[0])
-
-    @property
-    def centres(self) -> np.ndarray:
-        """Cell centres (M, 3), m: (i + 1/2) res."""
-        return (self.cells + 0.5) * self.resolution
-
-    @property
-    def mean(self) -> np.ndarray:
-        """``eq:mean_var``: E[theta_*] = alpha_* / (alpha_* + beta_*)."""
-        return self.alpha / (self.alpha + self.beta)
-
-    @property
-    def variance(self) -> np.ndarray:
-        """``eq:mean_var``: V = alpha beta / ((alpha + beta)^2 (alpha + beta + 1))."""
-        s = self.alpha + self.beta
-        return self.alpha * self.beta / (s * s * (s + 1.0))
-
-    def select(self, mask) -> OccupancyMap:
-        """The map restricted to the cells where ``mask`` is true."""
-        mask = np.asarray(mask)
-        return dataclasses.replace(
-            self, cells=self.cells[mask], alpha=self.alpha[mask], beta=self.beta[mask]
-        )
-
-    def occupied(self, threshold: float = 0.5) -> OccupancyMap:
-        """Cells with mean occupancy > threshold (the paper uses 0.5)."""
-        return self.select(self.mean > threshold)
-
-    def points(self, threshold: float = 0.5) -> np.ndarray:
-        """Occupied cell centres (K, 3): the map's point cloud for evaluation (C2C)."""
-        return self.occupied(threshold).centres
-
-    def slice(self, z_min=None, z_max=None, *, axis: int | None = None, index=None):
-        """Cells with centre z in [z_min, z_max], or the index plane cells[:, axis] == index."""
-        if axis is not None:
-            if axis not in (0, 1, 2) or index is None:
-                raise DataError("OccupancyMap.slice: axis must be 0, 1 or 2 and index given")
-            return self.select(self.cells[:, axis] == int(index))
-        z = self.centres[:, 2]
-        mask = np.ones(len(self), bool)
-        if z_min is not None:
-            mask &= z >= z_min
-        if z_max is not None:
-            mask &= z <= z_max
-        return self.select(mask)
-
-    def column_max(self) -> OccupancyMap:
-        """Per (x, y) column, the one cell of highest mean occupancy (a seafloor height map)."""
-        if len(self) == 0:
-            return self
-        order = np.lexsort((-self.mean, self.cells[:, 1], self.cells[:, 0]))
-        xy = self.cells[order, :2]
-        first = np.ones(len(order), bool)
-        first[1:] = np.any(xy[1:] != xy[:-1], axis=1)
-        return self.select(order[first])
-
-    def save(self, path: str | Path) -> Path:
-        """Write the map as ``.npz`` (atomic: temp file then rename)."""
-        path = Path(path)
-        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(
-                fh, cells=self.cells, alpha=self.alpha, beta=self.beta,
-                resolution=self.resolution, alpha0=self.alpha0, beta0=self.beta0,
-                metadata=np.array(json.dumps(self.metadata, default=str)),
-            )  # fmt: skip
-        return path
-
-    @classmethod
-    def load(cls, path: str | Path) -> OccupancyMap:
-        """Read a map written by :meth:`save` (a folder means FOLDER/map.npz)."""
-        path = Path(path)
-        if path.is_dir():
-            path = path / "map.npz"
-        wrong = not_an_npz(path, "a map.npz written by `undertow map` (or its folder)")
-        if wrong:
-            raise ReaderError(wrong)
-        try:
-            with np.load(path, allow_pickle=False) as d:
-                return cls(
-                    cells=d["cells"], alpha=d["alpha"], beta=d["beta"],
-                    resolution=float(d["resolution"]), alpha0=float(d["alpha0"]),
-                    beta0=float(d["beta0"]), metadata=json.loads(str(d["metadata"])),
-                )  # fmt: skip
-        except FileNotFoundError as exc:
-            raise ReaderError(f"{path}: no such map file") from exc
-        except (KeyError, ValueError, OSError) as exc:
-            raise ReaderError(f"{path}: not an undertow map ({exc})") from exc
-
-
-_KINDS = {
-    ".ply": "a PLY point cloud", ".tum": "a TUM trajectory", ".txt": "a text file",
-    ".yaml": "a YAML file", ".yml": "a YAML file", ".json": "a JSON file", ".bag": "a ROS bag",
-    ".mcap": "a ROS 2 bag", ".db3": "a ROS 2 bag",
-}  # fmt: skip
-
-
-def not_an_npz(path: str | Path, expected: str) -> str | None:
-    """None if ``path`` is a missing file or a zip archive (what ``.npz`` files are), else a
-    one-line message saying what it looks like and what was ``expected`` (instead of numpy's
-    "pickled data" error for a text or PLY file)."""
-    path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            magic = fh.read(4)
-    except FileNotFoundError:
-        return None
-    except IsADirectoryError:
-        return f"{path}: is a folder; expected {expected}"
-    except OSError:
-        return None  # let the reader report it
-    if magic == b"PK\x03\x04":
-        return None
-    kind = _KINDS.get(path.suffix.lower(), "not an .npz archive")
-    if magic == b"ply\n" or magic[:3] == b"ply":
-        kind = "a PLY point cloud"
-    return f"{path}: {kind}, expected {expected}"

@@ -25,18 +25,16 @@ from __future__ import annotations
 import functools
 import os
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 
 from ..errors import ConfigError, DataError
-from .grid import ChunkedGrid, OccupancyMap
+from ..occupancy import OccupancyMap
+from .config import MappingConfig, Method
+from .grid import ChunkedGrid
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
 from .samples import Samples
 
-Method = Literal["csm", "bki", "adaptive"]
-L_MIN = (0.10, 0.10, 0.05)
-L_MAX = (0.18, 0.18, 0.08)
 DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
 
 
@@ -60,13 +58,19 @@ def default_max_memory_gb() -> float:
 
 
 class Mapper:
-    """Base: a chunked grid of evidence mass plus the Beta prior (alpha_0, beta_0)."""
+    """Base: a chunked grid of evidence mass plus the Beta prior (alpha_0, beta_0).
+
+    Arguments are checked values (see :class:`~undertow.mapping.config.MappingConfig`, which
+    checks them and holds the defaults; :func:`make_mapper` builds a mapper through it).
+    ``max_memory_gb`` caps the storage one :meth:`integrate` may need (estimated first; None:
+    half the machine's RAM)."""
 
     method = ""
-    max_memory_gb: float | None = None  # None: half the machine's RAM (make_mapper sets it)
 
-    def __init__(self, resolution: float = 0.1, alpha0: float = 1e-10, beta0: float = 1e-10):
+    def __init__(self, *, resolution: float, alpha0: float, beta0: float,
+                 max_memory_gb: float | None) -> None:  # fmt: skip
         self.resolution, self.alpha0, self.beta0 = float(resolution), float(alpha0), float(beta0)
+        self.max_memory_gb = max_memory_gb
         self.grid = ChunkedGrid(self.resolution)
         self.n_samples = 0
         self.n_integrations = 0
@@ -100,7 +104,7 @@ class Mapper:
         try:
             self.grid.scatter(*args, bounds, l_min, l_max)
         except MemoryError:
-            raise ConfigError(_out_of_memory(self.resolution)) from None
+            raise out_of_memory(self.resolution) from None
 
     def seed(self, prior: OccupancyMap | str | Path) -> None:
         """Add a saved map's evidence (alpha - alpha_0, beta - beta_0 per cell) to this map."""
@@ -126,7 +130,7 @@ class Mapper:
         try:
             cells, a, b = self.grid.cells()
         except MemoryError:
-            raise ConfigError(_out_of_memory(self.resolution)) from None
+            raise out_of_memory(self.resolution) from None
         return OccupancyMap(cells, self.alpha0 + a, self.beta0 + b, self.resolution,
                             self.alpha0, self.beta0, self.metadata())  # fmt: skip
 
@@ -146,8 +150,8 @@ class BkiMapper(Mapper):
 
     method = "bki"
 
-    def __init__(self, resolution=0.1, length_scale=0.15, alpha0=1e-10, beta0=1e-10):
-        super().__init__(resolution, alpha0, beta0)
+    def __init__(self, *, length_scale: float, **base) -> None:
+        super().__init__(**base)
         self.length_scale = float(length_scale)
 
     def _scatter(self, samples: Samples) -> None:
@@ -159,13 +163,13 @@ class BkiMapper(Mapper):
 
 
 class AdaptiveBkiMapper(Mapper):
-    """The paper's adaptive BKI: product kernel with pose-variance length scales (module doc)."""
+    """The paper's adaptive BKI: product kernel with pose-variance length scales (module doc).
+    ``variance_bounds`` None: per-session normalization, else fixed (min(3,), max(3,))."""
 
     method = "adaptive"
 
-    def __init__(self, resolution=0.1, l_min=L_MIN, l_max=L_MAX, alpha0=1e-10, beta0=1e-10,
-                 variance_bounds=None):  # fmt: skip
-        super().__init__(resolution, alpha0, beta0)
+    def __init__(self, *, l_min, l_max, variance_bounds, **base) -> None:
+        super().__init__(**base)
         self.l_min = np.asarray(l_min, float)
         self.l_max = np.asarray(l_max, float)
         self.normalization = "session" if variance_bounds is None else "fixed"
@@ -206,87 +210,35 @@ class AdaptiveBkiMapper(Mapper):
         }  # fmt: skip
 
 
-def _out_of_memory(resolution: float) -> str:
-    return (
+def out_of_memory(resolution: float) -> ConfigError:
+    """The one-line error for a map that ran out of memory anyway (after the estimate)."""
+    return ConfigError(
         f"mapping ran out of memory at resolution {resolution:g} m: use a coarser resolution "
         "(or a lower mapping.max_memory_gb, checked before mapping)"
     )
 
 
-def _positive(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ConfigError(f"{name} must be a number, got {value!r}") from exc
-    if not (np.isfinite(v) and v > 0):
-        raise ConfigError(f"{name} must be finite and > 0, got {value}")
-    return v
-
-
-def _triple(name: str, value) -> np.ndarray:
-    arr = np.asarray(value, float)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr) & (arr > 0)):
-        raise ConfigError(f"{name} must be three finite values > 0 (x, y, z), got {value}")
-    return arr
-
-
-def make_mapper(method: Method, resolution: float = 0.1, length_scale: float = 0.15,
-                l_min=L_MIN, l_max=L_MAX, alpha0: float = 1e-10, beta0: float = 1e-10,
-                variance_bounds=None, prior=None, max_memory_gb=None) -> Mapper:  # fmt: skip
-    """A mapper by name ("csm", "bki", "adaptive"), optionally seeded from a prior map.
-
-    ``max_memory_gb`` caps the storage a call of ``integrate`` may need (estimated first; None:
-    half the machine's RAM). Length scales must exceed resolution / 10."""
-    resolution = _positive("resolution", resolution)
-    alpha0, beta0 = _positive("alpha0", alpha0), _positive("beta0", beta0)
-    if method == "csm":
-        mapper: Mapper = CsmMapper(resolution, alpha0, beta0)
-    elif method == "bki":
-        length_scale = _positive("length_scale", length_scale)
-        _above_resolution("length_scale", np.array([length_scale]), resolution)
-        mapper = BkiMapper(resolution, length_scale, alpha0, beta0)
-    elif method == "adaptive":
-        lo, hi = _triple("l_min", l_min), _triple("l_max", l_max)
-        if np.any(lo > hi):
-            raise ConfigError(f"l_min {lo.tolist()} must not exceed l_max {hi.tolist()}")
-        _above_resolution("l_min", lo, resolution)
-        if variance_bounds is not None:
-            try:
-                vb = np.asarray(variance_bounds, float)
-            except (TypeError, ValueError) as exc:
-                raise ConfigError(f"variance_bounds must be (min(3,), max(3,)): {exc}") from exc
-            if vb.shape != (2, 3) or not np.all(np.isfinite(vb)) or np.any(vb < 0):
-                raise ConfigError("variance_bounds must be (min(3,), max(3,)), finite and >= 0")
-            if np.any(vb[0] > vb[1]):
-                raise ConfigError(
-                    f"variance_bounds min {vb[0].tolist()} exceeds max {vb[1].tolist()}"
-                )
-            variance_bounds = (vb[0], vb[1])
-        mapper = AdaptiveBkiMapper(resolution, lo, hi, alpha0, beta0, variance_bounds)
+def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
+    """The config's mapper with its (checked) values, optionally seeded from a prior map (an
+    :class:`~undertow.occupancy.OccupancyMap` or a saved ``map.npz``)."""
+    base = {"resolution": config.resolution, "alpha0": config.alpha0, "beta0": config.beta0,
+            "max_memory_gb": config.max_memory_gb}  # fmt: skip
+    if config.method == "csm":
+        mapper: Mapper = CsmMapper(**base)
+    elif config.method == "bki":
+        mapper = BkiMapper(length_scale=config.length_scale, **base)
     else:
-        raise ConfigError(f"unknown mapping method {method!r}; choose csm, bki or adaptive")
-    if max_memory_gb is not None:
-        mapper.max_memory_gb = _positive("max_memory_gb", max_memory_gb)
+        mapper = AdaptiveBkiMapper(l_min=config.l_min, l_max=config.l_max,
+                                   variance_bounds=config.variance_bounds, **base)  # fmt: skip
     if prior is not None:
         mapper.seed(prior)
     return mapper
 
 
-def _above_resolution(name: str, lengths: np.ndarray, resolution: float) -> None:
-    """A length scale under a tenth of a cell puts a sample's kernel mass in at most one cell
-    centre, or none: the map would lose its samples."""
-    if np.any(lengths <= resolution / 10):
-        shown = lengths.tolist() if lengths.size > 1 else float(lengths[0])
-        raise ConfigError(
-            f"{name} {shown} m is not above resolution / 10 = {resolution / 10:g} m: use a "
-            "finer resolution or longer length scales"
-        )
+def make_mapper(method: Method, prior=None, **settings) -> Mapper:
+    """A mapper by name ("csm", "bki", "adaptive"), optionally seeded from a prior map.
 
-
-def write_map_ply(path, occupancy_map: OccupancyMap, threshold: float = 0.5) -> Path:
-    """Occupied cell centres with float ``mean`` and ``variance`` vertex properties, as a binary
-    little-endian PLY (CloudCompare, Open3D) through :func:`undertow.io.ply.write_ply`."""
-    from ..io.ply import write_ply
-
-    occ = occupancy_map.occupied(threshold)
-    return write_ply(path, occ.centres, {"mean": occ.mean, "variance": occ.variance})
+    ``settings`` are :class:`~undertow.mapping.config.MappingConfig` fields (``resolution``,
+    ``length_scale``, ``l_min``, ``l_max``, ``alpha0``, ``beta0``, ``variance_bounds``,
+    ``max_memory_gb``); the ones not given take its defaults, and all are checked there."""
+    return mapper_from_config(MappingConfig.from_dict({"method": method, **settings}), prior)

@@ -1,29 +1,28 @@
-"""Map a log along a trajectory end to end and write the result folder (`undertow map`)."""
+"""Map a log along a trajectory end to end: training samples, one mapper pass, the map."""
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from pathlib import Path
 
-import yaml
-
-from .._util.atomic import output_folder
-from ..errors import ConfigError
 from ..log import Log
+from ..occupancy import OccupancyMap
 from ..trajectory import Trajectory
-from .config import MappingConfig, mapper_from_config, samples_from_config
-from .grid import OccupancyMap
-from .mappers import write_map_ply
+from .config import MappingConfig
+from .mappers import mapper_from_config, out_of_memory
+from .samples import samples_from_config
 
 
 @dataclass
 class MappingResult:
-    """The map, and what went into it (sample counts, dropped ranges, mapper settings)."""
+    """The map, and what went into it (sample counts, dropped ranges, mapper settings);
+    ``warnings``: what reading and mapping warned of (filled by
+    :func:`undertow.jobs.map.map_file`)."""
 
     map: OccupancyMap
     config: MappingConfig
     metadata: dict = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
 
 
 def map_log(
@@ -38,10 +37,7 @@ def map_log(
         mapper.integrate(samples)
         occupancy = mapper.occupancy()
     except MemoryError:
-        raise ConfigError(
-            f"mapping ran out of memory at resolution {config.resolution:g} m: use a coarser "
-            "resolution (or a lower mapping.max_memory_gb, checked before mapping)"
-        ) from None
+        raise out_of_memory(config.resolution) from None
     # the threshold the map was made with, for `evaluate map` (older maps: 0.5)
     occupancy = dataclasses.replace(
         occupancy,
@@ -60,15 +56,3 @@ def map_log(
         "source": log.source,
     }
     return MappingResult(occupancy, config, metadata)
-
-
-def save_map(result: MappingResult, out_dir: str | Path, overwrite: bool = False) -> Path:
-    """Write ``map.npz``, ``map.ply`` (occupied cell centres with mean and variance) and
-    ``config.yaml`` (mapping config and what went into the map), all at once (a non-empty
-    folder is replaced only with ``overwrite``)."""
-    with output_folder(out_dir, overwrite) as out:
-        result.map.save(out / "map.npz")
-        write_map_ply(out / "map.ply", result.map, threshold=result.config.occupied_threshold)
-        doc = {"mapping": result.config.model_dump(mode="json"), "result": result.metadata}
-        (out / "config.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
-    return Path(out_dir)

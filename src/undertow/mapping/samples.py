@@ -7,7 +7,10 @@ range's time and the sensor mounting (lever arm t_s, rotation R_s, both in the b
     origin o = p + R t_s,   direction v = R R_s u,   hit m = o + r v   (label y = 1),
 
 plus free samples m = o + s v for s = 0, f, 2f, ... <= r - f (label y = 0), f = free_resolution,
-as la3dm does (NOTES.md section 4). Position and its per-axis variance are interpolated linearly,
+as the reference BKI implementation la3dm does (Doherty et al., "Learning-aided 3-D occupancy
+mapping with Bayesian generalized kernel inference", IEEE T-RO 2019;
+github.com/RobustFieldAutonomyLab/la3dm: free points every free_resolution along each ray, from
+the origin, labelled 0). Position and its per-axis variance are interpolated linearly,
 roll/pitch/yaw on the unwrapped angles. Invalid beams, non-finite or out-of-range values (DVL
 0.05-50 m, sonar min_range-max_range) and ranges outside the trajectory's time span are dropped
 and counted in ``Samples.dropped``.
@@ -20,10 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError, DataError, MissingStreamError
+from ..errors import DataError, MissingStreamError
 from ..log import Log
 from ..rotations import rpy_to_matrix, wrap_angle
 from ..trajectory import Trajectory
+from .config import MappingConfig
 from .kernels import _expand_rays
 
 SENSOR_DVL, SENSOR_SONAR = 0, 1
@@ -122,20 +126,19 @@ def _check_range(kind, t, r, flag, lo, hi, span, dropped) -> np.ndarray:
     return flag & in_range & in_time
 
 
-def build_samples(log: Log, trajectory: Trajectory, free_resolution: float = 0.1,
-                  sigma0_dvl: float = 0.9, sigma0_sonar: float = 0.6, use_dvl: bool = True,
-                  use_sonar: bool = True) -> Samples:  # fmt: skip
-    """Hits and free samples from the log's DVL beam ranges and sonar ranges (see module doc)."""
-    if not (free_resolution > 0 and np.isfinite(free_resolution)):
-        raise ConfigError(f"free_resolution must be > 0, got {free_resolution}")
-    if not (sigma0_dvl > 0 and sigma0_sonar > 0):
-        raise ConfigError(f"sigma0 must be > 0, got dvl {sigma0_dvl}, sonar {sigma0_sonar}")
+def build_samples(log: Log, trajectory: Trajectory, **settings) -> Samples:
+    """Hits and free samples from the log's DVL beam ranges and sonar ranges (see module doc).
+
+    ``settings`` are :class:`~undertow.mapping.config.MappingConfig` fields (``free_resolution``,
+    ``sigma0_dvl``, ``sigma0_sonar``, ``use_dvl``, ``use_sonar``); the ones not given take its
+    defaults, and all are checked there."""
+    return samples_from_config(log, trajectory, MappingConfig.from_dict(settings))
+
+
+def samples_from_config(log: Log, trajectory: Trajectory, config: MappingConfig) -> Samples:
+    """:func:`build_samples` with the config's (checked) values."""
+    f, use_dvl, use_sonar = config.free_resolution, config.use_dvl, config.use_sonar
     wanted = [n for n, use in (("dvl", use_dvl), ("sonar", use_sonar)) if use]
-    if not wanted:
-        raise ConfigError(
-            "mapping.use_dvl and mapping.use_sonar are both false in the config: enable at "
-            "least one range stream"
-        )
     if not any(getattr(log, n) is not None and len(getattr(log, n)) for n in wanted):
         raise MissingStreamError(f"mapping needs a range stream ({' or '.join(wanted)} "
                                  "enabled) but the log has none of them")  # fmt: skip
@@ -151,17 +154,18 @@ def build_samples(log: Log, trajectory: Trajectory, free_resolution: float = 0.1
         unit = d.beam_unit.reshape(-1, 3)
         flag = d.beam_valid.reshape(-1) & np.all(np.isfinite(unit), axis=1)
         ok = _check_range("dvl", t, r, flag, DVL_MIN_RANGE, DVL_MAX_RANGE, span, dropped)
-        parts.append(_rays(t, r, unit, ok, log.mounting.dvl, trajectory, sigma0_dvl, SENSOR_DVL))
+        parts.append(_rays(t, r, unit, ok, log.mounting.dvl, trajectory, config.sigma0_dvl,
+                           SENSOR_DVL))  # fmt: skip
     if use_sonar and log.sonar is not None and len(log.sonar):
         s = log.sonar
         flag = np.ones(len(s), bool)
         ok = _check_range("sonar", s.t, s.range, flag, s.min_range, s.max_range, span, dropped)
         unit = np.tile([0.0, 0.0, 1.0], (len(s), 1))
         parts.append(_rays(s.t, s.range, unit, ok, log.mounting.sonar, trajectory,
-                           sigma0_sonar, SENSOR_SONAR))  # fmt: skip
+                           config.sigma0_sonar, SENSOR_SONAR))  # fmt: skip
     _check_time_overlap(log, span, dropped, sum(p[2].size for p in parts), use_dvl, use_sonar)
     origin, direction, r, var, sig, sensor = (np.concatenate(c) for c in zip(*parts, strict=True))
-    return _expand(origin, direction, r, var, sig, sensor, free_resolution, dropped)
+    return _expand(origin, direction, r, var, sig, sensor, f, dropped)
 
 
 def _check_time_overlap(log: Log, span, dropped: dict, kept: int, use_dvl, use_sonar) -> None:

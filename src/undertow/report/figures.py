@@ -5,8 +5,8 @@ no global state) and written atomically (temp file, then rename). Depth is z DOW
 rest of the library, so side views put the surface at the top.
 
 This module holds the shared helpers and the sensor and kernel figures; the trajectory figures
-live in :mod:`.figures_traj` and the map figures in :mod:`.figures_map`. All are importable from
-here (``from undertow.report.figures import plot_trajectories``) and from :mod:`undertow.report`.
+live in :mod:`.figures_traj` and the map figures in :mod:`.figures_map`. Every figure is
+importable from :mod:`undertow.report`.
 
 - :func:`plot_velocity` -- paper Fig. 8 (DVL x velocity vs estimate vs ground truth).
 - :func:`plot_disturbance` -- paper Fig. 2b (wave elevation, DVL altitude, DVL x velocity).
@@ -29,23 +29,6 @@ DPI = 120
 GROUND_TRUTH_COLOR = "tab:green"
 VARIANT_COLORS = {"proposed": "tab:blue", "baseline": "tab:red"}
 DISTANCE_CMAP = "turbo"  # blue = close to the ground truth, red = far
-
-_LAZY = {
-    "plot_trajectories": "figures_traj",
-    "plot_trajectory_errors": "figures_traj",
-    "plot_map_distance": "figures_map",
-    "plot_map_slice": "figures_map",
-    "plot_rock_map": "figures_map",
-}
-
-
-def __getattr__(name: str):
-    """Re-export the figures of the sibling modules without a circular import (PEP 562)."""
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(f".{_LAZY[name]}", __package__), name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def new_figure(width_in: float, height_in: float, nrows: int = 1, ncols: int = 1, **kw):

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import DataError
-from ..mapping.grid import OccupancyMap
+from ..occupancy import OccupancyMap
 from .figures import DISTANCE_CMAP, cloud, new_figure, save_figure, subsample
 
 _GT_POINTS = 30_000

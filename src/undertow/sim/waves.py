@@ -1,4 +1,5 @@
-"""Linear (Airy) waves in water of finite depth (NOTES.md section 2).
+"""Linear (Airy) waves in water of finite depth (Dean & Dalrymple, "Water Wave Mechanics for
+Engineers and Scientists", chapters 3-4).
 
 Airy theory is written with z UP and z = 0 at the still surface (the water is -h < z_up < 0):
 

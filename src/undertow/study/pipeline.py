@@ -26,16 +26,22 @@ import numpy as np
 from .._util.plain import to_plain
 from ..estimation.calibration import calibrate
 from ..estimation.characterize import characterize, estimate_waves
-from ..estimation.run import localize
+from ..estimation.localizer import localize
 from ..evaluation.cloud import evaluate_map
 from ..evaluation.trajectory import trajectory_rmse
 from ..mapping.config import MappingConfig
 from ..mapping.run import map_log
 from ..sim import load_scenario, simulate
+from . import paper
+from .claims import evaluate_seed
 
 WAVE_CONDITIONS = ("wave-a0.10-f1.00", "wave-a0.10-f0.75", "wave-a0.05-f0.75")
 VARIANTS = ("baseline", "be", "an", "proposed")
 MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("adaptive", "proposed"))
+#: The states whose filter standard deviation is averaged along the trajectory (index in x).
+MEAN_STD_STATES = {"x_m": 0, "y_m": 1, "yaw_rad": 5, "vx_m_s": 6}
+#: The rock survey's maps are evaluated over the rock's footprint plus this margin.
+ROCK_MARGIN_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -45,7 +51,7 @@ class StudySettings:
     conditions: tuple[str, ...] = WAVE_CONDITIONS
     calm: str = "calm"
     rock_survey: str | None = "rock-survey"
-    bki_length_scale: float = 0.15
+    bki_length_scale: float = paper.BKI_LENGTH_SCALE_M
 
 
 @dataclass
@@ -99,8 +105,7 @@ def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
         results["rock_survey"] = _rock_survey(
             settings.rock_survey, seed, calibration, char.profile, art
         )
-    results["claims"] = evaluate_claims(results)
-    results["claims_table1"] = evaluate_table1_claims(results["table1"])
+    results["claims"], results["claims_table1"] = evaluate_seed(results)
     return results, art
 
 
@@ -111,12 +116,7 @@ def _trajectory_metrics(traj, ground_truth) -> dict:
         "rmse": errors.rmse,
         "nees_mean": errors.nees_mean,
         "nees_fraction_in_95": errors.nees_fraction_in_95,
-        "mean_std": {
-            "x_m": float(std[:, 0].mean()),
-            "y_m": float(std[:, 1].mean()),
-            "yaw_rad": float(std[:, 5].mean()),
-            "vx_m_s": float(std[:, 6].mean()),
-        },
+        "mean_std": {key: float(std[:, i].mean()) for key, i in MEAN_STD_STATES.items()},
     }
 
 
@@ -145,7 +145,7 @@ def _rock_survey(name: str, seed: int, calibration, profile, art: Artifacts) -> 
     traj = localize(sim.log, "proposed", profile=profile, wave=wave, calibration=calibration)
     art.trajectories[(name, "proposed")] = traj
     rock = sim.scenario.tank.rock
-    margin = 0.5
+    margin = ROCK_MARGIN_M
     lo = np.array([rock.center_x_m - rock.length_m / 2, rock.center_y_m - rock.width_m / 2])
     hi = np.array([rock.center_x_m + rock.length_m / 2, rock.center_y_m + rock.width_m / 2])
     near = np.all(
@@ -171,175 +171,3 @@ def _table1_row(row: dict) -> dict:
     for key in ("dvl_std_m_s", "dvl_extra_std_m_s"):
         out[key] = dict(zip(("vx", "vy", "vz"), row[key], strict=True))
     return to_plain(out)
-
-
-#: The paper's qualitative claims, as predicates over one condition's results.
-CLAIMS = {
-    "bias_estimation_reduces_yaw_error": (
-        "bias estimation removes the heading drift (yaw RMSE: be < baseline)",
-        lambda c: (
-            c["localization"]["be"]["rmse"]["yaw_rad"]
-            < c["localization"]["baseline"]["rmse"]["yaw_rad"]
-        ),
-    ),
-    "bias_estimation_reduces_y_error": (
-        "bias estimation removes the y error (y RMSE: be < baseline)",
-        lambda c: (
-            c["localization"]["be"]["rmse"]["y_m"] < c["localization"]["baseline"]["rmse"]["y_m"]
-        ),
-    ),
-    "added_noise_reduces_velocity_error": (
-        "added noise improves the velocity error (vx RMSE: an < baseline)",
-        lambda c: (
-            c["localization"]["an"]["rmse"]["vx_m_s"]
-            < c["localization"]["baseline"]["rmse"]["vx_m_s"]
-        ),
-    ),
-    "added_noise_widens_covariance": (
-        "added noise widens the covariance in waves (mean vx std: an > baseline)",
-        lambda c: (
-            c["localization"]["an"]["mean_std"]["vx_m_s"]
-            > c["localization"]["baseline"]["mean_std"]["vx_m_s"]
-        ),
-    ),
-    "x_error_not_removed_by_filter": (
-        "the x error (DVL along-track offset) stays: proposed within 10 % of baseline",
-        lambda c: (
-            abs(
-                c["localization"]["proposed"]["rmse"]["x_m"]
-                - c["localization"]["baseline"]["rmse"]["x_m"]
-            )
-            < 0.1 * c["localization"]["baseline"]["rmse"]["x_m"]
-        ),
-    ),
-    "proposed_filter_improves_csm_map": (
-        "the proposed filter improves the CSM map (C2C: csm/proposed < csm/baseline)",
-        lambda c: (
-            c["mapping"]["csm/proposed"]["c2c_mean_m"] < c["mapping"]["csm/baseline"]["c2c_mean_m"]
-        ),
-    ),
-    "adaptive_bki_most_accurate": (
-        "adaptive BKI is the most accurate map (lowest C2C of csm, bki, adaptive)",
-        lambda c: (
-            c["mapping"]["adaptive/proposed"]["c2c_mean_m"]
-            < min(
-                c["mapping"]["bki/proposed"]["c2c_mean_m"],
-                c["mapping"]["csm/proposed"]["c2c_mean_m"],
-            )
-        ),
-    ),
-    "bki_denser_than_csm": (
-        "both BKI maps are denser than CSM (occupied cells)",
-        lambda c: (
-            min(
-                c["mapping"]["bki/proposed"]["occupied_cells"],
-                c["mapping"]["adaptive/proposed"]["occupied_cells"],
-            )
-            > c["mapping"]["csm/proposed"]["occupied_cells"]
-        ),
-    ),
-    "adaptive_fewer_cells_than_bki": (
-        "adaptive BKI has fewer occupied cells than BKI",
-        lambda c: (
-            c["mapping"]["adaptive/proposed"]["occupied_cells"]
-            < c["mapping"]["bki/proposed"]["occupied_cells"]
-        ),
-    ),
-    "adaptive_proposed_more_accurate_than_csm_baseline": (
-        "Table IV headline: adaptive BKI with the proposed filter is more accurate than CSM with "
-        "the baseline filter (C2C: adaptive/proposed < csm/baseline)",
-        lambda c: (
-            c["mapping"]["adaptive/proposed"]["c2c_mean_m"]
-            < c["mapping"]["csm/baseline"]["c2c_mean_m"]
-        ),
-    ),
-    "adaptive_proposed_denser_than_csm_baseline": (
-        "Table IV headline: adaptive BKI with the proposed filter is denser than CSM with the "
-        "baseline filter (occupied cells)",
-        lambda c: (
-            c["mapping"]["adaptive/proposed"]["occupied_cells"]
-            > c["mapping"]["csm/baseline"]["occupied_cells"]
-        ),
-    ),
-    "scale_calibration_removes_x_error": (
-        "beyond the paper: calibrating the DVL scale factor removes most of the x error",
-        lambda c: (
-            c["localization"]["proposed+scale"]["rmse"]["x_m"]
-            < 0.5 * c["localization"]["proposed"]["rmse"]["x_m"]
-        ),
-    ),
-}
-
-
-#: What explains a claim failing in the simulated basin (shown only where it does not hold in
-#: every seed): mechanisms of the simulator and the metric, not numbers.
-WHY_NOT = {
-    "bias_estimation_reduces_yaw_error": "the DR drift mu_b comes from the calm run's "
-    "calibration; a drift that differs from it is absorbed only slowly by the bias random walk",
-    "bias_estimation_reduces_y_error": "see the yaw claim: y error follows the heading error",
-    "added_noise_reduces_velocity_error": "where the wave noise at the DVL's depth is small, the "
-    "added variance is small and its effect is within the seed-to-seed spread",
-    "proposed_filter_improves_csm_map": "the simulated floor is flat: a lateral pose error moves "
-    "map points along the floor, not away from it, and the barometer keeps the depth error at "
-    "millimetres, so C2C cannot see the baseline's y and yaw drift (the paper's basin scan has "
-    "walls and slopes that can)",
-    "adaptive_proposed_more_accurate_than_csm_baseline": "neither half of the paper's gain "
-    "can show here: the simulated floor is flat, so the baseline's lateral (y, yaw) error moves "
-    "CSM points along the floor, not away from it (see the CSM claim), and C2C is quantized by "
-    "the 0.1 m grid (the floor lies on a cell boundary, every occupied cell centre is 0.05 m "
-    "from it), so both maps sit at about 0.05 m and differ by fractions of a millimetre",
-    "adaptive_bki_most_accurate": "C2C is quantized by the 0.1 m grid (the floor lies on a cell "
-    "boundary, cell centres are 0.05 m from it), so CSM and adaptive BKI differ by fractions of "
-    "a millimetre and sampling noise decides",
-}
-
-
-#: The paper's reading of its Table I (section IV-B), as predicates over the simulated Table I;
-#: a claim whose conditions were not run is not evaluable (KeyError).
-TABLE1_CLAIMS = {
-    "shorter_waves_more_dvl_noise": (
-        "shorter waves give larger DVL noise (vx std: f = 1.00 Hz > f = 0.75 Hz at a = 0.10 m)",
-        lambda t: (
-            t["wave-a0.10-f1.00"]["dvl_std_m_s"]["vx"] > t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
-        ),
-        "the simulator's wave noise scales with the orbital velocity at the DVL's depth (an "
-        "assumption, coefficient 1), which for the same amplitude is larger for the longer "
-        "0.75 Hz waves because they decay less with depth (linear theory); the paper explains "
-        "its opposite finding by shorter waves being faster, but by the dispersion relation "
-        "the 1.00 Hz waves travel at 1.56 m/s and the 0.75 Hz waves at 2.08 m/s",
-    ),
-    "smaller_amplitude_less_dvl_noise": (
-        "smaller waves give smaller DVL noise (vx std: a = 0.05 m < a = 0.10 m at 0.75 Hz)",
-        lambda t: (
-            t["wave-a0.05-f0.75"]["dvl_std_m_s"]["vx"] < t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
-        ),
-        None,
-    ),
-}
-
-
-def evaluate_table1_claims(table1: dict) -> dict:
-    """{claim: bool} for one seed (claims whose conditions were not run are left out)."""
-    out = {}
-    for key, (_, pred, _) in TABLE1_CLAIMS.items():
-        try:
-            out[key] = bool(pred(table1))
-        except KeyError:
-            continue
-    return out
-
-
-def condition_view(results: dict, condition: str) -> dict:
-    """One condition's localization and mapping results (what claim predicates read)."""
-    return {
-        "localization": results["localization"][condition],
-        "mapping": results["mapping"][condition],
-    }
-
-
-def evaluate_claims(results: dict) -> dict:
-    """{claim: {condition: bool}} for one seed."""
-    return {
-        key: {c: bool(pred(condition_view(results, c))) for c in results["localization"]}
-        for key, (_, pred) in CLAIMS.items()
-    }

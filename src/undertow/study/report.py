@@ -1,4 +1,8 @@
-"""Figures and the HTML report of a study, from the first seed's in-memory results."""
+"""Figures and the HTML report of a study, from the first seed's in-memory results.
+
+The drawing and the page are generic (:mod:`undertow.report`); this module picks what the study
+shows: which runs go in which paper figure, the captions, and the notes on the paper's claims.
+"""
 
 from __future__ import annotations
 
@@ -6,89 +10,35 @@ from pathlib import Path
 
 import numpy as np
 
-from .pipeline import Artifacts
+from .pipeline import Artifacts, StudySettings
+
+Figures = list[tuple[str, Path]]
 
 
 def build_report(
-    out: Path, tables: dict, markdown: str, art: Artifacts, versions: dict
-) -> tuple[list[tuple[str, Path]], Path]:
+    out: Path,
+    tables: dict,
+    markdown: str,
+    art: Artifacts,
+    versions: dict,
+    settings: StudySettings | None = None,
+) -> tuple[Figures, Path]:
     """Write ``figures/*.png`` and ``report.html`` under ``out``; return (figures, report)."""
-    from ..report import figures as fig
     from ..report.html import write_report
 
-    figdir = out / "figures"
+    settings = settings or StudySettings()
     cond = tables["conditions"][0]
+    figures = condition_figures(out / "figures", cond, art, settings)
+    figures += rock_survey_figures(out / "figures", tables, art)
     sim = art.simulations[cond]
-    log, cloud = sim.log, sim.floor_cloud
-    trajs = {v: art.trajectories[(cond, v)] for v in ("baseline", "proposed")}
-    adaptive = art.maps[(cond, "adaptive/proposed")]
-    bki = art.maps[(cond, "bki/proposed")]
-    lateral = float(np.median(log.ground_truth.position[:, 1]))
-    mapping_cfg = adaptive_lengths()
-    figures = [
-        (
-            f"Trajectory ({cond}): proposed (blue) vs baseline (red) vs ground truth (green) "
-            "(paper Fig. 3a).",
-            fig.plot_trajectories(figdir / "trajectories.png", log.ground_truth, trajs),
-        ),
-        (
-            f"Error along the trajectory ({cond}); baseline dashed, proposed solid with its own "
-            "2-sigma band (paper Fig. 3b).",
-            fig.plot_trajectory_errors(figdir / "trajectory_errors.png", log.ground_truth, trajs),
-        ),
-        (
-            f"Adaptive BKI map ({cond}, proposed filter) coloured by distance to the ground-truth "
-            "floor scan (paper Fig. 4).",
-            fig.plot_map_distance(figdir / "map_distance.png", adaptive.points(0.5), cloud),
-        ),
-        (
-            f"Map slice near the floor, adaptive vs BKI ({cond}; paper Fig. 6).",
-            fig.plot_map_slice(
-                figdir / "map_slice.png",
-                {"adaptive BKI": adaptive, "BKI (l = 0.15 m)": bki},
-                cloud,
-                (lateral - 0.05, lateral + 0.05),
-            ),
-        ),
-        (
-            f"x velocity ({cond}): DVL (red) vs estimate (blue) vs ground truth (green) "
-            "(paper Fig. 8).",
-            fig.plot_velocity(figdir / "velocity.png", log, trajs["proposed"]),
-        ),
-        (
-            f"Wave elevation, DVL altitude and DVL x velocity ({cond}; paper Fig. 2b).",
-            fig.plot_disturbance(figdir / "disturbance.png", log),
-        ),
-        (
-            "The adaptive kernel for small and large pose uncertainty (l_min vs l_max; paper "
-            "Fig. 7).",
-            fig.plot_kernel_shapes(figdir / "kernel_shapes.png", *mapping_cfg),
-        ),
-    ]
-    survey = next((name for name, _ in art.maps if name not in tables["conditions"]), None)
-    if survey is not None:
-        rock_sim = art.simulations[survey]
-        rock = rock_sim.scenario.tank.rock
-        figures.append(
-            (
-                "Rock survey (free vehicle in waves): adaptive BKI map over the rock's true "
-                "outline (paper Fig. 5).",
-                fig.plot_rock_map(
-                    figdir / "rock_map.png",
-                    art.maps[(survey, "adaptive/proposed")],
-                    (rock.center_x_m, rock.center_y_m, rock.length_m, rock.width_m, rock.height_m),
-                    rock_sim.scenario.water.depth_m,
-                ),
-            )
-        )
     report = write_report(
         out / "report.html",
         title="undertow: the paper's experiments in the simulated wave basin",
         tables_markdown=markdown,
         tables=tables,
         figures=figures,
-        map_points=adaptive.points(0.5),
-        ground_truth_points=cloud,
+        map_points=art.maps[(cond, "adaptive/proposed")].points(0.5),
+        ground_truth_points=sim.floor_cloud,
         config={"scenario": sim.scenario.to_yaml_dict(), "seeds": tables["seeds"]},
         versions=versions,
         notes=report_notes(tables),
@@ -96,31 +46,102 @@ def build_report(
     return figures, report
 
 
+def condition_figures(figdir: Path, cond: str, art: Artifacts, settings: StudySettings) -> Figures:
+    """The paper's figures 2b, 3, 4, 6, 7 and 8 for one wave condition (captions, paths)."""
+    from ..report import figures as fig
+    from ..report import figures_map, figures_traj
+
+    sim = art.simulations[cond]
+    log, cloud = sim.log, sim.floor_cloud
+    trajs = {v: art.trajectories[(cond, v)] for v in ("baseline", "proposed")}
+    adaptive = art.maps[(cond, "adaptive/proposed")]
+    bki_label = f"BKI (l = {settings.bki_length_scale:g} m)"
+    slice_maps = {"adaptive BKI": adaptive, bki_label: art.maps[(cond, "bki/proposed")]}
+    lateral = float(np.median(log.ground_truth.position[:, 1]))
+    half = 0.5 * adaptive.resolution
+    gt = log.ground_truth
+    return [
+        (f"Trajectory ({cond}): proposed (blue) vs baseline (red) vs ground truth (green) "
+         "(paper Fig. 3a).",
+         figures_traj.plot_trajectories(figdir / "trajectories.png", gt, trajs)),
+        (f"Error along the trajectory ({cond}); baseline dashed, proposed solid with its own "
+         "2-sigma band (paper Fig. 3b).",
+         figures_traj.plot_trajectory_errors(figdir / "trajectory_errors.png", gt, trajs)),
+        (f"Adaptive BKI map ({cond}, proposed filter) coloured by distance to the ground-truth "
+         "floor scan (paper Fig. 4).",
+         figures_map.plot_map_distance(figdir / "map_distance.png", adaptive.points(0.5), cloud)),
+        (f"Map slice near the floor, adaptive vs BKI ({cond}; paper Fig. 6).",
+         figures_map.plot_map_slice(figdir / "map_slice.png", slice_maps, cloud,
+                                    (lateral - half, lateral + half))),
+        (f"x velocity ({cond}): DVL (red) vs estimate (blue) vs ground truth (green) "
+         "(paper Fig. 8).",
+         fig.plot_velocity(figdir / "velocity.png", log, trajs["proposed"])),
+        (f"Wave elevation, DVL altitude and DVL x velocity ({cond}; paper Fig. 2b).",
+         fig.plot_disturbance(figdir / "disturbance.png", log)),
+        ("The adaptive kernel for small and large pose uncertainty (l_min vs l_max; paper "
+         "Fig. 7).",
+         fig.plot_kernel_shapes(figdir / "kernel_shapes.png", *adaptive_lengths())),
+    ]  # fmt: skip
+
+
+def rock_survey_figures(figdir: Path, tables: dict, art: Artifacts) -> Figures:
+    """Paper Fig. 5 (the adaptive BKI map over the rock), when the rock survey ran."""
+    from ..report import figures_map
+
+    survey = next((name for name, _ in art.maps if name not in tables["conditions"]), None)
+    if survey is None:
+        return []
+    sim = art.simulations[survey]
+    rock = sim.scenario.tank.rock
+    outline = (rock.center_x_m, rock.center_y_m, rock.length_m, rock.width_m, rock.height_m)
+    path = figures_map.plot_rock_map(
+        figdir / "rock_map.png",
+        art.maps[(survey, "adaptive/proposed")],
+        outline,
+        sim.scenario.water.depth_m,
+    )
+    caption = (
+        "Rock survey (free vehicle in waves): adaptive BKI map over the rock's true outline "
+        "(paper Fig. 5)."
+    )
+    return [(caption, path)]
+
+
 def adaptive_lengths():
+    """(l_min, l_max) of the adaptive kernel the study maps with (the mapping defaults)."""
     from ..mapping.config import MappingConfig
 
     cfg = MappingConfig()
     return cfg.l_min, cfg.l_max
 
 
+def _verdict(holds: int, n: int) -> str:
+    return "holds" if holds == n else "does not hold" if holds == 0 else "holds partly"
+
+
 def report_notes(tables: dict) -> list[str]:
-    """What holds and what does not, read from the claim fractions (never typed in)."""
+    """What holds and what does not, read from the claim fractions and the measured values."""
     notes = []
     for entry in tables.get("table1_claims", {}).values():
         f = entry["all"]
         if f["n"]:
-            verdict = "holds" if f["holds"] == f["n"] else "does not hold"
-            note = f"Table I: {entry['claim']}: {verdict} ({f['holds']}/{f['n']} seeds)."
-            if f["holds"] < f["n"]:
-                note += f" Why: {entry['why_not'] or 'not explained yet'}."
-            notes.append(note)
+            notes.append(
+                f"Table I: {entry['claim']} ({entry['test']}): {_verdict(f['holds'], f['n'])} "
+                f"({f['holds']}/{f['n']} seeds). The paper: {entry['statement']} "
+                f"Measured: {entry['why']}."
+            )
     for entry in tables["claims"].values():
-        counts = [entry[c] for c in tables["conditions"] if entry[c]["n"]]
-        holds = sum(c["holds"] for c in counts)
-        total = sum(c["n"] for c in counts)
-        verdict = "holds" if holds == total else "does not hold" if holds == 0 else "holds partly"
-        note = f"{entry['claim']}: {verdict} ({holds}/{total} seed-conditions)."
-        if holds < total:
-            note += f" Why: {entry.get('why_not') or 'not explained yet'}."
+        counts = {c: entry[c] for c in tables["conditions"] if entry[c]["n"]}
+        holds = sum(f["holds"] for f in counts.values())
+        total = sum(f["n"] for f in counts.values())
+        note = (
+            f"{entry['claim']} ({entry['test']}): {_verdict(holds, total)} ({holds}/{total} "
+            f"seed-conditions). The paper: {entry['statement']}"
+        )
+        if entry["by_construction"]:
+            note += f" By construction of the simulator: {entry['by_construction']}."
+        for c, f in counts.items():
+            if f["holds"] < f["n"]:
+                note += f" {c}: {entry['why'][c]}."
         notes.append(note)
     return notes

@@ -98,7 +98,9 @@ def run_study(
     if report:
         from .report import build_report
 
-        study.figures, study.report = build_report(out, tables, markdown, artifacts, _versions())
+        study.figures, study.report = build_report(
+            out, tables, markdown, artifacts, _versions(), settings
+        )
     study.wall_s = time.perf_counter() - start
     return study
 
@@ -159,8 +161,8 @@ def _write_text(path: Path, text: str) -> None:
 
 def _write_runs(root: Path, art: Artifacts) -> None:
     """First seed's runs: simulation outputs, trajectories per variant, maps per method."""
+    from ..io.ply import write_map_ply
     from ..io.results import save_trajectory
-    from ..mapping.mappers import write_map_ply
     from ..sim import write_simulation
 
     for name, sim in art.simulations.items():

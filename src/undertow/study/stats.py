@@ -13,7 +13,7 @@ returned is a plain float, int or ``None`` (for NaN/inf), so the result is JSON-
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from numbers import Real
 from typing import Any
 
@@ -74,22 +74,14 @@ def summarize(values: Iterable[float]) -> dict:
     }
 
 
-def claim_fraction(results: Iterable[Mapping], predicate: Callable[[Mapping], bool]) -> dict:
-    """{"holds": k, "n": n, "fraction": k / n} of the seeds where ``predicate(result)`` is true.
-
-    A seed where the predicate raises ``KeyError`` (a result missing from that seed) is not
-    evaluable and is left out of n; ``fraction`` is ``None`` when no seed is evaluable. Any other
-    exception is a bug in the predicate and propagates.
-    """
-    holds = evaluable = 0
-    for result in results:
-        try:
-            verdict = bool(predicate(result))
-        except KeyError:
-            continue
-        evaluable += 1
-        holds += verdict
-    return {"holds": holds, "n": evaluable, "fraction": holds / evaluable if evaluable else None}
+def claim_fraction(verdicts: Iterable[bool]) -> dict:
+    """{"holds": k, "n": n, "fraction": k / n} of n per-seed verdicts, k of them true;
+    ``fraction`` is ``None`` when there is no verdict (a claim whose conditions were not run)."""
+    verdicts = list(verdicts)
+    if any(not isinstance(v, bool | np.bool_) for v in verdicts):
+        raise DataError(f"claim verdicts must be booleans, got {verdicts}")
+    holds, n = int(sum(verdicts)), len(verdicts)
+    return {"holds": holds, "n": n, "fraction": holds / n if n else None}
 
 
 def format_cell(leaf: Mapping, decimals: int = 3) -> str:

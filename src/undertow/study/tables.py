@@ -8,7 +8,8 @@ cell is the mean over seeds with, for more than one seed, its 95 % Student-t int
 from __future__ import annotations
 
 from . import paper
-from .pipeline import CLAIMS, MAP_RUNS, TABLE1_CLAIMS, WHY_NOT
+from .claims import CLAIMS, TABLE1_CLAIMS, Claim
+from .pipeline import MAP_RUNS, ROCK_MARGIN_M
 from .stats import aggregate, claim_fraction
 
 AXIS_LABELS = {
@@ -22,25 +23,17 @@ def build_tables(results: list[dict]) -> dict:
     """Aggregated tables (JSON-serializable): table1..table4, claims, seeds."""
     agg = aggregate(results)
     conditions = list(results[0]["localization"])
-    claims = {}
-    for key, (text, pred) in CLAIMS.items():
-        claims[key] = {"claim": text, "why_not": WHY_NOT.get(key)}
-        for c in conditions:
-            claims[key][c] = claim_fraction(results, lambda r, c=c, pred=pred: pred(_view(r, c)))
-    table1_claims = {}
-    for key, (text, _, why_not) in TABLE1_CLAIMS.items():
-        fraction = claim_fraction(results, lambda r, key=key: r["claims_table1"][key])
-        table1_claims[key] = {"claim": text, "why_not": why_not, "all": fraction}
+    run = list(results[0]["table1"])
     return {
         "seeds": [r["seed"] for r in results],
-        "table1_claims": table1_claims,
+        "table1_claims": {c.id: _table1_claim(c, results, run) for c in TABLE1_CLAIMS},
         "conditions": conditions,
         "table1": agg["table1"],
         "localization": agg["localization"],
         "mapping": agg["mapping"],
         "rock_survey": agg.get("rock_survey"),
         "calibration": agg["calibration"],
-        "claims": claims,
+        "claims": {c.id: _claim(c, results, conditions) for c in CLAIMS},
         "paper": {
             "table1": paper.TABLE_I,
             "table2_3": paper.TABLE_II_III,
@@ -49,11 +42,33 @@ def build_tables(results: list[dict]) -> dict:
     }
 
 
-def _view(result: dict, condition: str) -> dict:
+def _claim_text(claim: Claim) -> dict:
     return {
-        "localization": result["localization"][condition],
-        "mapping": result["mapping"][condition],
+        "claim": claim.summary,
+        "test": claim.test,
+        "statement": claim.statement,
+        "by_construction": claim.by_construction,
     }
+
+
+def _claim(claim: Claim, results: list[dict], conditions: list[str]) -> dict:
+    """The claim's text, then per condition the seeds where it holds and why (not)."""
+    entry, why = _claim_text(claim), {}
+    for c in conditions:
+        measured = claim.measure(results, c)
+        entry[c] = claim_fraction(measured.verdicts)
+        why[c] = claim.explain(measured)
+    entry["why"] = why
+    return entry
+
+
+def _table1_claim(claim: Claim, results: list[dict], run: list[str]) -> dict:
+    """A Table I claim over the seeds; no verdict (n = 0) when its conditions were not run."""
+    entry = _claim_text(claim)
+    measured = claim.measure(results) if claim.applies(run) else None
+    entry["why"] = claim.explain(measured) if measured else None
+    entry["all"] = claim_fraction(measured.verdicts if measured else [])
+    return entry
 
 
 def cell(stat: dict | None, digits: int = 3) -> str:
@@ -155,43 +170,58 @@ def rock_survey_markdown(r: dict) -> str:
         + ", ".join(
             f"{AXIS_LABELS[a]} {cell(rmse[a], 4)}" for a in ("x_m", "y_m", "z_m", "yaw_rad")
         )
-        + ". Maps evaluated over the rock's footprint plus 0.5 m:",
+        + f". Maps evaluated over the rock's footprint plus {ROCK_MARGIN_M:g} m:",
         "",
     ]
     rows = [
         [name, cell(r[key]["c2c_mean_m"], 4), cell(r[key]["occupied_cells"], 0)]
-        for name, key in (("Adaptive BKI", "adaptive"), ("BKI (l = 0.15 m)", "bki"))
+        for name, key in (("Adaptive BKI", "adaptive"), (f"BKI (l = {_rock_bki_l():g} m)", "bki"))
     ]
     return "\n".join(lines) + "\n" + _md(["mapping", "C2C sim (m)", "cells sim"], rows)
+
+
+def _rock_bki_l() -> float:
+    """The rock survey maps with the mapping stage's default length scale."""
+    from ..mapping.config import MappingConfig
+
+    return MappingConfig().length_scale
+
+
+def _titled(entry: dict) -> str:
+    return f"{entry['claim']} ({entry['test']})"
 
 
 def table1_claims_markdown(t: dict) -> str:
     rows = []
     for entry in t.get("table1_claims", {}).values():
         f = entry["all"]
-        if not f["n"]:
-            continue
-        why = "" if f["holds"] == f["n"] else entry["why_not"] or "not explained yet"
-        rows.append([entry["claim"], f"{f['holds']}/{f['n']}", why])
-    return (
-        _md(["the paper's reading of Table I", "holds in (seeds)", "why not"], rows) if rows else ""
-    )
+        if f["n"]:
+            rows.append([_titled(entry), f"{f['holds']}/{f['n']}", entry["why"]])
+    header = ["the paper's reading of Table I", "holds in (seeds)", "measured, and why (not)"]
+    return _md(header, rows) if rows else ""
 
 
 def claims_markdown(t: dict) -> str:
-    """Claim | holds in k/n seeds per condition | why, where it does not hold in every seed."""
-    rows = []
+    """Claim | holds in k/n seeds per condition | by construction; then, where a claim does not
+    hold in every seed of a condition, why (from the measured values)."""
+    rows, why_not = [], []
     for entry in t["claims"].values():
-        row = [entry["claim"]]
-        always = True
+        row = [_titled(entry)]
         for c in t["conditions"]:
             f = entry[c]
             row.append(f"{f['holds']}/{f['n']}" if f["n"] else "n/a")
-            always = always and f["n"] > 0 and f["holds"] == f["n"]
-        row.append("" if always else entry.get("why_not") or "not explained yet")
+            if f["holds"] < f["n"]:
+                counts = f"{f['holds']}/{f['n']}"
+                why_not.append(f"- {entry['claim']}, {c} ({counts}): {entry['why'][c]}")
+        row.append(entry["by_construction"] or "")
         rows.append(row)
-    header = ["claim", *(f"holds in (seeds) {c}" for c in t["conditions"]), "why not, where not"]
-    return _md(header, rows)
+    header = ["claim", *(f"holds in (seeds) {c}" for c in t["conditions"]), "by construction"]
+    table = _md(header, rows)
+    if not why_not:
+        return table
+    return (
+        table + "\n\nWhy not, where a claim does not hold in every seed:\n\n" + "\n".join(why_not)
+    )
 
 
 def render_markdown(t: dict) -> str:

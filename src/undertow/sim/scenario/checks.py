@@ -6,7 +6,8 @@ pydantic ``ValidationError`` located at the offending field (so the one-line err
 ``file.yaml: field motion.carriage.depth_m: ...``) and naming the limit:
 
 - sensor limits: ``min_range < max_range`` (DVL, sonar);
-- breaking: wave steepness H / lambda = 2 a / lambda <= 1/7 (NOTES.md section 2), lambda = 2 pi / k
+- breaking: wave steepness H / lambda = 2 a / lambda <= 1/7 (Michell's limit; Dean & Dalrymple,
+  "Water Wave Mechanics for Engineers and Scientists"), lambda = 2 pi / k
   with k from the dispersion relation omega^2 = g k tanh(k h);
 - the rock platform inside the tank and under water; the wave probe inside the tank;
 - the robot's path (carriage run or survey lawnmower, widened by the sensors' horizontal lever
@@ -27,7 +28,7 @@ from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ..waves import LinearWave
 
-BREAKING_STEEPNESS = 1.0 / 7.0  # H / lambda above which a wave breaks (NOTES.md section 2)
+BREAKING_STEEPNESS = 1.0 / 7.0  # H / lambda above which a wave breaks (Michell's limit)
 
 
 def _fail(loc: tuple, value, message: str) -> ValidationError:

@@ -2,9 +2,9 @@
 
 A scenario is a YAML file; any field left out takes the default below, and ``base: NAME`` starts
 from a built-in scenario (deep merge) so a user file can change a single field. The built-ins
-live in ``undertow/data/scenarios/*.yaml``. Sensor models are in ``scenario_sensors.py``; the
-cross-field checks that reject physically impossible scenarios (robot out of the water or below
-the floor, a run leaving the tank, a breaking wave, ...) in ``scenario_checks.py``.
+live in ``undertow/data/scenarios/*.yaml``. Sensor models are in ``sensors.py`` (this package);
+the cross-field checks that reject physically impossible scenarios (robot out of the water or
+below the floor, a run leaving the tank, a breaking wave, ...) in ``checks.py``.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class _Model(BaseModel):
 
 
 class WaterModel(_Model):
-    depth_m: float = Field(3.0, gt=0, description="still-water depth h; MHL basin ~3 m (NOTES 2)")
+    depth_m: float = Field(3.0, gt=0, description="still-water depth h; UMich MHL tank ~3 m deep")
     density_kg_m3: float = Field(
         FRESH_WATER_DENSITY,
         gt=0,
@@ -73,8 +73,8 @@ class RockModel(_Model):
 
 
 class TankModel(_Model):
-    length_m: float = Field(110.0, gt=0, description="MHL towing basin ~110 m (NOTES 2)")
-    width_m: float = Field(6.7, gt=0, description="MHL towing basin ~6.7 m (NOTES 2)")
+    length_m: float = Field(110.0, gt=0, description="UMich MHL towing tank, 360 ft")
+    width_m: float = Field(6.7, gt=0, description="UMich MHL towing tank, 22 ft")
     rock: RockModel = RockModel()
 
 
@@ -95,7 +95,7 @@ class MountLoadModel(_Model):
 class CarriageModel(_Model):
     start_x_m: float = Field(30.0, description="carriage start x in the tank")
     y_m: float = 0.0
-    depth_m: float = Field(0.5, description="body-origin depth (NOTES 2 quotes 0.5 m)")
+    depth_m: float = Field(0.5, description="body-origin depth, assumed (the paper gives none)")
     run_length_m: float = Field(36.6, gt=0, description="paper: 36.6 m along x")
     cruise_speed_m_s: float = Field(1.0, gt=0, description="assumed; below the A50 maximum")
     acceleration_m_s2: float = Field(0.5, gt=0, description="assumed carriage acceleration")

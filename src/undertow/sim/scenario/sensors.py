@@ -1,5 +1,5 @@
-"""Sensor, mounting and output parameters of a scenario (pydantic), defaults from NOTES.md and
-the sensor datasheets cited in each field. None of them is fitted to the paper's tables."""
+"""Sensor, mounting and output parameters of a scenario (pydantic), defaults from the sensor
+datasheets and documentation cited in each field. None of them is fitted to the paper's tables."""
 
 from __future__ import annotations
 
@@ -15,8 +15,9 @@ class _Model(BaseModel):
 
 
 class ImuModel(_Model):
-    """Gyro and accelerometer given as continuous densities (NOTES.md section 1 convention):
-    per-sample white sigma_d = sigma_c sqrt(rate); bias walk step = sigma_bc / sqrt(rate)."""
+    """Gyro and accelerometer given as continuous densities (the convention of Kalibr's "IMU
+    Noise Model"): per-sample white sigma_d = sigma_c sqrt(rate); bias walk step =
+    sigma_bc / sqrt(rate)."""
 
     rate_hz: float = Field(100.0, gt=0)
     gyro_noise_density: float = Field(
@@ -34,14 +35,14 @@ class ImuModel(_Model):
 
 
 class DvlModel(_Model):
-    rate_hz: float = Field(8.0, gt=0, description="A50 at 1.5-3 m altitude: 5-10 Hz (NOTES 1)")
-    beam_tilt_deg: float = Field(22.5, gt=0, lt=90, description="A50 beam tilt (NOTES 1)")
+    rate_hz: float = Field(8.0, gt=0, description="A50 spec: 10 Hz at 0.3-3 m, 5-6 at 1.5-14 m")
+    beam_tilt_deg: float = Field(22.5, gt=0, lt=90, description="A50 beam tilt (Water Linked spec)")
     beam_velocity_sigma: float = Field(
         2.0e-3, ge=0, description="m/s per beam; A50 ~1 % of 0.2 m/s, order of magnitude"
     )
     range_sigma: float = Field(5.0e-3, ge=0, description="m per beam range, assumed")
-    min_range: float = Field(0.05, ge=0, description="A50 altitude limit (NOTES 1)")
-    max_range: float = Field(50.0, gt=0, description="A50 altitude limit (NOTES 1)")
+    min_range: float = Field(0.05, ge=0, description="A50 spec: altitude 0.05-50 m")
+    max_range: float = Field(50.0, gt=0, description="A50 spec: altitude 0.05-50 m")
     sound_speed_setting: float = Field(
         1500.0, gt=0, description="c_set configured in the DVL (A50 default 1500 m/s)"
     )
@@ -50,7 +51,8 @@ class DvlModel(_Model):
         description=(
             "kappa (along-wave, cross-wave, vertical): extra velocity noise sigma = kappa U/sqrt2,"
             " U the orbital speed amplitude at the DVL depth; only the along-wave axis grows"
-            " with wave energy (NOTES 2). kappa = 1: noise with the orbital velocity's own RMS"
+            " with wave energy (paper, Table I)."
+            " kappa = 1: noise with the orbital velocity's own RMS"
         ),
     )
     wave_noise_sigma: Vec3 | None = Field(
@@ -81,13 +83,13 @@ class BarometerModel(_Model):
 
 class SonarModel(_Model):
     rate_hz: float = Field(10.0, gt=0, description="Ping2 ~10 Hz at a few metres")
-    beam_angle_deg: float = Field(25.0, gt=0, description="Ping2 full cone (NOTES 1)")
+    beam_angle_deg: float = Field(25.0, gt=0, description="Ping2 spec: 25 deg beam")
     fan_rings: int = Field(3, ge=1, description="rings of rays in the cone (plus the axis)")
     fan_azimuths: int = Field(12, ge=3, description="rays per ring")
     range_sigma: float = Field(0.01, ge=0, description="m, assumed")
     range_sigma_fraction: float = Field(5.0e-3, ge=0, description="Ping2 0.5 % of range")
     min_range: float = Field(0.3, ge=0, description="Ping2 spec")
-    max_range: float = Field(100.0, gt=0, description="Ping2 spec (NOTES 1)")
+    max_range: float = Field(100.0, gt=0, description="Ping2 spec: 100 m range")
     confidence_window: float = Field(
         0.1, gt=0, description="m; confidence = share of cone rays within this of the first return"
     )
@@ -116,7 +118,7 @@ class SensorMountModel(_Model):
 
 
 class MountingModel(_Model):
-    """Lever arms (m, body FRD) and rotations (rad): BlueROV2 URDF defaults (NOTES 1)."""
+    """Lever arms (m, body FRD) and rotations (rad): a public BlueROV2 URDF's values."""
 
     imu: SensorMountModel = SensorMountModel()
     dvl: SensorMountModel = SensorMountModel(

@@ -17,7 +17,9 @@ disturbance (bubbles, pressure fluctuation near the surface): its standard devia
 the orbital speed amplitude U(d) = a omega cosh(k(h-d))/sinh(kh) at the DVL depth d, kappa per
 axis from the scenario (or given directly). The paper's Table I values are measured data; the
 simulator does NOT copy them. The wave range noise scales likewise with the vertical orbital
-displacement RMS. c_set / c_true is the sound-speed scale error (NOTES.md section 1).
+displacement RMS. c_set / c_true is the sound-speed scale error: each beam's radial velocity
+is c f_D / (2 f_0) (the Doppler relation, f_0 the carrier and f_D the Doppler shift), so a
+DVL with fixed beam angles scales every velocity by the sound speed it is set to.
 
 Dead reckoning (A50 ``position_local``): orientation = true body roll, pitch, yaw plus a
 constant-rate drift (uncalibrated gyro bias) and white noise; position integrated (forward

@@ -4,8 +4,8 @@
     f_m[n]     = R_bs^T R_wb^T (a_s(t_n) - g e_z) + sigma_ad w'[n]    (z down: g e_z is gravity)
 
 with w, v standard normal. The scenario gives continuous densities and the rate f_s; the
-per-sample values are (NOTES.md section 1: sigma_c = sigma_d / sqrt(rate), sigma_bc = sigma_bd
-sqrt(rate), i.e. the inverse conversion)
+per-sample values are (the discretization of Kalibr's "IMU Noise Model": sigma_c = sigma_d /
+sqrt(rate), sigma_bc = sigma_bd sqrt(rate), i.e. the inverse conversion)
 
     sigma_d = sigma_c sqrt(f_s),   sigma_bd = sigma_bc / sqrt(f_s),   sigma_ad = sigma_ac sqrt(f_s).
 

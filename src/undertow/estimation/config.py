@@ -1,0 +1,132 @@
+"""LocalizerConfig: every parameter of the paper's UKF (section III-A), checked in one place.
+
+The filter's numba loop takes two records built here: :meth:`LocalizerConfig.process_model`
+(eq:dynamics_model's densities and drifts, the unscented weights, dt_max) and
+:meth:`LocalizerConfig.sensor_model` (the log's mounting and the Mahalanobis gates).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from ..log import FRESH_WATER_DENSITY, P_ATM, Mounting
+from . import model
+from .ukf import _weights
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Vec3 = tuple[Finite, Finite, Finite]
+PositiveVec3 = tuple[Positive, Positive, Positive]
+NonNegativeVec3 = tuple[NonNegative, NonNegative, NonNegative]
+Variant = Literal["baseline", "be", "an", "proposed"]
+VARIANTS: tuple[str, ...] = Variant.__args__
+
+
+class LocalizerConfig(BaseModel):
+    """Filter parameters; units in the names. Densities are continuous-time (see model.py).
+
+    Every number must be finite; standard deviations and acceleration densities must be > 0
+    (measurement stds are also floored at ``std_floor``, so R is never 0); bias-walk densities
+    may be 0 (a constant bias). Sigma points: alpha in [0.5, 2], beta in [0, 10], kappa in
+    [0, 54]. The centre weight is W^m_0 = lambda / (n + lambda) = 1 - n / (alpha^2 (n + kappa)):
+    kappa >= 0 and alpha >= 0.5 keep it >= -3 for n = 18, where the often quoted alpha = 1e-3
+    gives W^m_0 ~ -1e6, which breaks the angle means and the positive definiteness of the
+    covariances (Wan and van der Merwe, "The unscented Kalman filter for nonlinear
+    estimation", 2000, suggest a small alpha, e.g. 1e-3).
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    variant: Variant = "proposed"
+    # process noise (eq:dynamics_model): Gamma = density / dt, Gamma_b dt
+    accel_density: PositiveVec3 = (0.01, 0.01, 0.01)  # (m/s^2)^2/Hz
+    angular_accel_density: PositiveVec3 = (0.005, 0.005, 0.005)  # (rad/s^2)^2/Hz
+    dr_bias_walk_density: NonNegativeVec3 = (1e-7, 1e-7, 1e-6)  # rad^2/s
+    gyro_bias_walk_density: NonNegativeVec3 = (1e-8, 1e-8, 1e-8)  # (rad/s)^2/s
+    dr_bias_drift_rad_s: Vec3 = (0.0, 0.0, 0.0)  # mu_b: mean drift of the DR bias (calibration)
+    gyro_bias_drift_rad_s2: Vec3 = (0.0, 0.0, 0.0)  # mean drift of the IMU gyro bias
+    # measurement noise (std devs, per sample)
+    imu_gyro_std_rad_s: PositiveVec3 = (0.005, 0.005, 0.005)
+    dvl_velocity_std_m_s: PositiveVec3 = (0.01, 0.01, 0.01)  # used when the log has no covariance
+    dvl_std_floor_m_s: Positive = 0.001
+    dr_orientation_std_rad: PositiveVec3 = (0.005, 0.005, 0.01)
+    depth_std_m: Positive = 0.01
+    std_floor: Positive = 1e-6  # every measurement std is at least this
+    dr_orientation_frame: Literal["body", "dvl"] = "body"
+    # initial state (None: zeros, orientation from the first DR report, z from the first depth)
+    initial_state: list[Finite] | None = None
+    # start position (m, world) when initial_state is None; None: x = y = 0, z from the first
+    # depth (localize() fills it from the log's ground truth when it has one)
+    initial_position: Vec3 | None = None
+    # initial IMU gyro bias mean b-bar^g (rad/s) when initial_state is None, e.g. from
+    # `undertow calibrate`; only the variants that estimate biases (be, proposed) use it
+    gyro_bias_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    initial_std: list[NonNegative] = Field(
+        default_factory=lambda: [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3
+        + [0.005] * 3 + [0.01] * 3
+    )  # fmt: skip
+    # sensors
+    dvl_scale_factor: Positive = 1.0  # v_used = v_measured / scale
+    water_density_kg_m3: Positive = FRESH_WATER_DENSITY
+    surface_pressure_pa: Positive = P_ATM
+    # robustness and output
+    # Mahalanobis gate: chi-square probability of the NIS quantile, None = off
+    gate_probability: float | None = Field(None, gt=0, lt=1, allow_inf_nan=False)
+    max_dt_s: Positive = 1.0
+    output_rate_hz: Positive | None = None  # None: every processed measurement time
+    # sigma points (alpha ~0.5-1; NOT 1e-3 for n = 18)
+    alpha: float = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False)
+    beta: float = Field(2.0, ge=0.0, le=10.0, allow_inf_nan=False)
+    kappa: float = Field(0.0, ge=0.0, le=3.0 * 18, allow_inf_nan=False)
+
+    @field_validator("initial_state", "initial_std")
+    @classmethod
+    def _eighteen(cls, value):
+        if value is not None and len(value) != model.N_STATE:
+            raise ValueError(f"needs {model.N_STATE} values (one per state), got {len(value)}")
+        return value
+
+    @property
+    def estimates_bias(self) -> bool:
+        return self.variant in ("be", "proposed")
+
+    @property
+    def adds_wave_noise(self) -> bool:
+        return self.variant in ("an", "proposed")
+
+    def process_model(self) -> model.ProcessModel:
+        """The record the filter and the smoother predict with: unscented weights of n = 18,
+        Gamma densities, the mean drifts (zeros for the variants without bias states)."""
+        wm, wc, lam = _weights(model.N_STATE, self.alpha, self.beta, self.kappa)
+        drift = self.dr_bias_drift_rad_s + self.gyro_bias_drift_rad_s2
+        return model.ProcessModel(
+            wm=wm,
+            wc=wc,
+            lam=float(lam),
+            q_acc=np.array(self.accel_density + self.angular_accel_density, float),
+            q_bias=np.array(self.dr_bias_walk_density + self.gyro_bias_walk_density, float),
+            mu_bias=np.array(drift, float) if self.estimates_bias else np.zeros(6),
+            dt_max=float(self.max_dt_s),
+            freeze_bias=not self.estimates_bias,
+        )
+
+    def sensor_model(self, mounting: Mounting) -> model.SensorModel:
+        """The record the filter's measurement models use: ``mounting``'s rotations (as body ->
+        sensor R^T) and lever arms, and the NIS gate per kind, the chi-square quantile of
+        ``gate_probability`` with dim z degrees of freedom (inf: no gate)."""
+        gate = np.full(len(model.KIND_DIM), np.inf)
+        if self.gate_probability is not None:
+            from scipy.stats import chi2
+
+            gate[:] = chi2.ppf(self.gate_probability, model.KIND_DIM)
+        return model.SensorModel(
+            imu_Rt=np.ascontiguousarray(mounting.imu.rotation_matrix().T),
+            dvl_Rt=np.ascontiguousarray(mounting.dvl.rotation_matrix().T),
+            dvl_r=np.array(mounting.dvl.translation, float),
+            baro_r=np.array(mounting.barometer.translation, float),
+            gate=gate,
+        )

@@ -1,0 +1,165 @@
+"""`undertow localize`, `undertow calibrate` and `undertow evaluate trajectory` as library
+functions: file paths and settings in, a result object with the warnings and facts the command
+prints out::
+
+    from undertow.jobs.localize import evaluate_trajectory_file, localize_file
+
+    result = localize_file("runs/a10/log", variant="proposed", calibration="calm_cal.yaml",
+                           out_dir="runs/a10/proposed")
+    print(result.wave, result.wave_source, result.warnings)
+    print(evaluate_trajectory_file(result.out_dir, "runs/a10/ground_truth.tum").errors.rmse)
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from .._util.atomic import check_output_folder
+from ..estimation.calibration import Calibration, calibrate
+from ..estimation.localizer import check_options, localize
+from ..evaluation.trajectory import TrajectoryErrors, trajectory_rmse
+from ..io.results import save_trajectory
+from ..io.tum import read_tum
+from ..settings import Settings
+from ..trajectory import Trajectory
+from .common import load_log
+
+
+@contextmanager
+def collect_warnings(into: list[str]) -> Iterator[None]:
+    """Append the text of every warning raised inside to ``into`` instead of showing it (each
+    distinct warning once per call, as a fresh process would show it)."""
+    # the same as jobs.map.collect_warnings (not imported from there: importing the mapping job
+    # costs a third of a second); both belong in jobs.common
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.filterwarnings("default", category=UserWarning)
+        try:
+            yield
+        finally:
+            into.extend(str(w.message) for w in caught)
+
+
+@dataclass(frozen=True, eq=False)
+class LocalizationResult:
+    """A localized log: the trajectory (its metadata as written to ``config.yaml``), the wave
+    condition the filter used and where it came from (``WAVE_GIVEN``, ``WAVE_DEFAULT`` of
+    :mod:`undertow.estimation.localizer`, or the place in the log that recorded it), whether the
+    variant added that condition's noise, the measurement counters, the warnings raised, and
+    the folder written (None when none was asked for)."""
+
+    trajectory: Trajectory
+    wave: str
+    wave_source: str
+    wave_noise_added: bool
+    counts: dict
+    warnings: tuple[str, ...]
+    out_dir: Path | None = None
+
+    @property
+    def variant(self) -> str:
+        return self.trajectory.variant
+
+
+def localize_file(path: str | Path, settings: Settings | str | Path | None = None, *,
+                  topics: str | Path | None = None, out_dir: str | Path | None = None,
+                  overwrite: bool = False, profile=None, wave=None, calibration=None,
+                  extrapolate: bool = False, smooth: bool = False,
+                  **overrides) -> LocalizationResult:  # fmt: skip
+    """Localize the log at ``path`` with the paper's UKF (see
+    :func:`~undertow.estimation.localizer.localize` for what it takes from the log and the
+    calibration).
+
+    ``settings``: a :class:`~undertow.settings.Settings`, a settings YAML path or None
+    (defaults); ``overrides`` are :class:`~undertow.estimation.config.LocalizerConfig` fields
+    (``variant``, ``output_rate_hz``, ``gate_probability``, ...) taking precedence over the
+    settings' ``localizer`` section. ``profile``: noise profile (YAML path or NoiseProfile,
+    default the paper's Table I); ``wave``: condition name or (amplitude, frequency), default
+    the one the log records, else calm; ``calibration``: a Calibration or its YAML file.
+    The options are checked before the log is read; with ``out_dir`` the folder is checked too
+    and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``)."""
+    settings_path = None if isinstance(settings, Settings) else settings
+    if not isinstance(settings, Settings):
+        settings = Settings.from_yaml(settings_path)
+    params = {**settings.localizer_params(), **overrides}
+    check_options(smooth, params)
+    if out_dir is not None:
+        inputs = [path, _path_or_none(profile), _path_or_none(calibration), settings_path, topics]
+        check_output_folder(out_dir, overwrite, inputs=inputs)
+    caught: list[str] = []
+    with collect_warnings(caught):
+        log = load_log(path, topics, settings)
+        trajectory = localize(log, profile=profile, wave=wave, calibration=calibration,
+                              extrapolate=extrapolate, smooth=smooth, **params)  # fmt: skip
+    if out_dir is not None:
+        save_trajectory(trajectory, out_dir, overwrite)
+    meta = trajectory.metadata
+    return LocalizationResult(
+        trajectory=trajectory,
+        wave=meta["wave_condition"],
+        wave_source=meta["wave_condition_source"],
+        wave_noise_added=meta["wave_noise"] is not None,
+        counts=meta["counts"],
+        warnings=tuple(caught),
+        out_dir=None if out_dir is None else Path(out_dir),
+    )
+
+
+def _path_or_none(value):
+    return value if isinstance(value, (str, Path)) else None
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """The calibration (what was estimated, and why the rest was not), the warnings raised and
+    the YAML written (None when none was asked for)."""
+
+    calibration: Calibration
+    warnings: tuple[str, ...]
+    out: Path | None = None
+
+
+def calibrate_file(log_path: str | Path, ground_truth: str | Path | None = None,
+                   settings: Settings | str | Path | None = None, *,
+                   topics: str | Path | None = None,
+                   out: str | Path | None = None) -> CalibrationResult:  # fmt: skip
+    """Estimate mu_b, the IMU gyro bias and the DVL scale factor of the log at ``log_path``
+    against its ground truth: the TUM file ``ground_truth`` when given, else the log's
+    ground_truth stream (:func:`~undertow.estimation.calibration.calibrate`). With ``out``, the
+    calibration YAML is written there (for ``localize_file(calibration=...)``)."""
+    if not isinstance(settings, Settings):
+        settings = Settings.from_yaml(settings)
+    caught: list[str] = []
+    with collect_warnings(caught):
+        log = load_log(log_path, topics, settings)
+        if ground_truth is not None:
+            log = log.replace(ground_truth=read_tum(ground_truth))
+        calibration = calibrate(log)
+    if out is not None:
+        calibration.save_yaml(out)
+    return CalibrationResult(calibration, tuple(caught), None if out is None else Path(out))
+
+
+@dataclass(frozen=True)
+class TrajectoryEvaluation:
+    """Per-axis RMSE and pose NEES of a trajectory (see
+    :class:`~undertow.evaluation.trajectory.TrajectoryErrors`) and the warnings raised."""
+
+    errors: TrajectoryErrors
+    warnings: tuple[str, ...]
+
+    def to_dict(self) -> dict:
+        return self.errors.to_dict()
+
+
+def evaluate_trajectory_file(estimate: str | Path, ground_truth: str | Path,
+                             align: str = "none") -> TrajectoryEvaluation:  # fmt: skip
+    """Evaluate a ``trajectory.npz`` (or its localization folder) against a ground-truth TUM
+    file (:func:`~undertow.evaluation.trajectory.trajectory_rmse`; ``align``: none | origin)."""
+    caught: list[str] = []
+    with collect_warnings(caught):
+        errors = trajectory_rmse(Trajectory.load_npz(estimate), read_tum(ground_truth), align)
+    return TrajectoryEvaluation(errors, tuple(caught))

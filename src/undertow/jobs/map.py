@@ -1,0 +1,146 @@
+"""`undertow map` and `undertow evaluate map` as library functions: file paths and settings in,
+a result object with the warnings and facts the command prints out.
+
+    >>> result = map_file("runs/a10/log", "runs/a10/proposed", method="adaptive",
+    ...                   out_dir="runs/a10/map")                      # doctest: +SKIP
+    >>> evaluate_map_file("runs/a10/map", "runs/a10/ground_truth.ply").to_dict()  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .._util.atomic import check_output_folder
+from ..errors import ConfigError, DataError, ReaderError
+from ..evaluation.cloud import MapEvaluation, evaluate_map, map_threshold
+from ..io.ply import read_ply
+from ..io.results import save_map
+from ..mapping.config import MappingConfig
+from ..mapping.run import MappingResult, map_log
+from ..occupancy import MAP_FILE, OccupancyMap, not_an_npz
+from ..settings import Settings
+from ..trajectory import Trajectory
+from .common import load_log
+
+#: options that only one mapping method uses: giving one for another method is an error
+METHOD_OPTIONS = {"length_scale": "bki", "variance_bounds": "adaptive"}
+_TRAJECTORY_NPZ = "a trajectory.npz written by `undertow localize` (or its folder)"
+
+
+@contextmanager
+def collect_warnings(into: list[str]) -> Iterator[None]:
+    """Append the text of every warning raised inside to ``into`` instead of showing it (each
+    distinct warning once per call, as a fresh process would show it)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.filterwarnings("default", category=UserWarning)
+        try:
+            yield
+        finally:
+            into.extend(str(w.message) for w in caught)
+
+
+def _npz_file(path: str | Path, name: str, expected: str, prefix: str = "") -> Path:
+    """``path``, or ``path/name`` for a folder; a wrong kind of file (a .tum, .ply, .yaml) is
+    one line saying what it looks like and what was ``expected``."""
+    path = Path(path)
+    path = path / name if path.is_dir() else path
+    problem = not_an_npz(path, expected)
+    if problem:
+        raise ReaderError(prefix + problem)
+    return path
+
+
+def mapping_config(settings: Settings, overrides: dict) -> MappingConfig:
+    """The settings' mapping section with ``overrides`` (MappingConfig fields) on top, checked
+    once; an override that only another method uses (:data:`METHOD_OPTIONS`) is an error."""
+    config = MappingConfig.from_dict({**settings.mapping.model_dump(), **overrides})
+    for key, applies in METHOD_OPTIONS.items():
+        if key in overrides and config.method != applies:
+            raise ConfigError(f"{key} applies to the {applies} method, not {config.method}")
+    return config
+
+
+def map_file(log_path: str | Path, trajectory_path: str | Path,
+             settings: Settings | str | Path | None = None, *, topics: str | Path | None = None,
+             prior: OccupancyMap | str | Path | None = None, out_dir: str | Path | None = None,
+             overwrite: bool = False, **overrides) -> MappingResult:  # fmt: skip
+    """Occupancy map of the seafloor from a log's DVL beams and sonar ranges along a trajectory
+    (a ``trajectory.npz`` with covariances, or its localization folder).
+
+    ``settings``: a :class:`~undertow.settings.Settings`, a settings YAML path or None
+    (defaults); ``overrides`` are :class:`~undertow.mapping.config.MappingConfig` fields
+    (``method``, ``resolution``, ``length_scale``, ``variance_bounds``, ...) taking precedence
+    over the settings' ``mapping`` section. ``prior``: a map (or ``map.npz``, or its folder) to
+    seed from. With ``out_dir``, the folder is checked before any work and then written
+    (:func:`~undertow.io.results.save_map`). Warnings are returned in ``result.warnings``."""
+    settings_path = None if isinstance(settings, Settings) else settings
+    if out_dir is not None:
+        given_prior = None if isinstance(prior, OccupancyMap) else prior
+        inputs = [log_path, trajectory_path, given_prior, settings_path, topics]
+        check_output_folder(out_dir, overwrite, inputs=inputs)
+    trajectory_file = _npz_file(trajectory_path, "trajectory.npz", _TRAJECTORY_NPZ)
+    if prior is not None and not isinstance(prior, OccupancyMap):
+        prior = _npz_file(prior, "map.npz", MAP_FILE, "prior ")
+    if not isinstance(settings, Settings):
+        settings = Settings.from_yaml(settings_path)
+    config = mapping_config(settings, overrides)
+    caught: list[str] = []
+    with collect_warnings(caught):
+        log = load_log(log_path, topics, settings)
+        result = map_log(log, Trajectory.load_npz(trajectory_file), config, prior=prior)
+    result.warnings = caught
+    if out_dir is not None:
+        save_map(result.map, config.model_dump(mode="json"), result.metadata, out_dir, overwrite,
+                 threshold=config.occupied_threshold)  # fmt: skip
+    return result
+
+
+@dataclass(frozen=True)
+class MapEvaluationResult:
+    """Map metrics and the occupancy threshold used (None for a map.ply, thresholded when it
+    was written), where that threshold came from, and warnings (an empty map)."""
+
+    evaluation: MapEvaluation
+    threshold: float | None
+    threshold_from: str
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {**self.evaluation.to_dict(), "threshold": self.threshold,
+                "threshold_from": self.threshold_from}  # fmt: skip
+
+
+def evaluate_map_file(map_path: str | Path, ground_truth_path: str | Path,
+                      threshold: float | None = None) -> MapEvaluationResult:  # fmt: skip
+    """Cloud-to-cloud distance of a map (``map.npz``, its folder, or a ``map.ply``) to a
+    ground-truth PLY cloud (:func:`~undertow.evaluation.cloud.evaluate_map`). Occupied cells of
+    a map.npz: mean > ``threshold`` in (0, 1), by default the one the map was made with."""
+    if threshold is not None and not 0.0 < threshold < 1.0:
+        raise ConfigError(f"threshold must be in (0, 1), got {threshold}")
+    map_path = Path(map_path)
+    map_path = map_path / "map.npz" if map_path.is_dir() else map_path
+    notes: list[str] = []
+    resolution, threshold_from = None, "the map.ply (thresholded when it was written)"
+    if map_path.suffix.lower() == ".ply":
+        if threshold is not None:
+            raise ConfigError(
+                f"threshold applies to a map.npz; {map_path} holds the cells already "
+                "thresholded when it was written (give the map.npz, or leave the threshold out)"
+            )
+        points = read_ply(map_path)[0]
+        if len(points) == 0:
+            notes.append(f"{map_path}: the map has no points")
+    else:
+        occupancy = OccupancyMap.load(map_path)
+        threshold, threshold_from = map_threshold(occupancy, threshold)
+        points = occupancy.points(threshold)
+        resolution = occupancy.resolution
+    gt_points = read_ply(ground_truth_path)[0]
+    if len(gt_points) == 0:
+        raise DataError(f"{ground_truth_path}: the ground-truth cloud has no points")
+    evaluation = evaluate_map(points, gt_points, resolution=resolution)
+    return MapEvaluationResult(evaluation, threshold, threshold_from, notes)

@@ -1,0 +1,103 @@
+"""`undertow characterize`, `reproduce` and `demo` as library functions: paths and settings in,
+a result object with the warnings and facts the command prints out.
+
+    >>> result = characterize_files(["runs/calm/log", "runs/a10/log"], out="profile.yaml")
+    ...                                                              # doctest: +SKIP
+    >>> result.warnings, result.to_dict()["profile"]                  # doctest: +SKIP
+    >>> study = reproduce("results_mc", seeds=10)                     # doctest: +SKIP
+    >>> study.markdown, study.failures, study.report                  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import UndertowError
+from ..estimation.characterize import Characterization, characterize
+from ..settings import Settings
+from ..study.pipeline import StudySettings
+from ..study.runner import StudyResult, run_study
+from .common import load_log
+from .map import collect_warnings
+
+
+@dataclass
+class CharacterizeResult:
+    """What `undertow characterize` prints: one row per run (the paper's Table I), the noise
+    profile for `undertow localize` (written to ``profile_path`` when given) and the warnings:
+    those raised while reading and characterizing, then one per note a run raised
+    (``"<source>: <note>"``)."""
+
+    characterization: Characterization
+    profile_path: Path | None = None
+    warnings: list[str] = field(default_factory=list)
+
+    def rows(self) -> list[dict]:
+        return self.characterization.table()
+
+    def to_dict(self) -> dict:
+        """The ``--json`` output: the runs and the noise profile."""
+        return {"runs": self.rows(), "profile": self.characterization.profile.to_dict()}
+
+
+def characterize_files(
+    paths: Sequence[str | Path],
+    settings: Settings | str | Path | None = None,
+    *,
+    topics: str | Path | None = None,
+    out: str | Path | None = None,
+) -> CharacterizeResult:
+    """Wave amplitude and frequency (wave probe) and the DVL noise per axis during the waves,
+    about the true motion (the paper's Table I), plus the barometer's wave-induced depth noise,
+    of the logs at ``paths``; a calm run among them is the reference whose noise is subtracted.
+
+    ``settings``: a :class:`~undertow.settings.Settings`, a settings YAML path or None
+    (defaults); ``topics``: a topic map YAML overriding the settings' topics. With ``out``, the
+    noise profile is written there (YAML for `undertow localize --profile`)."""
+    if not isinstance(settings, Settings):
+        settings = Settings.from_yaml(settings)
+    caught: list[str] = []
+    with collect_warnings(caught):
+        result = characterize([load_log(p, topics, settings) for p in paths])
+    profile_path = None
+    if out is not None:
+        profile_path = Path(out)
+        result.profile.to_yaml(profile_path)
+    notes = [f"{run.source}: {note}" for run in result.runs for note in run.notes]
+    return CharacterizeResult(result, profile_path, caught + notes)
+
+
+def reproduce(
+    out_dir: str | Path = "results",
+    *,
+    seeds: int = 1,
+    first_seed: int = 0,
+    scheduler: str | None = None,
+    rock_survey: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> StudyResult:
+    """The paper's experiments end to end for the seeds ``first_seed .. first_seed + seeds - 1``:
+    simulate, characterize, localize (4 variants), map (CSM, BKI, adaptive BKI), evaluate;
+    tables with the paper's values, figures and ``report.html`` under ``out_dir``
+    (:func:`undertow.study.runner.run_study`; ``scheduler`` runs the seeds after the first)."""
+    if seeds < 1:
+        raise UndertowError("--seeds must be at least 1")
+    if first_seed < 0:
+        raise UndertowError(f"--first-seed must be >= 0, got {first_seed}")
+    settings = StudySettings(rock_survey="rock-survey" if rock_survey else None)
+    return run_study(
+        out_dir,
+        seeds=list(range(first_seed, first_seed + seeds)),
+        scheduler=scheduler,
+        settings=settings,
+        progress=progress,
+    )
+
+
+def demo(
+    out_dir: str | Path = "results", progress: Callable[[str], None] | None = None
+) -> StudyResult:
+    """The main job with its defaults: :func:`reproduce` with one seed (seed 0)."""
+    return reproduce(out_dir, progress=progress)

@@ -1,0 +1,228 @@
+"""The paper's claims as data: verdicts, missing quantities, explanations from measured values.
+
+The verdicts are checked against the claims written out by hand as predicates (the form they had
+before they became records), on random seed results shaped like :func:`run_seed`'s."""
+
+import ast
+import inspect
+import re
+
+import numpy as np
+import pytest
+
+from undertow.mapping.config import MappingConfig
+from undertow.study import claims, paper
+from undertow.study.claims import CLAIMS, TABLE1_CLAIMS, MissingQuantity, evaluate_seed
+from undertow.study.pipeline import MAP_RUNS, MEAN_STD_STATES, VARIANTS, WAVE_CONDITIONS
+from undertow.study.report import report_notes
+from undertow.study.tables import build_tables, render_markdown
+
+FILTERS = (*VARIANTS, "proposed+scale")
+
+
+def fake_result(seed: int, conditions=WAVE_CONDITIONS) -> dict:
+    """A seed result with every leaf :func:`run_seed` writes, random but positive."""
+    rng = np.random.default_rng(seed)
+
+    def draw(scale=1.0):
+        return float(rng.uniform(0.5, 1.5) * scale)
+
+    def axes(names):
+        return {a: draw() for a in names}
+
+    def trajectory():
+        return {"rmse": axes(paper.AXES), "nees_mean": draw(6), "nees_fraction_in_95": draw(0.5),
+                "mean_std": axes(MEAN_STD_STATES)}  # fmt: skip
+
+    def evaluation():
+        return {"c2c_mean_m": draw(0.05), "c2c_median_m": draw(0.05), "c2c_rmse_m": draw(0.05),
+                "coverage_mean_m": draw(0.1), "occupied_cells": int(rng.integers(1000, 9000)),
+                "ground_truth_in_footprint": 64064}  # fmt: skip
+
+    def table1_row():
+        return {"amplitude_m": draw(0.1), "frequency_hz": draw(),  "depth_std_m": draw(0.01),
+                "dvl_std_m_s": axes(("vx", "vy", "vz")),
+                "dvl_extra_std_m_s": axes(("vx", "vy", "vz"))}  # fmt: skip
+
+    result = {
+        "seed": seed,
+        "table1": {name: table1_row() for name in ("calm", *conditions)},
+        "calibration": {"dvl_scale_factor": draw(), "dvl_scale_factor_std": draw(1e-4)},
+        "localization": {c: {v: trajectory() for v in FILTERS} for c in conditions},
+        "mapping": {c: {f"{m}/{v}": evaluation() for m, v in MAP_RUNS} for c in conditions},
+    }
+    result["claims"], result["claims_table1"] = evaluate_seed(result)
+    return result
+
+
+#: The claims as they were written before they became records (an independent reference).
+REFERENCE = {
+    "bias_estimation_reduces_yaw_error": lambda L, M: (
+        L["be"]["rmse"]["yaw_rad"] < L["baseline"]["rmse"]["yaw_rad"]
+    ),
+    "bias_estimation_reduces_y_error": lambda L, M: (
+        L["be"]["rmse"]["y_m"] < L["baseline"]["rmse"]["y_m"]
+    ),
+    "added_noise_reduces_velocity_error": lambda L, M: (
+        L["an"]["rmse"]["vx_m_s"] < L["baseline"]["rmse"]["vx_m_s"]
+    ),
+    "added_noise_widens_covariance": lambda L, M: (
+        L["an"]["mean_std"]["vx_m_s"] > L["baseline"]["mean_std"]["vx_m_s"]
+    ),
+    "x_error_not_removed_by_filter": lambda L, M: (
+        abs(L["proposed"]["rmse"]["x_m"] - L["baseline"]["rmse"]["x_m"])
+        < 0.1 * L["baseline"]["rmse"]["x_m"]
+    ),
+    "proposed_filter_improves_csm_map": lambda L, M: (
+        M["csm/proposed"]["c2c_mean_m"] < M["csm/baseline"]["c2c_mean_m"]
+    ),
+    "adaptive_bki_most_accurate": lambda L, M: (
+        M["adaptive/proposed"]["c2c_mean_m"]
+        < min(M["bki/proposed"]["c2c_mean_m"], M["csm/proposed"]["c2c_mean_m"])
+    ),
+    "bki_denser_than_csm": lambda L, M: (
+        min(M["bki/proposed"]["occupied_cells"], M["adaptive/proposed"]["occupied_cells"])
+        > M["csm/proposed"]["occupied_cells"]
+    ),
+    "adaptive_fewer_cells_than_bki": lambda L, M: (
+        M["adaptive/proposed"]["occupied_cells"] < M["bki/proposed"]["occupied_cells"]
+    ),
+    "adaptive_proposed_more_accurate_than_csm_baseline": lambda L, M: (
+        M["adaptive/proposed"]["c2c_mean_m"] < M["csm/baseline"]["c2c_mean_m"]
+    ),
+    "adaptive_proposed_denser_than_csm_baseline": lambda L, M: (
+        M["adaptive/proposed"]["occupied_cells"] > M["csm/baseline"]["occupied_cells"]
+    ),
+    "scale_calibration_removes_x_error": lambda L, M: (
+        L["proposed+scale"]["rmse"]["x_m"] < 0.5 * L["proposed"]["rmse"]["x_m"]
+    ),
+}
+REFERENCE_TABLE1 = {
+    "shorter_waves_more_dvl_noise": lambda t: (
+        t["wave-a0.10-f1.00"]["dvl_std_m_s"]["vx"] > t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
+    ),
+    "smaller_amplitude_less_dvl_noise": lambda t: (
+        t["wave-a0.05-f0.75"]["dvl_std_m_s"]["vx"] < t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
+    ),
+}
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_verdicts_are_the_hand_written_predicates(seed):
+    result = fake_result(seed)
+    assert [c.id for c in CLAIMS] == list(REFERENCE)
+    assert [c.id for c in TABLE1_CLAIMS] == list(REFERENCE_TABLE1)
+    for key, pred in REFERENCE.items():
+        for c in WAVE_CONDITIONS:
+            expected = pred(result["localization"][c], result["mapping"][c])
+            assert result["claims"][key][c] == expected, (key, c)
+    for key, pred in REFERENCE_TABLE1.items():
+        assert result["claims_table1"][key] == pred(result["table1"])
+
+
+def test_a_missing_quantity_is_an_error_naming_the_claim_and_the_path():
+    result = fake_result(0)
+    del result["mapping"]["wave-a0.10-f0.75"]["bki/proposed"]["c2c_mean_m"]
+    with pytest.raises(MissingQuantity) as info:
+        evaluate_seed(result)
+    message = str(info.value)
+    assert "'adaptive_bki_most_accurate'" in message
+    assert "mapping/wave-a0.10-f0.75/bki/proposed/c2c_mean_m" in message
+    result = fake_result(0)
+    result["table1"]["wave-a0.10-f1.00"]["dvl_std_m_s"]["vx"] = None
+    with pytest.raises(MissingQuantity, match="table1/wave-a0.10-f1.00/dvl_std_m_s/vx"):
+        evaluate_seed(result)
+
+
+def test_a_quantity_path_is_checked_when_the_claim_is_written():
+    with pytest.raises(ValueError, match="'proposal'"):
+        claims.rmse("proposal", "x_m")
+    with pytest.raises(ValueError, match="'x_mps'"):
+        claims.rmse("proposed", "x_mps")
+    with pytest.raises(ValueError, match="'c2c'"):
+        claims.map_metric("csm/baseline", "c2c")
+
+
+def test_table1_claims_apply_only_where_their_conditions_ran():
+    """A reduced study (one wave condition): no Table I verdict, n = 0 in the tables, no text."""
+    results = [fake_result(s, conditions=("wave-a0.10-f0.75",)) for s in (0, 1)]
+    assert results[0]["claims_table1"] == {}
+    tables = build_tables(results)
+    for entry in tables["table1_claims"].values():
+        assert entry["all"] == {"holds": 0, "n": 0, "fraction": None} and entry["why"] is None
+    assert "the paper's reading of Table I" not in render_markdown(tables)
+
+
+def test_explanations_are_formatted_from_the_measured_values():
+    """Every explanation starts with the compared quantities at their mean over the seeds; a
+    different measurement gives a different text."""
+    results = [fake_result(s) for s in (3, 4)]
+    tables = build_tables(results)
+    for claim in CLAIMS:
+        for c in WAVE_CONDITIONS:
+            why = tables["claims"][claim.id]["why"][c]
+            for q in (*claim.left, *claim.right):
+                mean = sum(q.read(r, c, claim.id) for r in results) / 2
+                assert q.format(mean) in why, (claim.id, c)
+    for claim in TABLE1_CLAIMS:
+        assert claim.measure(results).compared() in tables["table1_claims"][claim.id]["why"]
+    other = build_tables([fake_result(s) for s in (5, 6)])
+    assert other["claims"] != tables["claims"]
+
+
+def test_why_not_reads_the_measured_wave_frequencies():
+    """The Table I explanation derives the wave speeds from the MEASURED frequencies,
+    c = g / (2 pi f) (deep water), not from typed-in numbers."""
+    results = [fake_result(7)]
+    t1 = results[0]["table1"]
+    t1["wave-a0.10-f1.00"]["dvl_std_m_s"]["vx"] = 0.01  # the claim fails: explained
+    t1["wave-a0.10-f1.00"]["frequency_hz"], t1["wave-a0.10-f0.75"]["frequency_hz"] = 1.2, 0.6
+    why = build_tables(results)["table1_claims"]["shorter_waves_more_dvl_noise"]["why"]
+    g = 9.80665
+    assert f"{g / (2 * np.pi * 1.2):.2f} m/s" in why and f"{g / (2 * np.pi * 0.6):.2f} m/s" in why
+    assert "1.20 Hz" in why and "0.60 Hz" in why
+
+
+def _prose_literals(tree: ast.AST):
+    """String literals of the module that are not docstrings, format specs or dict keys."""
+    skip = set()
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if isinstance(body, list) and body and isinstance(body[0], ast.Expr):
+            skip.add(id(body[0].value))
+        if isinstance(node, ast.FormattedValue) and node.format_spec is not None:
+            skip.update(id(n) for n in ast.walk(node.format_spec))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip:
+            yield node
+
+
+def test_no_number_is_typed_into_the_claims_prose():
+    """Numbers in the claims' texts come from measured or paper values at run time: besides
+    names that hold digits (the wave conditions, C2C, table1), no string literal has one."""
+    names = (*WAVE_CONDITIONS, "C2C", "c2c", "table1")
+    for node in _prose_literals(ast.parse(inspect.getsource(claims))):
+        text = node.value
+        for name in names:
+            text = text.replace(name, "")
+        assert not re.search(r"\d", text), f"line {node.lineno}: {node.value!r}"
+
+
+def test_claims_that_hold_by_construction_say_so_in_the_tables_and_the_report():
+    built = [c for c in CLAIMS if c.by_construction]
+    assert {c.id for c in built} == {
+        "x_error_not_removed_by_filter",
+        "scale_calibration_removes_x_error",
+    }
+    tables = build_tables([fake_result(8)])
+    markdown, notes = render_markdown(tables), " ".join(report_notes(tables))
+    for claim in built:
+        assert tables["claims"][claim.id]["by_construction"] == claim.by_construction
+        assert claim.by_construction in markdown
+        assert f"By construction of the simulator: {claim.by_construction}" in notes
+
+
+def test_the_grid_and_length_scale_in_the_prose_are_those_the_study_maps_with():
+    """The explanations cite the paper's grid (Table IV caption); the study maps on it."""
+    assert MappingConfig().resolution == paper.GRID_RESOLUTION_M
+    assert MappingConfig().length_scale == paper.BKI_LENGTH_SCALE_M
