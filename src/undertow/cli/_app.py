@@ -108,7 +108,9 @@ OverwriteOption = Annotated[
 ]
 ConfigOption = Annotated[
     Path | None,
-    typer.Option(help="Settings YAML with topics / localizer / mapping sections (see README)."),
+    typer.Option(
+        help="Settings YAML with topics / localizer / mapping sections (see docs/command-line.md)."
+    ),
 ]
 
 
