@@ -3,7 +3,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test test-fast lint bench clean
+.PHONY: install demo test test-fast lint bench fuzz clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -29,6 +29,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py $(ONLY)
+
+# the readers' fuzzing campaign (docs/reliability.md): N mutated inputs through `undertow info`
+fuzz: $(STAMP)
+	$(BIN)/python fuzz/run.py --inputs $(or $(N),10000) --seed $(or $(SEED),0) --jobs $(or $(JOBS),2)
 
 clean:
 	rm -rf $(VENV) results

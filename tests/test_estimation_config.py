@@ -51,29 +51,36 @@ def test_zero_bias_walk_is_allowed_and_defaults_validate():
     assert LocalizerConfig(**cfg.model_dump()) == cfg  # what config.yaml holds reads back
 
 
-def test_a_run_that_gates_almost_everything_warns_once():
+def test_a_run_that_gates_almost_everything_warns_once_per_sensor():
     """A chi-square quantile of 1e-9 is below any real innovation's NIS: nearly every
-    measurement is gated and the track would be frozen at the start."""
+    measurement is gated and the track would be frozen at the start: one line per sensor."""
     log = make_log(duration=5.0, u=0.3)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         Localizer("proposed", gate_probability=1e-9).run(log)
-    frozen = [w for w in caught if "frozen" in str(w.message)]
-    assert len(frozen) == 1 and "\n" not in str(frozen[0].message)
-    assert "gated measurements" in str(frozen[0].message)
+    lines = [str(w.message) for w in caught if "barely uses" in str(w.message)]
+    for sensor in ("imu", "dvl"):
+        mine = [m for m in lines if m.startswith(f"{sensor}: ")]
+        assert len(mine) == 1 and "\n" not in mine[0] and "gated" in mine[0]
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # and a sound run says nothing
         Localizer("proposed", gate_probability=0.999).run(log)
 
 
 def test_a_run_whose_every_update_overflows_warns():
-    """Finite but absurd measurements (1e300) overflow every update: each is reverted."""
+    """Finite but absurd measurements (1e300): rejected by the envelopes by default; without
+    them they overflow every update, each is reverted, and each sensor says so."""
     log = make_log(duration=3.0)
     imu = Imu(log.imu.t, np.full_like(log.imu.angular_velocity, 1e300))
     dvl = Dvl.from_velocity(log.dvl.t, np.full_like(log.dvl.velocity, 1e300))
+    absurd = log.replace(imu=imu, dvl=dvl)
     with pytest.warns(RuntimeWarning, match="reverted steps .* frozen"):
-        traj = Localizer("proposed").run(log.replace(imu=imu, dvl=dvl))
+        traj = Localizer("proposed", gyro_max_rate_rad_s=None, dvl_max_speed_m_s=None).run(absurd)
     assert np.all(np.isfinite(traj.x))
+    with pytest.warns(RuntimeWarning, match="imu: 100 % .* beyond the gyro's range"):
+        traj = Localizer("proposed").run(absurd)
+    c = traj.metadata["counts"]
+    assert c["rejected_imu_range"] == len(imu) and c["rejected_dvl_speed"] == len(dvl)
 
 
 # --- calibration files -------------------------------------------------------------------------

@@ -135,8 +135,9 @@ def test_adversarial_run_never_nan():
         pressure=Pressure(log.pressure.t[log.pressure.t < 25], log.pressure.pressure[
             log.pressure.t < 25]),
     )  # fmt: skip
+    no_envelope = {"gyro_max_rate_rad_s": None, "dvl_max_speed_m_s": None}
     for gate in (None, 0.999):
-        traj = Localizer("proposed", gate_probability=gate, max_dt_s=0.5).run(bad)
+        traj = Localizer("proposed", gate_probability=gate, max_dt_s=0.5, **no_envelope).run(bad)
         assert np.all(np.isfinite(traj.x)) and np.all(np.isfinite(traj.P))
         c = traj.metadata["counts"]
         assert c["rejected_imu"] > 0 and c["rejected_dvl_invalid"] > 0
@@ -144,6 +145,9 @@ def test_adversarial_run_never_nan():
         assert c["dt_capped"] > 0
         assert np.all(np.diagonal(traj.P, axis1=1, axis2=2) > 0)
     assert c["gated_imu"] > 0 and c["gated_dvl"] > 0
+    # by default the envelopes reject the spikes before the filter: 50 rows at 1e6 rad/s
+    c = Localizer("proposed", max_dt_s=0.5).run(bad).metadata["counts"]
+    assert 0 < c["rejected_imu_range"] <= 50 and c["rejected_dvl_speed"] > 0
 
 
 def test_output_rate_missing_stream_and_bad_config():

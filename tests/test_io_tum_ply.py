@@ -28,10 +28,17 @@ def test_tum_round_trip_and_format(tmp_path):
     np.testing.assert_allclose(poses.orientation, rpy, atol=1e-12)
 
 
-def test_tum_malformed_line(tmp_path):
+def test_tum_malformed_line_skipped_and_counted(tmp_path):
     path = tmp_path / "bad.tum"
-    path.write_text("# header\n0 0 0 0 0 0 0 1\n1 2 3\n")
-    with pytest.raises(ReaderError, match=r"bad\.tum: line 3"):
+    path.write_text("# header\n0 0 0 0 0 0 0 1\n1 2 3\n2 1 1 1 0 0 0 1\nnan 1 1 1 0 0 0 1\n")
+    with pytest.warns(UserWarning) as caught:
+        poses = read_tum(path)
+    text = [str(w.message) for w in caught]
+    assert any("bad.tum: malformed TUM lines skipped: 1 (first: line 3" in t for t in text)
+    assert any("non-finite time dropped: 1" in t for t in text)
+    np.testing.assert_array_equal(poses.t, [0.0, 2.0])  # the good poses kept, NaN time dropped
+    path.write_text("1 2 3\n")
+    with pytest.raises(ReaderError, match=r"bad\.tum: no usable pose"):
         read_tum(path)
 
 

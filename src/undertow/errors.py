@@ -1,7 +1,7 @@
 """Errors a user can meet. The CLI prints them as one line and exits non-zero.
 
-Library code raises these (never ``print`` + ``sys.exit``); anything else is a bug and keeps
-its traceback.
+Library code raises these (never ``print`` + ``sys.exit``); anything else is a bug: the
+command line prints one line naming a crash report with the traceback and exits with 70.
 """
 
 from __future__ import annotations
@@ -25,3 +25,9 @@ class ConfigError(UndertowError):
 
 class DataError(UndertowError):
     """Measurement arrays are inconsistent (shapes, time going backwards, non-finite times)."""
+
+
+class Terminated(BaseException):
+    """The process was asked to stop (SIGTERM). Like KeyboardInterrupt it is not an
+    ``Exception``, so no ``except Exception`` swallows it, and every ``finally`` on the way out
+    runs (temporary output is removed); the command line then exits with 128 + 15."""

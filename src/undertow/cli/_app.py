@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 import warnings
 from pathlib import Path
@@ -14,7 +15,15 @@ import typer
 from rich.console import Console
 
 from .._util.plain import json_safe
-from ..errors import UndertowError
+from ..errors import Terminated, UndertowError
+from ._crash import (
+    EXIT_BUG,
+    EXIT_INTERRUPTED,
+    EXIT_TERMINATED,
+    EXIT_USER,
+    bug_line,
+    sigterm_as_exception,
+)
 
 app = typer.Typer(
     add_completion=False,
@@ -53,20 +62,35 @@ def _setup() -> None:
 
 
 def user_errors(fn):
-    """Turn UndertowError into one clear line and exit code 1."""
+    """Run a command: an UndertowError (or an OSError on a path the user gave) is one line and
+    exit status 1; Ctrl-C and SIGTERM remove temporary output (the ``finally`` clauses run on the
+    way out) and exit with 130 and 143; any other exception is a bug: one line naming a crash
+    report file, exit status 70 (``UNDERTOW_DEBUG=1`` shows the traceback instead)."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         try:
-            return fn(*args, **kwargs)
-        except UndertowError as exc:
-            err.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
-            raise typer.Exit(1) from None
-        except OSError as exc:  # a path the user gave: missing folder, permissions, disk full
-            err.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
-            raise typer.Exit(1) from None
+            with sigterm_as_exception():
+                return fn(*args, **kwargs)
+        except (UndertowError, OSError) as exc:  # OSError: a missing folder, permissions, disk
+            _error_exit(str(exc), EXIT_USER)
+        except KeyboardInterrupt:
+            _error_exit("interrupted (Ctrl-C); temporary output removed", EXIT_INTERRUPTED)
+        except Terminated:
+            _error_exit("terminated (SIGTERM); temporary output removed", EXIT_TERMINATED)
+        except (typer.Exit, typer.Abort, typer.TyperException):  # typer's own way out
+            raise
+        except Exception as exc:
+            if os.environ.get("UNDERTOW_DEBUG"):
+                raise
+            _error_exit(bug_line(exc), EXIT_BUG)
 
     return wrapper
+
+
+def _error_exit(message: str, code: int) -> None:
+    err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code) from None
 
 
 def _progress(quiet: bool):

@@ -61,10 +61,11 @@ def localize(
     ] = None,
     smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
     gate: Annotated[
-        float | None,
+        str | None,
         typer.Option(
-            help="Mahalanobis gate: drop a measurement whose NIS exceeds the chi-square quantile "
-            "of this probability, e.g. 0.999 (default: off)."
+            help="Mahalanobis gate: a probability, e.g. 0.999, drops a measurement whose NIS "
+            "exceeds that chi-square quantile; 'off' disables gating (default: a 20-sigma gate "
+            "on the DVL, DR and barometer)."
         ),
     ] = None,
     output_rate: Annotated[
@@ -80,13 +81,12 @@ def localize(
     Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
     --calibration calm_cal.yaml --out runs/a10/proposed`
     """
-    from ..jobs.localize import localize_file
+    from ..jobs.localize import gate_option, localize_file
 
     condition = _wave_option(wave, wave_amplitude, wave_frequency)
     options = {
         "variant": variant,
         "output_rate_hz": output_rate,
-        "gate_probability": gate,
         "initial_position": _triple(initial_position, "--initial-position"),
     }
     with _progress(quiet) as progress:
@@ -96,6 +96,7 @@ def localize(
             profile=profile, calibration=calibration, extrapolate=extrapolate, smooth=smooth,
             wave=condition,
             **{name: value for name, value in options.items() if value is not None},
+            **gate_option(gate),
         )  # fmt: skip
     _print_warnings(result.warnings)
     if not quiet:

@@ -10,7 +10,8 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, PlainValidator, field_validator
+from pydantic_core import PydanticCustomError
 
 from ..log import FRESH_WATER_DENSITY, P_ATM, Mounting
 from . import model
@@ -24,6 +25,32 @@ PositiveVec3 = tuple[Positive, Positive, Positive]
 NonNegativeVec3 = tuple[NonNegative, NonNegative, NonNegative]
 Variant = Literal["baseline", "be", "an", "proposed"]
 VARIANTS: tuple[str, ...] = Variant.__args__
+# the default gate ("default"): an innovation of the DVL, DR or barometer whose NIS exceeds this,
+# a 20-sigma Mahalanobis distance, is dropped; the IMU is not gated (its range envelope catches
+# spikes, and a turn's legitimate innovations reach NIS ~5000: a gate would lock it out)
+DEFAULT_GATE = "default"
+DEFAULT_GATE_NIS = 20.0**2
+
+
+def _gate(value):
+    """gate_probability: None (off), "default" or a chi-square probability in (0, 1)."""
+    if value is None or value == DEFAULT_GATE:
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise PydanticCustomError(
+            "gate", "Input should be a probability in (0, 1), 'default' or null (off)"
+        )
+    value = float(value)
+    if not np.isfinite(value):
+        raise PydanticCustomError("finite_number", "Input should be a finite number")
+    if value <= 0:
+        raise PydanticCustomError("greater_than", "Input should be greater than 0")
+    if value >= 1:
+        raise PydanticCustomError("less_than", "Input should be less than 1")
+    return value
+
+
+Gate = Annotated[float | str | None, PlainValidator(_gate)]
 
 
 class LocalizerConfig(BaseModel):
@@ -74,8 +101,17 @@ class LocalizerConfig(BaseModel):
     water_density_kg_m3: Positive = FRESH_WATER_DENSITY
     surface_pressure_pa: Positive = P_ATM
     # robustness and output
-    # Mahalanobis gate: chi-square probability of the NIS quantile, None = off
-    gate_probability: float | None = Field(None, gt=0, lt=1, allow_inf_nan=False)
+    # Mahalanobis gate: chi-square probability of the NIS quantile (every sensor), "default"
+    # (DEFAULT_GATE_NIS for the DVL, DR and barometer) or None (off)
+    gate_probability: Gate = DEFAULT_GATE
+    # physical envelopes (None: no check): a measurement beyond one is rejected before the filter
+    # and counted (rejected_<sensor>_<limit>); see docs/localization.md, "Robust defaults"
+    dvl_max_speed_m_s: Positive | None = 2.0  # Water Linked DVL A50 datasheet: 2 m/s max velocity
+    gyro_max_rate_rad_s: Positive | None = 34.9  # MEMS full scale +-2000 deg/s (ICM-20602)
+    max_depth_m: Finite | None = 300.0  # DVL A50 and Bar30 depth rating: 300 m
+    min_depth_m: Finite | None = -2.0  # above the surface beyond air-pressure/altitude offsets
+    max_vertical_speed_m_s: Positive | None = 5.0  # depth rate no ROV reaches, heave included
+    depth_jump_tolerance_m: NonNegative = 0.5  # sensor noise allowance of the depth-rate check
     max_dt_s: Positive = 1.0
     output_rate_hz: Positive | None = None  # None: every processed measurement time
     # sigma points (alpha ~0.5-1; NOT 1e-3 for n = 18)
@@ -117,9 +153,12 @@ class LocalizerConfig(BaseModel):
     def sensor_model(self, mounting: Mounting) -> model.SensorModel:
         """The record the filter's measurement models use: ``mounting``'s rotations (as body ->
         sensor R^T) and lever arms, and the NIS gate per kind, the chi-square quantile of
-        ``gate_probability`` with dim z degrees of freedom (inf: no gate)."""
+        ``gate_probability`` with dim z degrees of freedom, or the default gate (inf: no gate)."""
         gate = np.full(len(model.KIND_DIM), np.inf)
-        if self.gate_probability is not None:
+        if self.gate_probability == DEFAULT_GATE:
+            gate[:] = DEFAULT_GATE_NIS
+            gate[model.IMU] = np.inf
+        elif self.gate_probability is not None:
             from scipy.stats import chi2
 
             gate[:] = chi2.ppf(self.gate_probability, model.KIND_DIM)

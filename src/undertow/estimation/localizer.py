@@ -43,6 +43,14 @@ from ..trajectory import Trajectory
 from . import model
 from .calibration import Calibration
 from .config import LocalizerConfig
+from .health import (
+    check_mounting,
+    dvl_inside,
+    imu_inside,
+    per_sensor,
+    pressure_inside,
+    warn_unhealthy,
+)
 from .noise import NoiseProfile, WaveNoise
 from .smoother import smooth as urts_smooth
 
@@ -81,6 +89,7 @@ class Localizer:
         The metadata records the wave condition used and where it came from."""
         cfg = self.config
         log.require("dvl", "imu", stage="Localizer")
+        check_mounting(log.mounting)
         wave, wave_source = wave_condition(self.wave, log)
         noise = self.profile.noise(wave, extrapolate=self.extrapolate)
         meas, rejected = _measurements(log, cfg, noise)
@@ -91,11 +100,15 @@ class Localizer:
             meas, float(meas["t"][0]), x0, P0, cfg.process_model(),
             cfg.sensor_model(log.mounting), _output_times(meas["t"], cfg.output_rate_hz),
         )  # fmt: skip
-        counts = dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))
+        counts = {**rejected, **dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))}
         _warn_if_frozen(counts, int(meas.size))
+        rows = np.bincount(meas["kind"], minlength=len(model.KIND_NAMES))
+        sensors = per_sensor(counts, dict(zip(model.KIND_NAMES, rows.tolist(), strict=True)))
+        warn_unhealthy(sensors, cfg.gate_probability)
         metadata = {
             "variant": cfg.variant,
-            "counts": {**rejected, **counts},
+            "counts": counts,
+            "sensors": sensors,
             "nis": _nis_summary(nis),
             "wave_noise": noise.to_dict() if cfg.adds_wave_noise else None,
             "wave_condition": noise.condition,
@@ -191,22 +204,22 @@ def wave_condition(wave, log: Log) -> tuple[object, str]:
 
 
 def _warn_if_frozen(counts: dict, n_measurements: int) -> None:
-    """One warning line when most processed measurements needed a covariance repair, a
-    reverted step or were gated: the filter then barely moves (inconsistent parameters, a
-    gate too tight for the noise, or data far from the model)."""
+    """One warning line when most processed measurements needed a covariance repair or a
+    reverted step: the filter then barely moves (inconsistent parameters, or data far from
+    the model). Gated and rejected measurements are judged per sensor
+    (:func:`~undertow.estimation.health.warn_unhealthy`)."""
     processed = n_measurements - counts["nonfinite_rejected"]
     if processed <= 0:
         return
     troubled = {
         "covariance repairs": counts["cholesky_repairs"],
         "reverted steps": counts["numerical_reverts"],
-        "gated measurements": sum(counts[f"gated_{name}"] for name in model.KIND_NAMES),
     }
     worst = max(troubled, key=troubled.get)
     if troubled[worst] > TROUBLE_FRACTION * processed:
         warnings.warn(
             f"Localizer: {troubled[worst]} {worst} for {processed} measurements; the track is "
-            "probably frozen or wrong (check the noise parameters, the gate and the data)",
+            "probably frozen or wrong (check the noise parameters, the mounting and the data)",
             RuntimeWarning,
             stacklevel=3,
         )
@@ -269,6 +282,7 @@ def _imu_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
     w = imu.angular_velocity
     ok = _finite_rows(w)
     rejected["rejected_imu"] = int(np.sum(~ok))
+    ok = imu_inside(imu.t, w, ok, cfg.gyro_max_rate_rad_s, rejected)
     return imu.t, model.IMU, w, _diag(cfg.imu_gyro_std_rad_s, len(imu), cfg), ok
 
 
@@ -289,7 +303,8 @@ def _dvl_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
     finite = _finite_rows(v)
     rejected["rejected_dvl_invalid"] = int(np.sum(~dvl.valid))
     rejected["rejected_dvl_nonfinite"] = int(np.sum(dvl.valid & ~finite))
-    return dvl.t, model.DVL, v, R, finite & dvl.valid
+    ok = dvl_inside(dvl.t, dvl.velocity, finite & dvl.valid, cfg.dvl_max_speed_m_s, rejected)
+    return dvl.t, model.DVL, v, R, ok
 
 
 def _dr_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
@@ -319,6 +334,7 @@ def _pressure_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: d
     d = p.depth(cfg.water_density_kg_m3, cfg.surface_pressure_pa)[:, None]
     ok = _finite_rows(d)
     rejected["rejected_pressure"] = int(np.sum(~ok))
+    ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected)
     return p.t, model.BARO, d, _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1], ok
 
 
@@ -344,7 +360,10 @@ def _initial_state(log: Log, cfg: LocalizerConfig):
             x0[3:6] = rpy
     if log.pressure is not None and len(log.pressure):
         d = log.pressure.depth(cfg.water_density_kg_m3, cfg.surface_pressure_pa)
-        ok = np.flatnonzero(np.isfinite(d))
+        lo, hi = cfg.min_depth_m, cfg.max_depth_m  # the first depth within the envelope
+        with np.errstate(invalid="ignore"):
+            inside = np.isfinite(d) & (d >= (-np.inf if lo is None else lo))
+            ok = np.flatnonzero(inside & (d <= (np.inf if hi is None else hi)))
         if ok.size:
             lever = rpy_to_matrix(x0[3:6]) @ np.asarray(log.mounting.barometer.translation, float)
             x0[2] = d[ok[0]] - lever[2]

@@ -72,6 +72,8 @@ KIND_NAMES = ("imu", "dvl", "dead_reckoning", "pressure")
 KIND_DIM = (3, 3, 3, 1)
 STATE_ANGLES = np.zeros(N_STATE, dtype=np.bool_)
 STATE_ANGLES[3:6] = True
+Z_ANGLES = np.ones(3, dtype=np.bool_)  # the DR measurement: three angles, wrapped
+Z_LINEAR = np.zeros(3, dtype=np.bool_)  # IMU, DVL and (first entry) barometer
 
 # one merged measurement: time (s), kind (IMU, DVL, DR, BARO), z (the first KIND_DIM[kind]
 # entries used) and its noise covariance R (the leading KIND_DIM[kind] square block used)
@@ -274,14 +276,14 @@ def _predict_workspace():
     )  # fmt: skip
 
 
-@njit(cache=True, inline="always")
-def _predict(x, P, dt, process, ws, factored=False):
+@njit(cache=True)
+def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
     """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place:
-    x = mean_i f(chi_i, dt), P = sum_i W^c_i (f(chi_i) - x)(f(chi_i) - x)^T + Q(x, dt).
+    x = mean_i f(chi_i, dt), P = sum_i W^c_i (f(chi_i) - x)(f(chi_i) - x)^T + Q(x, dt), with
+    the fields of :class:`ProcessModel` as arguments.
 
     ``factored``: the workspace's L already holds the Cholesky factor of P (skip factorizing)."""
     chi, chi_f, D, L, Q, R, T, xi = ws
-    lam = process.lam
     if factored:
         status = 0
         _spread(x, L, lam, STATE_ANGLES, chi)
@@ -294,55 +296,18 @@ def _predict(x, P, dt, process, ws, factored=False):
             a0, a1, a2 = chi[i, 3], chi[i, 4], chi[i, 5]
             _rotation(a0, a1, a2, R)
             _euler_rate(a0, a1, T)
-        _f(chi[i], dt, process.mu_bias, chi_f[i], R, T)
-    _process_noise(x, dt, process.q_acc, process.q_bias, Q, R, T)
-    _predict_moments(chi_f, process.wm, process.wc, Q, STATE_ANGLES, x, P, D)
+        _f(chi[i], dt, mu_bias, chi_f[i], R, T)
+    _process_noise(x, dt, q_acc, q_bias, Q, R, T)
+    _predict_moments(chi_f, wm, wc, Q, STATE_ANGLES, x, P, D)
     return status
-
-
-class _Work(NamedTuple):
-    """Scratch arrays of the filter loop (allocated once per run)."""
-
-    pred: tuple  # _predict_workspace()
-    H: np.ndarray  # (3, 3, 18) Jacobians of the linear models
-    xb: np.ndarray  # (18,) x before a step, restored when the step fails
-    Pb: np.ndarray  # (18, 18) P before a step
-    z3: np.ndarray  # (3,) z of a three-dimensional measurement
-    z1: np.ndarray  # (1,) z of the barometer
-    R3: np.ndarray  # (3, 3)
-    R1: np.ndarray  # (1, 1)
-    Zs1: np.ndarray  # (2n+1, 1) h(chi_i) of the barometer
-    zi: np.ndarray  # (3,) one h(chi_i)
-    angles3: np.ndarray  # (3,) True: the DR angles are wrapped
-    linear3: np.ndarray  # (3,) False: IMU and DVL
-    linear1: np.ndarray  # (1,) False: the barometer
-
-
-@njit(cache=True)
-def _work(sensors):
-    return _Work(
-        _predict_workspace(), _jacobians(sensors), np.empty(N_STATE),
-        np.empty((N_STATE, N_STATE)), np.empty(3), np.empty(1), np.empty((3, 3)),
-        np.empty((1, 1)), np.empty((N_SIGMA, 1)), np.empty(3), np.ones(3, dtype=np.bool_),
-        np.zeros(3, dtype=np.bool_), np.zeros(1, dtype=np.bool_),
-    )  # fmt: skip
-
-
-@njit(cache=True)
-def _distinct_times(meas):
-    """Number of distinct consecutive times of the (time-sorted) measurements."""
-    n = 1
-    for k in range(1, meas.size):
-        if meas[k].t != meas[k - 1].t:
-            n += 1
-    return n
 
 
 @njit(cache=True)
 def _run_filter(meas, t0, x0, P0, process, sensors, out_times):
     """Walk the merged measurements ``meas`` (:data:`MEASUREMENT`, time-sorted) from (t0, x0,
-    P0): predict to each measurement time (none if dt <= 0, dt capped at dt_max), redraw sigma
-    points, update (:func:`_step`).
+    P0) with the model ``process`` (:class:`ProcessModel`) and ``sensors``
+    (:class:`SensorModel`): predict to each measurement time (none if dt <= 0, dt capped at
+    dt_max), redraw sigma points, update.
 
     Records (x, P) after the last update at each distinct time (``out_times`` None) or at
     ``out_times`` (predicted on a copy to each; the filter itself is not changed). A recorded P
@@ -353,132 +318,161 @@ def _run_filter(meas, t0, x0, P0, process, sensors, out_times):
     as in NIS_FIELDS, over every innovation evaluated (applied or gated; not when S cannot be
     factorized), NIS = nu^T S^-1 nu. For a consistent filter E[NIS] = dim z (KIND_DIM) and
     NIS <= CHI2_95[kind] with probability 0.95.
+
+    The records are unpacked here into explicit arguments of :func:`_filter`: numba keeps
+    arguments in registers through the loop, while it reloads arrays taken out of a tuple in
+    the loop (about 10 % more time per step in benchmarks/bench_ukf.py).
     """
+    t, kind, z, R = _columns(meas)
+    if out_times is None:
+        n_out = _distinct_times(t)
+    else:
+        n_out = out_times.size
+    wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias = process
+    return _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
+                   freeze_bias, _jacobians(sensors), sensors.gate, sensors, out_times,
+                   n_out)  # fmt: skip
+
+
+@njit(cache=True)
+def _columns(meas):
+    """The fields of the :data:`MEASUREMENT` array as contiguous arrays (t, kind, z, R)."""
+    N = meas.size
+    t, kind = np.empty(N), np.empty(N, np.int64)
+    z, R = np.empty((N, 3)), np.empty((N, 3, 3))
+    for k in range(N):
+        t[k] = meas[k].t
+        kind[k] = meas[k].kind
+        z[k] = meas[k].z
+        R[k] = meas[k].R
+    return t, kind, z, R
+
+
+@njit(cache=True)
+def _distinct_times(t):
+    """Number of distinct consecutive times in the (sorted) t."""
+    n = 1
+    for k in range(1, t.size):
+        if t[k] != t[k - 1]:
+            n += 1
+    return n
+
+
+@njit(cache=True)
+def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze, H, gate,
+            sensors, out_times, n_out):  # fmt: skip
+    """The loop of :func:`_run_filter` over its unpacked records; H = _jacobians(sensors)."""
     x = x0.copy()
     P = P0.copy()
-    if process.freeze_bias:
+    if freeze:
         _freeze_bias(x, P)
     counts = np.zeros(len(COUNT_NAMES), dtype=np.int64)
     nis = np.zeros((4, len(NIS_FIELDS)))
-    if out_times is None:
-        n_out = _distinct_times(meas)
-    else:
-        n_out = out_times.size
-    out = (np.empty(n_out), np.empty((n_out, N_STATE)), np.empty((n_out, N_STATE, N_STATE)))
-    work = _work(sensors)
-    L = work.pred[3]
+    out_t = np.empty(n_out)
+    out_x = np.empty((n_out, N_STATE))
+    out_P = np.empty((n_out, N_STATE, N_STATE))
+    ws = _predict_workspace()
+    L = ws[3]
+    xb = np.empty(N_STATE)  # (x, P) before a step, restored when it fails
+    Pb = np.empty((N_STATE, N_STATE))
+    z3, R3, z1, R1 = np.empty(3), np.empty((3, 3)), np.empty(1), np.empty((1, 1))
     t_cur = t0
     factored = False  # L holds the Cholesky factor of the current P
     k_out = 0
-    N = meas.size
+    N = t.size
     for k in range(N + 1):
-        tk = meas[k].t if k < N else np.inf
+        tk = t[k] if k < N else np.inf
         if out_times is not None:
-            k_out = _record_until(tk, out_times, k_out, x, P, t_cur, process, work, out, counts)
+            k_out = _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
+                                  mu, dt_max, ws, xb, Pb, out_t, out_x, out_P, counts)  # fmt: skip
         if k == N:
             break
-        processed, t_cur = _step(meas[k], x, P, t_cur, process, sensors, work, factored, counts,
-                                 nis)  # fmt: skip
-        if processed:
+        kd = kind[k]
+        zk, Rk = (z1, R1) if kd == BARO else (z3, R3)
+        for a in range(zk.size):
+            zk[a] = z[k, a]
+            for b in range(zk.size):
+                Rk[a, b] = R[k, a, b]
+        if not (_all_finite(zk) and _all_finite(Rk)):
+            counts[NONFINITE_REJECTED] += 1
+        else:
+            dt = tk - t_cur
+            if dt > 0:
+                if dt > dt_max:
+                    dt = dt_max
+                    counts[DT_CAPPED] += 1
+                _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, ws, factored, xb,
+                              Pb, counts)  # fmt: skip
+                t_cur = tk
+            else:
+                counts[NO_PREDICT] += 1
             factored = False
-        if out_times is None and k_out < n_out and (k == N - 1 or meas[k + 1].t != tk):
+            _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, H, gate, sensors, ws, xb, Pb,
+                         counts, nis)  # fmt: skip
+        if out_times is None and k_out < n_out and (k == N - 1 or t[k + 1] != tk):
             # the repair the next sigma-point draw would make, done now: every emitted
             # covariance is symmetric positive definite (the next draw then needs none)
             counts[REPAIRS] += max(_cholesky_repair(P, L), 0)
             factored = True
-            _store(out, k_out, tk, x, P)
+            out_t[k_out] = tk
+            out_x[k_out] = x
+            out_P[k_out] = P
             k_out += 1
-    return out[0][:k_out], out[1][:k_out], out[2][:k_out], counts, nis
+    return out_t[:k_out], out_x[:k_out], out_P[:k_out], counts, nis
 
 
-@njit(cache=True, inline="always")
-def _store(out, k, t, x, P):
-    out[0][k] = t
-    out[1][k] = x
-    out[2][k] = P
-
-
-@njit(cache=True, inline="always")
-def _record_until(tk, out_times, k_out, x, P, t_cur, process, work, out, counts):
+@njit(cache=True)
+def _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias, mu, dt_max, ws,
+                  xb, Pb, out_t, out_x, out_P, counts):  # fmt: skip
     """Record every output time before tk: (x, P) predicted on a copy from t_cur (dt capped at
     dt_max), its covariance repaired to SPD. Returns the next output index."""
-    xb, Pb, L = work.xb, work.Pb, work.pred[3]
     while k_out < out_times.size and out_times[k_out] < tk:
         xb[:] = x
         Pb[:, :] = P
-        dt = min(out_times[k_out] - t_cur, process.dt_max)
+        dt = min(out_times[k_out] - t_cur, dt_max)
         if dt > 0:
-            counts[REPAIRS] += max(_predict(xb, Pb, dt, process, work.pred), 0)
-        counts[REPAIRS] += max(_cholesky_repair(Pb, L), 0)  # emit only a PD covariance
-        _store(out, k_out, out_times[k_out], xb, Pb)
+            counts[REPAIRS] += max(_predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws), 0)
+        counts[REPAIRS] += max(_cholesky_repair(Pb, ws[3]), 0)  # emit only a PD covariance
+        out_t[k_out] = out_times[k_out]
+        out_x[k_out] = xb
+        out_P[k_out] = Pb
         k_out += 1
     return k_out
 
 
-@njit(cache=True, inline="always")
-def _step(m, x, P, t_cur, process, sensors, work, factored, counts, nis):
-    """One measurement m: rejected when z or R is not finite, else predict from t_cur to m.t
-    (none when dt <= 0, dt capped at dt_max) and update. Returns (processed, the filter's time
-    after it); once processed, the workspace's L no longer factors P."""
-    kd = m.kind
-    dim = 1 if kd == BARO else 3
-    zk = work.z1 if dim == 1 else work.z3
-    Rk = work.R1 if dim == 1 else work.R3
-    for a in range(dim):
-        zk[a] = m.z[a]
-        for b in range(dim):
-            Rk[a, b] = m.R[a, b]
-    if not (_all_finite(zk) and _all_finite(Rk)):
-        counts[NONFINITE_REJECTED] += 1
-        return False, t_cur
-    dt = m.t - t_cur
-    if dt > 0:
-        if dt > process.dt_max:
-            dt = process.dt_max
-            counts[DT_CAPPED] += 1
-        _predict_step(x, P, dt, process, work, factored, counts)
-        t_cur = m.t
-    else:
-        counts[NO_PREDICT] += 1
-    _update_step(kd, zk, Rk, x, P, process, sensors, work, counts, nis)
-    return True, t_cur
-
-
-@njit(cache=True, inline="always")
-def _predict_step(x, P, dt, process, work, factored, counts):
+@njit(cache=True)
+def _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, ws, factored, xb, Pb, counts):
     """Predict (x, P) over dt; a prediction that leaves them non-finite is undone (counted)."""
-    xb, Pb = work.xb, work.Pb
     xb[:] = x
     Pb[:, :] = P
-    counts[REPAIRS] += max(_predict(x, P, dt, process, work.pred, factored), 0)
+    counts[REPAIRS] += max(_predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, ws, factored), 0)
     if not (_all_finite(x) and _all_finite(P)):
         x[:] = xb
         P[:, :] = Pb
         counts[REVERTS] += 1
-    if process.freeze_bias:
+    if freeze:
         _freeze_bias(x, P)
 
 
-@njit(cache=True, inline="always")
-def _update_step(kd, zk, Rk, x, P, process, sensors, work, counts, nis):
+@njit(cache=True)
+def _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, H, gate, sensors, ws, xb, Pb, counts,
+                 nis):  # fmt: skip
     """Update (x, P) with z of kind kd: in closed form for the linear IMU, DVL and DR models,
     through sigma points for the barometer. A gated, failed or non-finite update is undone
     (counted); every innovation evaluated adds to the NIS accumulators."""
-    xb, Pb = work.xb, work.Pb
     xb[:] = x
     Pb[:, :] = P
-    gate = sensors.gate[kd]
     if kd == BARO:
-        chi, L, R = work.pred[0], work.pred[3], work.pred[5]
-        counts[REPAIRS] += max(_sigma_points(x, P, process.lam, STATE_ANGLES, L, chi), 0)
+        chi, L, Rw = ws[0], ws[3], ws[5]
+        counts[REPAIRS] += max(_sigma_points(x, P, lam, STATE_ANGLES, L, chi), 0)
+        Zs, zi = np.empty((N_SIGMA, 1)), np.empty(3)
         for i in range(N_SIGMA):
-            _h(kd, chi[i], sensors, work.zi, R)
-            work.Zs1[i, 0] = work.zi[0]
-        status, v = _update(x, P, chi, work.Zs1, zk, Rk, process.wm, process.wc, STATE_ANGLES,
-                            work.linear1, gate)  # fmt: skip
+            _h(kd, chi[i], sensors, zi, Rw)
+            Zs[i, 0] = zi[0]
+        status, v = _update(x, P, chi, Zs, zk, Rk, wm, wc, STATE_ANGLES, Z_LINEAR[:1], gate[kd])
     else:
-        zmask = work.angles3 if kd == DR else work.linear3
-        status, v = _update_linear(x, P, work.H[kd], zk, Rk, STATE_ANGLES, zmask, gate)
+        z_angles = Z_ANGLES if kd == DR else Z_LINEAR
+        status, v = _update_linear(x, P, H[kd], zk, Rk, STATE_ANGLES, z_angles, gate[kd])
     if status < 2 and np.isfinite(v):
         nis[kd, 0] += v
         nis[kd, 1] += 1.0
@@ -490,5 +484,5 @@ def _update_step(kd, zk, Rk, x, P, process, sensors, work, counts, nis):
         counts[GATED + kd if status == 1 else REVERTS] += 1
         x[:] = xb
         P[:, :] = Pb
-    if process.freeze_bias:
+    if freeze:
         _freeze_bias(x, P)

@@ -99,9 +99,10 @@ def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, 
 
 
 @njit(cache=True)
-def _run_smoother(t, xf, Pf, process):
+def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze):
     """URTS backward pass of the 18-state model over filtered (t, xf (N, 18), Pf (N, 18, 18))
-    with the filter's :class:`~undertow.estimation.model.ProcessModel`.
+    with the filter's process model: the fields of its
+    :class:`~undertow.estimation.model.ProcessModel` as arguments (``*process``).
 
     Returns (xs, Ps, counts) with counts as in SMOOTHER_COUNT_NAMES.
     """
@@ -112,21 +113,20 @@ def _run_smoother(t, xf, Pf, process):
     counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
     ws = model._predict_workspace()
     ws_rts = _rts_workspace(n)
-    freeze = process.freeze_bias
     m = np.empty(n)
     Pm = np.empty((n, n))
     x = np.empty(n)
     P = np.empty((n, n))
     for k in range(N - 2, -1, -1):
-        dt = min(t[k + 1] - t[k], process.dt_max)
+        dt = min(t[k + 1] - t[k], dt_max)
         m[:] = xf[k]
         Pm[:, :] = Pf[k]
-        status = model._predict(m, Pm, dt, process, ws)
+        status = model._predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws)
         if freeze:
             model._freeze_bias(m, Pm)
         x[:] = xf[k]
         P[:, :] = Pf[k]
-        flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], process.wc,
+        flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], wc,
                          model.STATE_ANGLES, ws_rts)  # fmt: skip
         if status < 0 or flag < 0 or not (model._all_finite(x) and model._all_finite(P)):
             counts[1] += 1
@@ -162,7 +162,7 @@ def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Tra
     if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
         raise DataError("smooth: trajectory times must be finite and strictly increasing")
     x, P = np.ascontiguousarray(trajectory.x), np.ascontiguousarray(trajectory.P)
-    xs, Ps, counts = _run_smoother(t, x, P, config.process_model())
+    xs, Ps, counts = _run_smoother(t, x, P, *config.process_model())
     metadata = {
         **meta,
         "smoothed": True,

@@ -2,8 +2,9 @@
 
 :func:`read_log` guesses the format from the path: a ``.bag`` file is ROS 1; a directory with
 ``metadata.yaml`` or a ``.mcap``/``.db3`` file is ROS 2; ``.txt/.json/.jsonl/.log`` is Water
-Linked TCP JSON. :func:`write_log` writes a ROS 2 mcap bag; TUM trajectories and PLY clouds
-have their own small modules.
+Linked TCP JSON; named pipes, devices and sockets are refused before opening.
+:func:`write_log` writes a ROS 2 mcap bag; TUM trajectories and PLY clouds have their own small
+modules.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 
 from ..errors import ReaderError
 from ..log import Log
+from ._collect import check_regular
 from .a50_json import JSON_SUFFIXES, read_a50_json
 from .info import LogSummary, StreamSummary, summarize
 from .ply import read_ply, write_ply
@@ -27,6 +29,7 @@ def detect_format(path) -> str:
     """'ros1', 'ros2' or 'a50_json' for ``path``; ReaderError naming the file otherwise."""
     path = Path(path)
     suffix = path.suffix.lower()
+    check_regular(path, directory_ok=True)  # a named pipe must not block, a device be read
     if path.is_dir():
         if (path / "metadata.yaml").exists() or any(
             p.suffix in ROS2_SUFFIXES for p in path.iterdir()

@@ -8,12 +8,52 @@ carried a distance) is counted in :class:`Notes`; :meth:`Notes.finish` emits one
 
 from __future__ import annotations
 
+import os
+import stat
 import warnings
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 
+from ..errors import ReaderError
 from ..log import Dvl, a50_beam_units
+
+#: what one malformed line, message or field of untrusted input can raise while being decoded:
+#: bad values (ValueError, TypeError, KeyError, AttributeError, IndexError), numbers too large
+#: for a float or infinities made integers (OverflowError), absurdly nested JSON (RecursionError)
+MALFORMED = (
+    ValueError,
+    TypeError,
+    KeyError,
+    AttributeError,
+    IndexError,
+    OverflowError,
+    RecursionError,
+)
+
+_KINDS = (
+    (stat.S_ISFIFO, "a named pipe"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def check_regular(path: Path, directory_ok: bool = False) -> None:
+    """ReaderError unless ``path`` is a regular file (or a directory when ``directory_ok``):
+    named pipes, devices and sockets are refused before opening (reading a FIFO blocks)."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise ReaderError(f"{path}: no such file or directory") from None
+    except (OSError, ValueError) as exc:
+        raise ReaderError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") from None
+    if stat.S_ISREG(mode) or (directory_ok and stat.S_ISDIR(mode)):
+        return
+    kind = next((name for test, name in _KINDS if test(mode)), "an unsupported file type")
+    what = "a log file or a ROS 2 bag directory" if directory_ok else "a regular file"
+    raise ReaderError(f"{path}: is {kind}, not {what} (refused before opening)")
 
 
 class Notes:
@@ -31,12 +71,17 @@ class Notes:
         if detail and kind not in self.details:
             self.details[kind] = detail
 
-    def finish(self) -> list[str]:
-        """Warn once per kind of note; return the messages (for ``Log.metadata['warnings']``)."""
+    def lines(self) -> list[str]:
+        """One line per kind of note: source, kind, count and the first occurrence."""
         lines = []
         for kind, n in self.counts.items():
             extra = f" (first: {self.details[kind]})" if kind in self.details else ""
             lines.append(f"{self.source}: {kind}: {n}{extra}")
+        return lines
+
+    def finish(self) -> list[str]:
+        """Warn once per kind of note; return the messages (for ``Log.metadata['warnings']``)."""
+        lines = self.lines()
         for line in lines:
             warnings.warn(line, stacklevel=3)
         return lines
@@ -137,6 +182,8 @@ class DvlRows:
     def build(self, notes: Notes, stream: str = "dvl") -> tuple[Dvl, np.ndarray]:
         """The Dvl stream (time-ordered) and the row order used (to align ``extra``)."""
         order = time_order(np.array(self.t), stream, notes)
+        if order.size == 0 and self.t:
+            notes.add(f"{stream}: no message with a finite time (stream dropped)")
         velocity = np.array(self.velocity, dtype=np.float64).reshape(-1, 3)
         count_nan_rows(notes, stream, velocity)
         cov = np.array(self.covariance, dtype=np.float64).reshape(-1, 3, 3)

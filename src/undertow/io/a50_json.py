@@ -12,7 +12,11 @@ Supported reports (Water Linked DVL protocol documentation, JSON protocol over T
 Time: ``time_of_validity`` when every velocity report has it; otherwise (json_v1 has no
 absolute time) the cumulative sum of the ``time`` field (ms since the previous report) in
 seconds, starting at 0 -- ``Log.metadata['time_base']`` says which. Exact duplicate lines (the
-real v1 log repeats lines) are dropped and malformed lines skipped, each with a counted warning.
+real v1 log repeats lines) are dropped and malformed lines skipped (anything that does not decode
+to a report with numeric fields: broken or absurdly nested JSON, numbers too large for a float,
+non-finite beam ids), each kind with one counted warning naming its first line; a stream whose
+every time is non-finite is dropped with a warning; a file with nothing usable is one
+:class:`~undertow.errors.ReaderError` line.
 The module also formats velocity reports (json_v3) for the bag writer.
 """
 
@@ -26,7 +30,7 @@ import numpy as np
 
 from ..errors import ReaderError
 from ..log import DeadReckoning, Dvl, Log
-from ._collect import DvlRows, Notes, count_nan_rows, time_order
+from ._collect import MALFORMED, DvlRows, Notes, check_regular, count_nan_rows, time_order
 
 JSON_SUFFIXES = (".txt", ".json", ".jsonl", ".log")
 
@@ -47,8 +51,17 @@ def _covariance(obj: dict):
     return arr if arr.shape == (3, 3) else None
 
 
+#: largest ``time`` field (ms since the previous report) taken as sent: a day
+MAX_REPORT_INTERVAL_MS = 86_400_000.0
+
+
 def add_velocity_report(rows: DvlRows, obj: dict, t: float) -> None:
-    """Append one velocity report (raises KeyError/TypeError/ValueError when malformed)."""
+    """Append one velocity report (raises one of ``_collect.MALFORMED`` when malformed; a
+    ``time`` field that is not a number of ms in [0, a day] is malformed: summed into the json_v1
+    time base, one absurd value would push every later report out of the log)."""
+    time_ms = float(obj.get("time", math.nan))
+    if "time" in obj and not 0.0 <= time_ms <= MAX_REPORT_INTERVAL_MS:
+        raise ValueError(f"time field {time_ms} is not a report interval in ms")
     beams = [
         (b["id"], float(b["velocity"]), float(b["distance"]), bool(b.get("beam_valid", True)))
         for b in obj.get("transducers", [])
@@ -64,7 +77,7 @@ def add_velocity_report(rows: DvlRows, obj: dict, t: float) -> None:
         beams=beams,
         raw_altitude=float(obj.get("altitude", math.nan)),
         time_of_validity=math.nan if tov is None else float(tov) * 1e-6,
-        time_ms=float(obj.get("time", math.nan)),
+        time_ms=time_ms,
     )
 
 
@@ -81,10 +94,14 @@ def position_row(obj: dict) -> tuple:
     )
 
 
-def dead_reckoning_from_rows(rows: list[tuple], notes: Notes) -> DeadReckoning:
-    """A time-ordered DeadReckoning stream from :func:`position_row` tuples."""
+def dead_reckoning_from_rows(rows: list[tuple], notes: Notes) -> DeadReckoning | None:
+    """A time-ordered DeadReckoning stream from :func:`position_row` tuples (None, with a note,
+    when no row has a finite time)."""
     arr = np.array(rows, dtype=np.float64).reshape(-1, 8)
     order = time_order(arr[:, 0], "dead_reckoning", notes)
+    if order.size == 0:
+        notes.add("dead_reckoning: no report with a finite time (stream dropped)")
+        return None
     arr = arr[order]
     count_nan_rows(notes, "dead_reckoning", arr[:, [1, 2, 3, 5, 6, 7]])  # std is optional
     return DeadReckoning(t=arr[:, 0], position=arr[:, 1:4], orientation=arr[:, 5:8], std=arr[:, 4])
@@ -93,10 +110,13 @@ def dead_reckoning_from_rows(rows: list[tuple], notes: Notes) -> DeadReckoning:
 def _read_lines(path: Path) -> list[str]:
     if not path.exists():
         raise ReaderError(f"{path}: no such file")
+    check_regular(path)
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError as exc:
         raise ReaderError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    except MemoryError:
+        raise ReaderError(f"{path}: too large to read into memory") from None
     if not text.strip():
         raise ReaderError(f"{path}: empty file (no JSON reports)")
     return text.splitlines()
@@ -104,7 +124,11 @@ def _read_lines(path: Path) -> list[str]:
 
 def read_a50_json(path) -> Log:
     """Read a Water Linked TCP JSON log (json_v1/v2/v3) into a Log."""
-    path = Path(path)
+    with np.errstate(all="ignore"):  # overflow to inf is counted as NaN/non-finite, not warned
+        return _read_a50_json(Path(path))
+
+
+def _read_a50_json(path: Path) -> Log:
     lines = _read_lines(path)
     notes = Notes(str(path))
     seen: set[str] = set()
@@ -129,7 +153,7 @@ def read_a50_json(path) -> Log:
                 velocity.append((number, obj))
             elif not isinstance(obj, dict) or "type" not in obj:
                 raise ValueError("not a DVL report")
-        except (ValueError, KeyError, TypeError, AttributeError):
+        except MALFORMED:
             bad_lines.append(number)
     notes.add("exact duplicate lines dropped", duplicates)
     if bad_lines:
@@ -140,11 +164,13 @@ def read_a50_json(path) -> Log:
     metadata: dict = {"format": "waterlinked_tcp_json"}
     dvl = _dvl_from_reports(velocity, notes, metadata) if velocity else None
     dead_reckoning = dead_reckoning_from_rows(positions, notes) if positions else None
+    if dvl is None and dead_reckoning is None:
+        raise ReaderError(f"{path}: no report with a finite time (every stream dropped)")
     metadata["warnings"] = notes.finish()
     return Log(dvl=dvl, dead_reckoning=dead_reckoning, source=str(path), metadata=metadata)
 
 
-def _dvl_from_reports(reports: list[tuple[int, dict]], notes: Notes, metadata: dict) -> Dvl:
+def _dvl_from_reports(reports: list[tuple[int, dict]], notes: Notes, metadata: dict) -> Dvl | None:
     formats = sorted({str(obj.get("format", "json_v1")) for _, obj in reports})
     metadata["json_formats"] = formats
     tov = [obj.get("time_of_validity") for _, obj in reports]
@@ -164,7 +190,7 @@ def _dvl_from_reports(reports: list[tuple[int, dict]], notes: Notes, metadata: d
         add_velocity_report(rows, obj, float(ti))
     count_nan_rows(notes, "dvl altitude", np.array(rows.extra["raw_altitude"]))
     dvl, _ = rows.build(notes)
-    return dvl
+    return dvl if len(dvl) else None
 
 
 def velocity_report_line(dvl: Dvl, i: int, time_ms: float, time_of_validity_s: float) -> str:

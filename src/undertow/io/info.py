@@ -62,11 +62,16 @@ def _missing(name: str, stream) -> dict[str, int]:
         "ground_truth": "position",
     }[name]
     values = np.asarray(getattr(stream, main), dtype=np.float64).reshape(len(stream), -1)
-    return {main: int(np.sum(~np.isfinite(values).all(axis=1)))}
+    return {main: int(np.sum(~np.isfinite(values).all(axis=1))) if values.size else 0}
 
 
 def summarize(log: Log) -> LogSummary:
     """Per-stream counts, rates and spans of ``log``."""
+    with np.errstate(all="ignore"):  # extreme values give inf/NaN figures, not numpy warnings
+        return _summarize(log)
+
+
+def _summarize(log: Log) -> LogSummary:
     streams = []
     for name, s in log.streams().items():
         n = len(s)

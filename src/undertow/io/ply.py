@@ -4,7 +4,8 @@
 array (e.g. occupancy probability), binary little-endian by default or ASCII; atomic.
 :func:`write_map_ply` writes an occupancy map's occupied cells that way.
 :func:`read_ply` reads the ``vertex`` element of ``ascii`` and ``binary_little_endian`` files
-(any scalar property types; elements before ``vertex`` must have no list properties).
+(any scalar property types; elements before ``vertex`` must have no list properties). Any
+malformed header or body is one :class:`~undertow.errors.ReaderError` line.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
+from ._collect import MALFORMED, check_regular
 from .tum import _atomic_write_text
 
 _TYPES = {
@@ -80,8 +82,8 @@ def write_map_ply(path, occupancy_map: OccupancyMap, threshold: float = OCCUPIED
 
 def _parse_header(path: Path, data: bytes):
     end = data.find(b"end_header")
-    if not data.startswith(b"ply") or end < 0:
-        raise ReaderError(f"{path}: not a PLY file (no 'ply' magic or no end_header)")
+    if not data.startswith(b"ply") or end < 0 or data.find(b"\n", end) < 0:
+        raise ReaderError(f"{path}: not a PLY file (no 'ply' magic or no end_header line)")
     body_start = data.index(b"\n", end) + 1
     fmt, elements = None, []
     for number, line in enumerate(data[:end].decode("ascii", "replace").splitlines(), start=1):
@@ -89,10 +91,14 @@ def _parse_header(path: Path, data: bytes):
         if not words or words[0] in ("ply", "comment", "obj_info"):
             continue
         if words[0] == "format":
-            fmt = words[1]
+            fmt = words[1] if len(words) > 1 else None
         elif words[0] == "element":
+            if len(words) != 3 or not words[2].isdigit():
+                raise ReaderError(f"{path}: header line {number}: malformed element {line!r}")
             elements.append((words[1], int(words[2]), []))
         elif words[0] == "property" and elements:
+            if len(words) < 3:
+                raise ReaderError(f"{path}: header line {number}: malformed property {line!r}")
             if words[1] == "list":
                 elements[-1][2].append((words[-1], None))
             elif words[1] in _TYPES:
@@ -107,10 +113,21 @@ def _parse_header(path: Path, data: bytes):
 def read_ply(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """(points (N,3) float64, {property: (N,) array}) of the vertex element of a PLY file."""
     path = Path(path)
+    if not path.exists():
+        raise ReaderError(f"{path}: no such file")
+    check_regular(path)
     try:
         data = path.read_bytes()
     except OSError as exc:
         raise ReaderError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    try:
+        return _read_ply(path, data)
+    except (*MALFORMED, MemoryError) as exc:
+        first = (str(exc).splitlines() or [""])[0][:200]
+        raise ReaderError(f"{path}: malformed PLY file ({type(exc).__name__}: {first})") from None
+
+
+def _read_ply(path: Path, data: bytes) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     fmt, elements, offset = _parse_header(path, data)
     skip_rows = 0
     for name, count, props in elements:

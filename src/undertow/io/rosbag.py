@@ -11,10 +11,17 @@ to its sensor frames, body forward-right-down; see :mod:`undertow.io.topics`), e
 defaults; ``metadata['mounting_source']`` says which. A user-given topic that is not in the bag
 gives one warning line. A directory without ``metadata.yaml`` holding a single ``.mcap``/``.db3``
 is read as that file. rosbags errors become one-line :class:`~undertow.errors.ReaderError`.
+
+Everything in and beside a bag is untrusted: a message that cannot be decoded or holds malformed
+fields is skipped and counted (one warning per topic); a sidecar that is not a mapping, or whose
+mounting or numeric metadata (``water_density_kg_m3``, ``surface_pressure_pa``) is malformed, is
+ignored in that part with one warning; named pipes, devices and sockets are refused before
+opening.
 """
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import replace
 from pathlib import Path
@@ -26,26 +33,44 @@ from rosbags.highlevel import AnyReader
 from ..errors import ReaderError, UndertowError
 from ..log import Dvl, Log, Mounting
 from ..rotations import quaternion_to_rpy
-from ._collect import DvlRows, Notes
-from .a50_json import add_velocity_report, dead_reckoning_from_rows
+from ._collect import MALFORMED, DvlRows, Notes, check_regular
+from .a50_json import _covariance, add_velocity_report, dead_reckoning_from_rows
 from .msgdefs import dvl_typestore
 from .rosbag_streams import ACCEPTED, Rows
 from .topics import TopicMap
 
 SIDECAR = "undertow.yaml"
 STORAGE_SUFFIXES = (".mcap", ".db3")
+#: sidecar metadata the estimation uses as numbers: kept only when a finite positive number
+NUMERIC_METADATA = ("water_density_kg_m3", "surface_pressure_pa")
+
+# what rosbags' own exceptions without a message mean for a damaged file
+_BARE = {
+    "AssertionError": "a record header or length field is malformed",
+    "MemoryError": "a record claims a length too large to allocate (corrupt length field)",
+    "IndexError": "a record ends before its declared length",
+    "KeyError": "a record refers to a connection or type that is not defined",
+    "RecursionError": "a message definition refers to itself",
+}
 
 
 def _one_line(exc: BaseException) -> str:
+    name = type(exc).__name__
     text = str(exc).strip().splitlines()
-    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+    if name in _BARE and (not text or name in ("MemoryError", "KeyError", "IndexError")):
+        return _BARE[name]
+    return f"{name}: {text[0][:200]}" if text else name
 
 
 def _bag_paths(path: Path) -> list[Path]:
+    check_regular(path, directory_ok=True)
     if path.suffix == ".bag":
         return [path]
     if path.is_dir():
         if (path / "metadata.yaml").exists():
+            for inner in path.iterdir():  # rosbags opens the metadata and the storage files
+                if inner.name == "metadata.yaml" or inner.suffix in STORAGE_SUFFIXES:
+                    check_regular(inner)
             return [path]
         files = sorted(p for p in path.iterdir() if p.suffix in STORAGE_SUFFIXES)
         if len(files) == 1:  # a bag directory whose metadata.yaml was not copied
@@ -67,7 +92,7 @@ def _warn_unmatched(topics: TopicMap, available: dict, path: Path, log: Log) -> 
     """One warning line per user-given stream of which no topic is in the bag, saying whether
     the stream was read from a fallback (the DVL and its dead reckoning from the raw JSON
     topic) or not at all."""
-    listing = sorted(available)
+    listing = sorted(map(str, available))
     shown = ", ".join(listing[:8]) + (f", ... ({len(listing)} in all)" if len(listing) > 8 else "")
     lines = []
     for stream, candidates in topics.unmatched_user_topics(available).items():
@@ -89,7 +114,11 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
         raise ReaderError(f"{path}: no such file or directory")
     if path.is_file() and path.stat().st_size == 0:
         raise ReaderError(f"{path}: empty file")
-    topics = topics or TopicMap()
+    with np.errstate(all="ignore"):  # overflow to inf is counted as non-finite, not warned
+        return _read_rosbag(path, topics or TopicMap())
+
+
+def _read_rosbag(path: Path, topics: TopicMap) -> Log:
     notes = Notes(str(path))
     rows = Rows(notes)
     paths = _bag_paths(path)
@@ -99,7 +128,7 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
     except Exception as exc:  # rosbags raises many types for corrupt input
         raise ReaderError(f"{path}: cannot open bag ({_one_line(exc)})") from exc
     try:
-        available = {c.topic: c.msgtype for c in reader.connections}
+        available = {str(c.topic): str(c.msgtype) for c in reader.connections}
         mapped = topics.resolve(available)
         used = {}
         for stream, topic in mapped.items():
@@ -109,7 +138,7 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
                 notes.add(
                     f"topic {topic} has unsupported type {available[topic]} for {stream} (skipped)"
                 )
-        conns = [c for c in reader.connections if c.topic in used]
+        conns = [c for c in reader.connections if str(c.topic) in used]
         _read_messages(reader, conns, used, rows, notes, path)
     finally:
         reader.close()
@@ -117,6 +146,8 @@ def read_rosbag(path, topics: TopicMap | None = None) -> Log:
     unmatched = _warn_unmatched(topics, available, path, log)
     if not log.streams():
         listing = ", ".join(f"{t} ({m})" for t, m in sorted(available.items())) or "none"
+        if any(notes.counts):
+            listing += "; " + "; ".join(notes.lines()[:2])
         raise ReaderError(f"{path}: no known measurement stream; topics in the bag: {listing}")
     log.metadata["warnings"] = unmatched + notes.finish()
     return log
@@ -126,19 +157,31 @@ def _read_messages(reader, conns, used, rows: Rows, notes: Notes, path: Path) ->
     if not conns:  # rosbags reads every topic when given no connection
         return
     messages = reader.messages(connections=conns)
+    index = 0
     while True:
         try:
             conn, record_ns, raw = next(messages)
         except StopIteration:
             return
         except Exception as exc:  # rosbags raises many types for corrupt input
-            raise ReaderError(f"{path}: corrupt or truncated bag ({_one_line(exc)})") from exc
+            raise ReaderError(
+                f"{path}: corrupt or truncated bag after {index} messages of the read topics "
+                f"({_one_line(exc)})"
+            ) from None
+        index += 1
+        topic = str(conn.topic)
         try:
             msg = reader.deserialize(raw, conn.msgtype)
         except Exception:  # a corrupt message: count it, keep the rest
-            notes.add(f"{conn.topic}: messages that could not be decoded (skipped)")
+            notes.add(f"{topic}: messages that could not be decoded (skipped)", detail=f"#{index}")
             continue
-        rows.add(used[conn.topic], conn.msgtype, msg, record_ns)
+        try:
+            rows.add(used[topic], conn.msgtype, msg, record_ns)
+        except MALFORMED as exc:  # decoded but with unusable fields: count it, keep the rest
+            notes.add(
+                f"{topic}: messages with malformed fields (skipped)",
+                detail=f"#{index}: {type(exc).__name__}: {str(exc)[:80]}",
+            )
 
 
 def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap) -> Log:
@@ -191,12 +234,14 @@ def _dvl(rows: Rows, notes: Notes, metadata: dict) -> Dvl | None:
             ]
             notes.add("dvl: velocity_mode never set; valid = at least 3 good beams", len(good))
         dvl, order = rows.dvl.build(notes)
-        return _merge_json(dvl, order, rows, metadata)
+        return _merge_json(dvl, order, rows, metadata) if len(dvl) else None
     if rows.json_velocity:
         fallback = DvlRows()
         for t, obj in rows.json_velocity:
             add_velocity_report(fallback, obj, t)
         dvl, order = fallback.build(notes)
+        if not len(dvl):
+            return None
         tov = np.array(fallback.extra["time_of_validity"])[order]
         if np.isfinite(tov).any():
             metadata["dvl_time_of_validity_s"] = tov
@@ -217,8 +262,9 @@ def _merge_json(dvl: Dvl, order: np.ndarray, rows: Rows, metadata: dict) -> Dvl:
         obj = by_key.get(key)
         if obj is None:
             continue
-        if "covariance" in obj and np.isnan(cov[i]).all():
-            cov[i] = np.asarray(obj["covariance"], dtype=np.float64).reshape(3, 3)
+        obj_cov = _covariance(obj)
+        if obj_cov is not None and np.isnan(cov[i]).all():
+            cov[i] = obj_cov
         if obj.get("time_of_validity") is not None:
             tov[i] = float(obj["time_of_validity"]) * 1e-6
     if np.isfinite(tov).any():
@@ -254,7 +300,14 @@ def _tf_mounting(transforms: list, topics: TopicMap, notes: Notes) -> Mounting |
                 detail=f"{parent} -> {child}",
             )
             continue
-        rpy = quaternion_to_rpy(np.asarray(quaternion, dtype=np.float64))
+        q = np.asarray(quaternion, dtype=np.float64)
+        if not (np.isfinite(q).all() and np.isfinite(translation).all()) or not np.any(q):
+            notes.add(
+                "tf_static: sensor transforms with a non-finite or zero rotation (ignored)",
+                detail=f"{parent} -> {child}",
+            )
+            continue
+        rpy = quaternion_to_rpy(q)
         changes[sensor] = {"translation": translation, "rotation": tuple(float(a) for a in rpy)}
     return Mounting().updated(changes) if changes else None
 
@@ -265,12 +318,45 @@ def _sidecar(path: Path, notes: Notes) -> tuple[Mounting | None, dict]:
     if not file.exists():
         return None, {}
     try:
-        data = yaml.safe_load(file.read_text(encoding="utf-8")) or {}
+        check_regular(file)
+        data = yaml.safe_load(file.read_text(encoding="utf-8"))
+        if data is None:
+            data = {}
+        if not isinstance(data, dict):
+            raise TypeError(f"a mapping is expected, found a {type(data).__name__}")
         mounting = Mounting.from_dict(data["mounting"]) if "mounting" in data else None
-    except (OSError, yaml.YAMLError, TypeError, KeyError, ValueError, UndertowError) as exc:
+        if mounting is not None and not np.isfinite(_mount_values(mounting)).all():
+            raise ValueError("mounting has non-finite values")
+    except (OSError, yaml.YAMLError, UnicodeDecodeError, UndertowError, *MALFORMED) as exc:
         notes.add(f"{SIDECAR} unreadable, its mounting and metadata ignored ({_one_line(exc)})")
         return None, {}
-    return mounting, {k: v for k, v in data.items() if k != "mounting"}
+    rest = {str(k): v for k, v in data.items() if k != "mounting"}
+    if not isinstance(rest.get("metadata", {}), dict):
+        notes.add(f"{SIDECAR}: metadata is not a mapping (ignored)")
+        rest.pop("metadata")
+    _check_numeric(rest.get("metadata") or {}, notes)
+    return mounting, rest
+
+
+def _mount_values(mounting: Mounting) -> list[float]:
+    return [v for m in mounting.to_dict().values() for part in m.values() for v in part]
+
+
+def _check_numeric(metadata: dict, notes: Notes) -> None:
+    """Drop (with a note) sidecar metadata the estimation reads as a number that is not a
+    finite positive number (e.g. ``water_density_kg_m3: sea``)."""
+    for key in NUMERIC_METADATA:
+        if key not in metadata:
+            continue
+        value = metadata[key]
+        try:
+            ok = isinstance(value, int | float) and not isinstance(value, bool)
+            ok = ok and math.isfinite(float(value)) and value > 0
+        except OverflowError:
+            ok = False
+        if not ok:
+            notes.add(f"{SIDECAR}: {key} is not a positive number (ignored)", 1, repr(value)[:40])
+            del metadata[key]
 
 
 __all__ = ["read_rosbag", "SIDECAR"]

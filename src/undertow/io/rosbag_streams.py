@@ -15,7 +15,7 @@ import numpy as np
 
 from ..log import GroundTruth, Imu, Pressure, SonarRange, WaveProbe
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
-from ._collect import DvlRows, Notes, count_nan_rows, time_order
+from ._collect import MALFORMED, DvlRows, Notes, count_nan_rows, time_order
 from .a50_json import add_velocity_report, is_position_report, is_velocity_report, position_row
 from .msgdefs import A50_DVL, MARINE_DVL
 
@@ -167,19 +167,26 @@ class Rows:
                 self.json_velocity.append((ns_to_s(record_ns), obj))
             elif is_position_report(obj):
                 self.json_position.append(position_row(obj))
-        except (ValueError, KeyError, TypeError, AttributeError):
+        except MALFORMED:
             self.notes.add("dvl_json: malformed JSON messages skipped")
 
     # -- builders ---------------------------------------------------------------------------
 
-    def _table(self, stream: str, width: int) -> np.ndarray:
+    def _table(self, stream: str, width: int) -> np.ndarray | None:
+        """The rows of ``stream`` with a finite time, time-ordered (None, noted, if none)."""
         arr = np.array(self.rows[stream], dtype=np.float64).reshape(-1, width)
-        return arr[time_order(arr[:, 0], stream, self.notes)]
+        arr = arr[time_order(arr[:, 0], stream, self.notes)]
+        if not len(arr):
+            self.notes.add(f"{stream}: no message with a finite time (stream dropped)")
+            return None
+        return arr
 
     def imu(self) -> Imu | None:
         if not self.rows["imu"]:
             return None
         a = self._table("imu", 13)
+        if a is None:
+            return None
         count_nan_rows(self.notes, "imu", a[:, 1:7])
         return Imu(
             t=a[:, 0],
@@ -192,6 +199,8 @@ class Rows:
         if not self.rows["pressure"]:
             return None
         a = self._table("pressure", 2)
+        if a is None:
+            return None
         count_nan_rows(self.notes, "pressure", a[:, 1])
         p = a[:, 1]
         med = np.nanmedian(p) if np.isfinite(p).any() else math.nan
@@ -207,6 +216,8 @@ class Rows:
         if not self.rows["sonar"]:
             return None
         a = self._table("sonar", 2)
+        if a is None:
+            return None
         count_nan_rows(self.notes, "sonar", a[:, 1])
         fov, rmin, rmax = (float(x) for x in self.sonar_limits)
         return SonarRange(
@@ -217,6 +228,8 @@ class Rows:
         if not self.rows["wave_probe"]:
             return None
         a = self._table("wave_probe", 2)
+        if a is None:
+            return None
         count_nan_rows(self.notes, "wave_probe", a[:, 1])
         return WaveProbe(t=a[:, 0], elevation=a[:, 1], x=float(self.probe_x))
 
@@ -224,6 +237,8 @@ class Rows:
         if not self.rows["ground_truth"]:
             return None
         a = self._table("ground_truth", 11)
+        if a is None:
+            return None
         count_nan_rows(self.notes, "ground_truth", a[:, 1:8])
         rpy = quaternion_to_rpy(a[:, 4:8])
         twist = a[:, 8:11]

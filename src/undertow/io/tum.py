@@ -2,7 +2,10 @@
 
 Orientation is roll, pitch, yaw (rad) in memory and a quaternion (x, y, z, w) in the file
 (:func:`undertow.rotations.rpy_to_quaternion`). Numbers are written with full precision
-(``repr``), lines starting with ``#`` are comments. Writes are atomic.
+(``repr``), lines starting with ``#`` are comments. Writes are atomic. Reading treats every line
+as untrusted: a malformed line (not 8 numbers) or a pose with a non-finite time is skipped and
+counted (one warning naming the first line), poses out of time order are sorted (counted); a file
+with no usable pose is one :class:`~undertow.errors.ReaderError` line.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
 from ..log import GroundTruth
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
+from ._collect import Notes, check_regular, time_order
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
@@ -46,12 +50,14 @@ def read_tum(path) -> GroundTruth:
     :class:`~undertow.log.GroundTruth` (a TUM file holds poses only: no velocity, no
     covariance)."""
     path = Path(path)
+    if not path.exists():
+        raise ReaderError(f"{path}: no such file")
+    check_regular(path)
     try:
         lines = path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError as exc:
-        raise ReaderError(f"{path}: no such file") from exc
     except (OSError, UnicodeDecodeError) as exc:
-        raise ReaderError(f"{path}: cannot read TUM file: {exc}") from exc
+        raise ReaderError(f"{path}: cannot read TUM file: {exc}") from None
+    notes = Notes(str(path))
     rows = []
     for number, line in enumerate(lines, start=1):
         text = line.strip()
@@ -63,9 +69,12 @@ def read_tum(path) -> GroundTruth:
                 raise ValueError(f"{len(fields)} fields, expected 8 (t tx ty tz qx qy qz qw)")
             rows.append([float(v) for v in fields])
         except ValueError as exc:
-            raise ReaderError(f"{path}: line {number}: malformed TUM pose ({exc})") from exc
-    if not rows:
-        raise ReaderError(f"{path}: no poses in TUM file")
-    arr = np.array(rows)
-    rpy = quaternion_to_rpy(arr[:, 4:8])
+            notes.add("malformed TUM lines skipped", 1, f"line {number}: {exc}")
+    with np.errstate(all="ignore"):
+        arr = np.array(rows, dtype=np.float64).reshape(-1, 8)
+        arr = arr[time_order(arr[:, 0], "poses", notes)]
+        if not len(arr):
+            raise ReaderError(f"{path}: no usable pose in TUM file ({'; '.join(notes.lines())})")
+        rpy = quaternion_to_rpy(arr[:, 4:8])
+    notes.finish()
     return GroundTruth(t=arr[:, 0], position=arr[:, 1:4], orientation=rpy)

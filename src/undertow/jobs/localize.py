@@ -18,9 +18,12 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from .._util.atomic import check_output_folder
+from .._util.atomic import check_output_file, check_output_folder
+from ..errors import ConfigError
 from ..estimation.calibration import Calibration, calibrate
+from ..estimation.config import DEFAULT_GATE
 from ..estimation.localizer import check_options, localize
+from ..estimation.noise import NoiseProfile
 from ..evaluation.trajectory import TrajectoryErrors, trajectory_rmse
 from ..io.results import save_trajectory
 from ..io.tum import read_tum
@@ -89,6 +92,7 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     if out_dir is not None:
         inputs = [path, _path_or_none(profile), _path_or_none(calibration), settings_path, topics]
         check_output_folder(out_dir, overwrite, inputs=inputs)
+    profile, calibration = _read_options(profile, wave, calibration, extrapolate)
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(path, topics, settings)
@@ -112,6 +116,20 @@ def _path_or_none(value):
     return value if isinstance(value, (str, Path)) else None
 
 
+def _read_options(profile, wave, calibration, extrapolate: bool):
+    """The noise profile and calibration read and checked, and a given wave condition looked
+    up in that profile, before any log is read: a wrong option fails at once, not after it."""
+    if not isinstance(profile, NoiseProfile):
+        profile = NoiseProfile.paper() if profile is None else NoiseProfile.from_yaml(profile)
+    if wave is not None:
+        with warnings.catch_warnings():  # its warnings are raised again where it is used
+            warnings.simplefilter("ignore")
+            profile.noise(wave, extrapolate=extrapolate)
+    if calibration is not None and not isinstance(calibration, Calibration):
+        calibration = Calibration.from_yaml(calibration)
+    return profile, calibration
+
+
 @dataclass(frozen=True)
 class CalibrationResult:
     """The calibration (what was estimated, and why the rest was not), the warnings raised and
@@ -132,11 +150,14 @@ def calibrate_file(log_path: str | Path, ground_truth: str | Path | None = None,
     calibration YAML is written there (for ``localize_file(calibration=...)``)."""
     if not isinstance(settings, Settings):
         settings = Settings.from_yaml(settings)
+    if out is not None:
+        check_output_file(out)
     caught: list[str] = []
     with collect_warnings(caught):
+        truth = None if ground_truth is None else read_tum(ground_truth)  # before the log
         log = load_log(log_path, topics, settings)
-        if ground_truth is not None:
-            log = log.replace(ground_truth=read_tum(ground_truth))
+        if truth is not None:
+            log = log.replace(ground_truth=truth)
         calibration = calibrate(log)
     if out is not None:
         calibration.save_yaml(out)
@@ -159,7 +180,28 @@ def evaluate_trajectory_file(estimate: str | Path, ground_truth: str | Path,
                              align: str = "none") -> TrajectoryEvaluation:  # fmt: skip
     """Evaluate a ``trajectory.npz`` (or its localization folder) against a ground-truth TUM
     file (:func:`~undertow.evaluation.trajectory.trajectory_rmse`; ``align``: none | origin)."""
+    if align not in ("none", "origin"):  # checked before the files are read
+        raise ConfigError(f"align must be 'none' or 'origin', not {align!r}")
     caught: list[str] = []
     with collect_warnings(caught):
         errors = trajectory_rmse(Trajectory.load_npz(estimate), read_tum(ground_truth), align)
     return TrajectoryEvaluation(errors, tuple(caught))
+
+
+def gate_option(text: str | None) -> dict:
+    """The localizer override for ``--gate TEXT``: {} when not given, ``gate_probability``
+    None for ``off``, ``"default"`` for ``default`` (the conservative default gate), else a
+    chi-square probability (checked with the other options; a non-number is one line)."""
+    if text is None:
+        return {}
+    word = text.strip().lower()
+    if word in ("off", "none", "null"):
+        return {"gate_probability": None}
+    if word == DEFAULT_GATE:
+        return {"gate_probability": DEFAULT_GATE}
+    try:
+        return {"gate_probability": float(word)}
+    except ValueError:
+        raise ConfigError(
+            f"--gate: expected off, default or a probability in (0, 1), not {text!r}"
+        ) from None

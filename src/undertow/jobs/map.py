@@ -14,6 +14,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from .._util.atomic import check_output_folder
 from ..errors import ConfigError, DataError, ReaderError
 from ..evaluation.cloud import MapEvaluation, evaluate_map, map_threshold
@@ -78,6 +80,9 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     seed from. With ``out_dir``, the folder is checked before any work and then written
     (:func:`~undertow.io.results.save_map`). Warnings are returned in ``result.warnings``."""
     settings_path = None if isinstance(settings, Settings) else settings
+    if not isinstance(settings, Settings):
+        settings = Settings.from_yaml(settings_path)
+    config = mapping_config(settings, overrides)  # the options first, then the files
     if out_dir is not None:
         given_prior = None if isinstance(prior, OccupancyMap) else prior
         inputs = [log_path, trajectory_path, given_prior, settings_path, topics]
@@ -85,18 +90,29 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     trajectory_file = _npz_file(trajectory_path, "trajectory.npz", _TRAJECTORY_NPZ)
     if prior is not None and not isinstance(prior, OccupancyMap):
         prior = _npz_file(prior, "map.npz", MAP_FILE, "prior ")
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings_path)
-    config = mapping_config(settings, overrides)
+    _check_prior(prior, config)
+    trajectory = Trajectory.load_npz(trajectory_file)  # read before the (longer) log
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(log_path, topics, settings)
-        result = map_log(log, Trajectory.load_npz(trajectory_file), config, prior=prior)
+        result = map_log(log, trajectory, config, prior=prior)
     result.warnings = caught
     if out_dir is not None:
         save_map(result.map, config.model_dump(mode="json"), result.metadata, out_dir, overwrite,
                  threshold=config.occupied_threshold)  # fmt: skip
     return result
+
+
+def _check_prior(prior, config: MappingConfig) -> None:
+    """Read a prior map given as a file and check it fits ``config`` before the log is read (the
+    mapper reads it again and records where it came from)."""
+    if prior is None:
+        return
+    prior_map = prior if isinstance(prior, OccupancyMap) else OccupancyMap.load(prior)
+    if not np.isclose(prior_map.resolution, config.resolution):
+        raise ConfigError(
+            f"prior map resolution {prior_map.resolution} m differs from {config.resolution} m"
+        )
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .._util.atomic import check_output_file
 from ..errors import UndertowError
 from ..estimation.characterize import Characterization, characterize
 from ..settings import Settings
@@ -58,6 +59,8 @@ def characterize_files(
     noise profile is written there (YAML for `undertow localize --profile`)."""
     if not isinstance(settings, Settings):
         settings = Settings.from_yaml(settings)
+    if out is not None:
+        check_output_file(out)
     caught: list[str] = []
     with collect_warnings(caught):
         result = characterize([load_log(p, topics, settings) for p in paths])

@@ -5,6 +5,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from ..errors import DataError
 from ..log import Log
 from ..occupancy import OccupancyMap
 from ..trajectory import Trajectory
@@ -38,6 +41,8 @@ def map_log(
         occupancy = mapper.occupancy()
     except MemoryError:
         raise out_of_memory(config.resolution) from None
+    except DataError as error:
+        raise _implausible_trajectory(trajectory) or error from None
     # the threshold the map was made with, for `evaluate map` (older maps: 0.5)
     occupancy = dataclasses.replace(
         occupancy,
@@ -56,3 +61,30 @@ def map_log(
         "source": log.source,
     }
     return MappingResult(occupancy, config, metadata)
+
+
+# no underwater vehicle this package maps with moves faster than this (m/s)
+PLAUSIBLE_SPEED_M_S = 20.0
+
+
+def _implausible_trajectory(trajectory: Trajectory) -> DataError | None:
+    """The error to raise instead of a map-extent one when the trajectory itself is
+    implausible (a step faster than PLAUSIBLE_SPEED_M_S, or not finite): then the
+    localization, not the map origin, is at fault. None when the trajectory looks sound."""
+    p, t = np.asarray(trajectory.position, float), np.asarray(trajectory.t, float)
+    if len(p) < 2:
+        return None
+    if not np.all(np.isfinite(p)):
+        return DataError("map: the trajectory has non-finite positions: it is wrong, not the map"
+                         " origin; check the localization's warnings")  # fmt: skip
+    step, dt = np.linalg.norm(np.diff(p, axis=0), axis=1), np.diff(t)
+    fast = np.flatnonzero((dt > 0) & (step > PLAUSIBLE_SPEED_M_S * dt))
+    if fast.size == 0:
+        return None
+    k = fast[0]
+    return DataError(
+        f"map: the trajectory jumps {np.linalg.norm(p[k + 1] - p[k]):.3g} m in "
+        f"{t[k + 1] - t[k]:.3g} s at t = {t[k]:.3f} s (faster than {PLAUSIBLE_SPEED_M_S:g} m/s): "
+        "the localization is wrong, not the map origin; check its warnings and the counts in "
+        "its config.yaml (localize with the default gate and envelopes)"
+    )

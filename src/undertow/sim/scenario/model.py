@@ -194,18 +194,30 @@ def _read_yaml(path, label: str) -> dict:
     return data
 
 
+def _is_file(path) -> bool:
+    """``path.is_file()``, False for a name the OS refuses (too long, a NUL byte)."""
+    try:
+        return Path(path).is_file()
+    except (OSError, ValueError):
+        return False
+
+
 def _raw(name_or_path: str | Path, depth: int = 0) -> tuple[dict, str]:
     text = str(name_or_path)
     builtin = _builtin_dir() / f"{text}.yaml"
-    if builtin.is_file():
+    if "/" not in text and _is_file(builtin):
         data, label = _read_yaml(builtin, f"scenario {text}"), f"built-in scenario {text}"
-    elif Path(text).is_file():
+    elif _is_file(text):
         data, label = _read_yaml(Path(text), text), text
     else:
         names = ", ".join(list_scenarios())
         raise ConfigError(f"unknown scenario {text!r}: not a file; built-ins are: {names}")
     base = data.pop("base", None)
     if base is not None:
+        if not isinstance(base, str):
+            raise ConfigError(
+                f"{label}: field base: the name of a scenario or a file, got {base!r:.40}"
+            )
         if depth > 8:
             raise ConfigError(f"{label}: field base: too deep a chain of base scenarios")
         try:
