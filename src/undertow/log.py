@@ -17,6 +17,7 @@ stages without copies or surprises.
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -429,11 +430,15 @@ class Mounting:
             for name, value in fields.items():
                 try:
                     vector = tuple(float(v) for v in value)
-                except (TypeError, ValueError):
+                except (TypeError, ValueError, OverflowError):
                     vector = ()
                 if name not in ("translation", "rotation") or len(vector) != 3:
                     raise ConfigError(
                         f"mounting.{sensor}.{name}: expected translation or rotation, 3 numbers"
+                    )
+                if not all(math.isfinite(v) for v in vector):
+                    raise ConfigError(
+                        f"mounting.{sensor}.{name}: non-finite values (3 finite numbers expected)"
                     )
                 mounts[sensor][name] = vector
         return Mounting(**{k: SensorMount(**v) for k, v in mounts.items()})
