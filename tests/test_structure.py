@@ -26,6 +26,7 @@ STAGE_OF = {
     "log": "core",
     "trajectory": "core",
     "occupancy": "core",
+    "wavetrack": "core",
     "_util": "core",
     "io": "io",
     "sim": "sim",
