@@ -92,6 +92,7 @@ class Trajectory:
                 state_names=np.array(STATE_NAMES),
                 variant=np.array(self.variant),
                 metadata_json=np.array(metadata),
+                **_wave_arrays(self.metadata),
             )
         return path
 
@@ -126,6 +127,21 @@ class Trajectory:
 
 
 _NOT_NPZ = "not a trajectory.npz written by `undertow localize`"
+
+
+def _wave_arrays(metadata: dict) -> dict:
+    """The wave condition the filter followed over time (metadata ``wave_track``, e.g. from
+    ``--wave auto``) as arrays ``wave_t``, ``wave_amplitude_m``, ``wave_frequency_hz`` (NaN
+    where calm); none for a constant condition."""
+    track = metadata.get("wave_track")
+    if not isinstance(track, dict) or "t" not in track:
+        return {}
+    f = [np.nan if v is None else v for v in track.get("frequency_hz", [])]
+    return {
+        "wave_t": np.asarray(track["t"], float),
+        "wave_amplitude_m": np.asarray(track["amplitude_m"], float),
+        "wave_frequency_hz": np.asarray(f, float),
+    }
 
 
 def _check_npz(path: Path) -> None:

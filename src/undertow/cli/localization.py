@@ -35,7 +35,10 @@ def localize(
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
     variant: Annotated[
         str | None,
-        typer.Option(help="baseline | be (bias estimation) | an (added noise) | proposed"),
+        typer.Option(
+            help="baseline | be (bias estimation) | an (added noise) | proposed | adaptive-r "
+            "(innovation-adaptive R, a peer baseline)"
+        ),
     ] = None,
     profile: Annotated[
         Path | None, typer.Option(help="Wave noise profile YAML (default: the paper's Table I).")
@@ -43,8 +46,10 @@ def localize(
     wave: Annotated[
         str | None,
         typer.Option(
-            help="Wave condition by name, e.g. calm or wave-a0.10-f1.00 (default: the one the "
-            "log records, e.g. in the bag's sidecar undertow.yaml, else calm)."
+            help="Wave condition: auto (estimated over time from the log's own barometer, DVL "
+            "and orientation; the noise follows it), or a name, e.g. calm or wave-a0.10-f1.00 "
+            "(default: the one the log records, e.g. in the bag's sidecar undertow.yaml, else "
+            "calm)."
         ),
     ] = None,
     wave_amplitude: Annotated[float | None, typer.Option(help="Wave amplitude, m.")] = None,
@@ -123,7 +128,9 @@ def _wave_source(result, by_name: str | None) -> str:
     """Where the wave condition of ``result`` came from, and the option that sets it."""
     from ..estimation.localizer import WAVE_DEFAULT, WAVE_GIVEN
 
-    if result.wave_source == WAVE_GIVEN:
+    if by_name is not None and by_name.strip().lower() == "auto":
+        how = "--wave auto: estimated over time from the log; config.yaml has wave_track"
+    elif result.wave_source == WAVE_GIVEN:
         how = "--wave" if by_name is not None else "--wave-amplitude/--wave-frequency"
     elif result.wave_source == WAVE_DEFAULT:
         how = "default: none given, none recorded in the log; set it with --wave"

@@ -61,13 +61,17 @@ def _characterize_table(rows: list[dict]):
     from rich.table import Table
 
     table = Table(title="Wave characterization (DVL std in the DVL frame, m/s)")
-    for col in ("run", "a (m)", "f (Hz)", "vx", "vy", "vz", "extra vx", "depth std (m)"):
+    columns = ("run", "a (m)", "f (Hz)", "onboard a", "onboard f", "vx", "vy", "vz", "extra vx",
+               "depth std (m)")  # fmt: skip
+    for col in columns:
         table.add_column(col, justify="right")
     for row in rows:
         table.add_row(
             row["source"],
             _fmt(row["amplitude_m"]),
             _fmt(row["frequency_hz"]),
+            _fmt(row.get("onboard_amplitude_m")),
+            _fmt(row.get("onboard_frequency_hz")),
             *(_fmt(v) for v in row["dvl_std_m_s"]),
             _fmt(row["dvl_extra_std_m_s"][0]),
             _fmt(row["depth_std_m"]),

@@ -74,6 +74,9 @@ class RunCharacterization:
     depth_std_m: float | None
     reference: str
     notes: list[str] = field(default_factory=list)
+    # the onboard estimate (undertow.estimation.waves) over the whole run: amplitude_m,
+    # frequency_hz, windows, platform; the probe's condition when there is one is the reference
+    onboard: dict | None = None
 
     @property
     def calm(self) -> bool:
@@ -176,7 +179,17 @@ def characterize_run(
     log.require("dvl", stage="characterize")
     notes: list[str] = []
     wave = estimate_waves(log.wave_probe) if log.wave_probe is not None else None
-    if wave is None:
+    onboard = onboard_waves(log, notes)
+    if wave is None and onboard is not None:
+        wave = WaveEstimate(
+            onboard["amplitude_m"], float("nan"), onboard["frequency_hz"],
+            calm=onboard["frequency_hz"] is None,
+        )  # fmt: skip
+        notes.append(
+            "no wave_probe stream: wave condition estimated from the onboard sensors "
+            f"({', '.join(onboard['sensors'])}; {onboard['windows']} window(s))"
+        )
+    elif wave is None:
         notes.append("no wave_probe stream: wave amplitude and frequency unknown (taken as calm)")
     elif wave.calm:
         notes.append(
@@ -194,6 +207,7 @@ def characterize_run(
     if count < 10:
         raise DataError(_too_few_samples(log, count, max_accel_m_s2))
     return RunCharacterization(
+        onboard=onboard,
         source=log.source,
         wave=wave,
         dvl_std_m_s=tuple(float(s) for s in std),
@@ -202,6 +216,33 @@ def characterize_run(
         reference=reference,
         notes=notes,
     )
+
+
+def onboard_waves(log: Log, notes: list[str]) -> dict | None:
+    """The onboard sea-state estimate (:func:`undertow.estimation.waves.estimate_sea_state`)
+    over the whole run, summarized: the median over windows of amplitude and frequency (calm:
+    frequency None) and the streams used. None, with a note, when it cannot be made."""
+    from ..errors import UndertowError
+    from .waves import estimate_sea_state
+
+    try:
+        est = estimate_sea_state(log)
+    except UndertowError as exc:
+        notes.append(f"onboard wave estimate not available: {exc}")
+        return None
+    if not est.windows:
+        notes.append("onboard wave estimate not available: no window")
+        return None
+    a = float(np.median([w.amplitude_m for w in est.windows]))
+    f = [w.frequency_hz for w in est.windows if w.frequency_hz is not None]
+    sensors = sorted({s for w in est.windows for s in w.sensors})
+    return {
+        "amplitude_m": a,
+        "frequency_hz": float(np.median(f)) if f and a > 0 else None,
+        "windows": len(est.windows),
+        "platform": est.windows[0].platform,
+        "sensors": sensors,
+    }
 
 
 def _too_few_samples(log: Log, count: int, max_accel_m_s2: float) -> str:
@@ -340,6 +381,10 @@ class Characterization:
                         run.wave.amplitude_zero_crossing_m if run.wave else None
                     ),
                     "frequency_hz": run.wave.frequency_hz if run.wave else None,
+                    "onboard_amplitude_m": run.onboard["amplitude_m"] if run.onboard else None,
+                    "onboard_frequency_hz": (
+                        run.onboard["frequency_hz"] if run.onboard else None
+                    ),
                     "dvl_std_m_s": list(run.dvl_std_m_s),
                     "dvl_extra_std_m_s": list(extra),
                     "depth_std_m": run.depth_std_m,

@@ -81,7 +81,8 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     (``variant``, ``output_rate_hz``, ``gate_probability``, ...) taking precedence over the
     settings' ``localizer`` section. ``profile``: noise profile (YAML path or NoiseProfile,
     default the paper's Table I); ``wave``: condition name or (amplitude, frequency), default
-    the one the log records, else calm; ``calibration``: a Calibration or its YAML file.
+    the one the log records, else calm; ``"auto"`` estimates it over time from the log's own
+    sensors (:mod:`undertow.estimation.waves`); ``calibration``: a Calibration or its YAML file.
     The options are checked before the log is read; with ``out_dir`` the folder is checked too
     and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``)."""
     settings_path = None if isinstance(settings, Settings) else settings
@@ -112,6 +113,11 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     )
 
 
+def is_auto(wave) -> bool:
+    """``wave`` asks for the condition estimated from the log itself (``--wave auto``)."""
+    return isinstance(wave, str) and wave.strip().lower() == "auto"
+
+
 def _path_or_none(value):
     return value if isinstance(value, (str, Path)) else None
 
@@ -121,7 +127,7 @@ def _read_options(profile, wave, calibration, extrapolate: bool):
     up in that profile, before any log is read: a wrong option fails at once, not after it."""
     if not isinstance(profile, NoiseProfile):
         profile = NoiseProfile.paper() if profile is None else NoiseProfile.from_yaml(profile)
-    if wave is not None:
+    if wave is not None and not is_auto(wave):
         with warnings.catch_warnings():  # its warnings are raised again where it is used
             warnings.simplefilter("ignore")
             profile.noise(wave, extrapolate=extrapolate)

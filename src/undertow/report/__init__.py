@@ -3,6 +3,7 @@
 from .figures import plot_disturbance, plot_kernel_shapes, plot_velocity
 from .figures_map import plot_map_distance, plot_map_slice, plot_rock_map
 from .figures_traj import plot_trajectories, plot_trajectory_errors
+from .figures_waves import plot_wave_estimate
 from .html import markdown_to_html, write_report
 
 __all__ = [
@@ -15,5 +16,6 @@ __all__ = [
     "plot_trajectories",
     "plot_trajectory_errors",
     "plot_velocity",
+    "plot_wave_estimate",
     "write_report",
 ]

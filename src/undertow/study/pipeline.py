@@ -10,8 +10,15 @@ For a seed s, with every simulator parameter from the built-in scenarios (never 
    own probe, the profile of step 2); the calibration's mu_b is used by the
    bias-estimating variants (the paper's "standard sensor calibration"), the DVL scale factor is
    NOT (the paper does not correct it); ``proposed+scale`` adds it (beyond the paper);
+   Beyond the paper, for the field: ``proposed+auto`` is the proposed filter with the wave
+   condition estimated from the run's own sensors (``--wave auto``, no probe), and
+   ``adaptive-r`` the peer baseline that adapts R from the innovations instead;
 5. map with CSM on the baseline trajectory and CSM, BKI (l = 0.15 m) and adaptive BKI on the
    proposed one (Table IV); evaluate against the ground truth.
+
+6. (beyond the paper) the changing-sea scenarios: the sea state changes during the run; the
+   proposed filter with the true schedule, with ``--wave auto``, with each fixed condition,
+   ``adaptive-r`` and the baseline, and the onboard wave estimate against the schedule.
 
 Returns plain, JSON-serializable numbers; :func:`run_seed_with_artifacts` also returns the
 in-memory objects the figures need.
@@ -32,11 +39,15 @@ from ..evaluation.trajectory import trajectory_rmse
 from ..mapping.config import MappingConfig
 from ..mapping.run import map_log
 from ..sim import load_scenario, simulate
+from ..wavetrack import WaveTrack
 from . import paper
 from .claims import evaluate_seed
 
 WAVE_CONDITIONS = ("wave-a0.10-f1.00", "wave-a0.10-f0.75", "wave-a0.05-f0.75")
 VARIANTS = ("baseline", "be", "an", "proposed")
+#: Beyond the paper, for the field: the proposed filter with the wave condition estimated from
+#: the log (no probe) and the innovation-adaptive peer baseline.
+FIELD_VARIANTS = ("proposed+auto", "adaptive-r")
 MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("adaptive", "proposed"))
 #: The states whose filter standard deviation is averaged along the trajectory (index in x).
 MEAN_STD_STATES = {"x_m": 0, "y_m": 1, "yaw_rad": 5, "vx_m_s": 6}
@@ -51,6 +62,7 @@ class StudySettings:
     conditions: tuple[str, ...] = WAVE_CONDITIONS
     calm: str = "calm"
     rock_survey: str | None = "rock-survey"
+    changing_sea: tuple[str, ...] = ("changing-sea-carriage", "changing-sea-survey")
     bki_length_scale: float = paper.BKI_LENGTH_SCALE_M
 
 
@@ -61,6 +73,7 @@ class Artifacts:
     simulations: dict = field(default_factory=dict)
     trajectories: dict = field(default_factory=dict)  # (condition, variant) -> Trajectory
     maps: dict = field(default_factory=dict)  # (condition, "method/variant") -> OccupancyMap
+    wave_estimates: dict = field(default_factory=dict)  # scenario -> (estimate dict, truth)
 
 
 def run_seed(seed: int, settings: StudySettings | None = None) -> dict:
@@ -91,11 +104,12 @@ def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
         row = table1[name]
         wave = (row["amplitude_m"], row["frequency_hz"])
         loc = {}
-        for variant in (*VARIANTS, "proposed+scale"):
+        for variant in (*VARIANTS, "proposed+scale", *FIELD_VARIANTS):
             base = variant.split("+")[0]
             params = {} if variant.endswith("+scale") else {"dvl_scale_factor": 1.0}
+            run_wave = "auto" if variant.endswith("+auto") else wave
             traj = localize(
-                log, base, profile=char.profile, wave=wave, calibration=calibration, **params
+                log, base, profile=char.profile, wave=run_wave, calibration=calibration, **params
             )
             art.trajectories[(name, variant)] = traj
             loc[variant] = _trajectory_metrics(traj, log.ground_truth)
@@ -105,6 +119,14 @@ def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
         results["rock_survey"] = _rock_survey(
             settings.rock_survey, seed, calibration, char.profile, art
         )
+    fixed = {"calm": "calm"}
+    fixed.update(
+        {n: (table1[n]["amplitude_m"], table1[n]["frequency_hz"]) for n in settings.conditions}
+    )
+    results["changing_sea"] = {
+        name: _changing_sea(name, seed, calibration, char.profile, fixed, art)
+        for name in settings.changing_sea
+    }
     results["claims"], results["claims_table1"] = evaluate_seed(results)
     return results, art
 
@@ -163,6 +185,58 @@ def _rock_survey(name: str, seed: int, calibration, profile, art: Artifacts) -> 
         evaluation = evaluate_map(pts[inside], sim.floor_cloud[near], resolution=0.1)
         out[method] = to_plain(evaluation.to_dict())
     return out
+
+
+def _changing_sea(name: str, seed: int, calibration, profile, fixed: dict, art) -> dict:
+    """A run whose sea state changes: the proposed filter with the true schedule (the
+    scenario's), with the condition estimated from the log (``auto``), with each ``fixed``
+    condition for the whole run; ``adaptive-r`` and the baseline; and the onboard wave
+    estimate's error against the schedule in its stationary windows."""
+    sim = simulate(load_scenario(name), seed=seed)
+    art.simulations[name] = sim
+    log = sim.log
+    truth = WaveTrack.from_dict(log.metadata["wave"], source="scenario")
+    runs = {
+        "baseline": ("baseline", None), "proposed": ("proposed", truth),
+        "proposed+auto": ("proposed", "auto"), "adaptive-r": ("adaptive-r", None),
+        **{f"fixed {label}": ("proposed", wave) for label, wave in fixed.items()},
+    }  # fmt: skip
+    out = {"localization": {}}
+    for key, (variant, wave) in runs.items():
+        traj = localize(log, variant, profile=profile, wave=wave, calibration=calibration,
+                        extrapolate=True, dvl_scale_factor=1.0)  # fmt: skip
+        art.trajectories[(name, key)] = traj
+        metrics = _trajectory_metrics(traj, log.ground_truth)
+        metrics["nees_deviation"] = abs(metrics["nees_mean"] / 6.0 - 1.0)
+        out["localization"][key] = metrics
+        if key == "proposed+auto":
+            art.wave_estimates[name] = (traj.metadata.get("wave_estimate"), truth)
+    out["wave_estimate"] = wave_estimate_errors(art.wave_estimates[name][0], truth)
+    return out
+
+
+def wave_estimate_errors(estimate: dict | None, truth: WaveTrack) -> dict:
+    """Largest and median relative errors (%) of the onboard estimate's amplitude and frequency
+    over its stationary windows (the truth the same at the window's start, centre and end and
+    not calm), and the count of such windows."""
+    errors_a, errors_f = [], []
+    for w in (estimate or {}).get("windows", []):
+        span = np.array([w["t_start"], 0.5 * (w["t_start"] + w["t_end"]), w["t_end"]])
+        a, f = truth.at(span)
+        if not (np.all(a > 0) and np.ptp(a) == 0 and np.ptp(f) == 0):
+            continue
+        errors_a.append(100 * abs(w["amplitude_m"] / a[1] - 1))
+        est_f = w["frequency_hz"] if w["frequency_hz"] is not None else np.nan
+        errors_f.append(100 * abs(est_f / f[1] - 1))
+    if not errors_a:
+        return {"windows": 0}
+    return {
+        "windows": len(errors_a),
+        "amplitude_error_max_pct": float(np.max(errors_a)),
+        "amplitude_error_median_pct": float(np.median(errors_a)),
+        "frequency_error_max_pct": float(np.max(errors_f)),
+        "frequency_error_median_pct": float(np.median(errors_f)),
+    }
 
 
 def _table1_row(row: dict) -> dict:

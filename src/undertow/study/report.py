@@ -30,6 +30,7 @@ def build_report(
     cond = tables["conditions"][0]
     figures = condition_figures(out / "figures", cond, art, settings)
     figures += rock_survey_figures(out / "figures", tables, art)
+    figures += wave_estimate_figures(out / "figures", art)
     sim = art.simulations[cond]
     report = write_report(
         out / "report.html",
@@ -107,6 +108,24 @@ def rock_survey_figures(figdir: Path, tables: dict, art: Artifacts) -> Figures:
     return [(caption, path)]
 
 
+def wave_estimate_figures(figdir: Path, art: Artifacts) -> Figures:
+    """The onboard wave estimate over time against the scenario's schedule, per changing-sea
+    scenario that ran."""
+    from ..report.figures_waves import plot_wave_estimate
+
+    out = []
+    for name, (estimate, truth) in art.wave_estimates.items():
+        if estimate is None:
+            continue
+        path = plot_wave_estimate(estimate, figdir / f"waves_{name}.png", truth, title=name)
+        caption = (
+            f"Wave condition over time ({name}): the estimate from the robot's own sensors per "
+            "window (blue, no wave probe) against the scenario's schedule (green)."
+        )
+        out.append((caption, path))
+    return out
+
+
 def adaptive_lengths():
     """(l_min, l_max) of the adaptive kernel the study maps with (the mapping defaults)."""
     from ..mapping.config import MappingConfig
@@ -130,7 +149,15 @@ def report_notes(tables: dict) -> list[str]:
                 f"({f['holds']}/{f['n']} seeds). The paper: {entry['statement']} "
                 f"Measured: {entry['why']}."
             )
-    for entry in tables["claims"].values():
+    for entry in tables.get("changing_sea_claims", {}).values():
+        f = entry["all"]
+        if f["n"]:
+            notes.append(
+                f"Changing sea: {entry['claim']} ({entry['test']}): "
+                f"{_verdict(f['holds'], f['n'])} ({f['holds']}/{f['n']} seeds). Measured: "
+                f"{entry['why']}."
+            )
+    for entry in [*tables["claims"].values(), *tables.get("field_claims", {}).values()]:
         counts = {c: entry[c] for c in tables["conditions"] if entry[c]["n"]}
         holds = sum(f["holds"] for f in counts.values())
         total = sum(f["n"] for f in counts.values())

@@ -8,7 +8,7 @@ cell is the mean over seeds with, for more than one seed, its 95 % Student-t int
 from __future__ import annotations
 
 from . import paper
-from .claims import CLAIMS, TABLE1_CLAIMS, Claim
+from .claims import CHANGING_SEA_CLAIMS, CLAIMS, FIELD_CLAIMS, TABLE1_CLAIMS, Claim
 from .pipeline import MAP_RUNS, ROCK_MARGIN_M
 from .stats import aggregate, claim_fraction
 
@@ -34,6 +34,12 @@ def build_tables(results: list[dict]) -> dict:
         "rock_survey": agg.get("rock_survey"),
         "calibration": agg["calibration"],
         "claims": {c.id: _claim(c, results, conditions) for c in CLAIMS},
+        "field_claims": {c.id: _claim(c, results, conditions) for c in FIELD_CLAIMS},
+        "changing_sea": agg.get("changing_sea"),
+        "changing_sea_claims": {
+            c.id: _table1_claim(c, results, list(results[0].get("changing_sea", {})))
+            for c in CHANGING_SEA_CLAIMS
+        },
         "paper": {
             "table1": paper.TABLE_I,
             "table2_3": paper.TABLE_II_III,
@@ -191,21 +197,51 @@ def _titled(entry: dict) -> str:
     return f"{entry['claim']} ({entry['test']})"
 
 
-def table1_claims_markdown(t: dict) -> str:
+def table1_claims_markdown(t: dict, key: str = "table1_claims",
+                           title: str = "the paper's reading of Table I") -> str:  # fmt: skip
     rows = []
-    for entry in t.get("table1_claims", {}).values():
+    for entry in t.get(key, {}).values():
         f = entry["all"]
         if f["n"]:
             rows.append([_titled(entry), f"{f['holds']}/{f['n']}", entry["why"]])
-    header = ["the paper's reading of Table I", "holds in (seeds)", "measured, and why (not)"]
+    header = [title, "holds in (seeds)", "measured, and why (not)"]
     return _md(header, rows) if rows else ""
 
 
-def claims_markdown(t: dict) -> str:
+CHANGING_SEA_RUNS = ("baseline", "proposed", "proposed+auto", "adaptive-r")
+
+
+def changing_sea_markdown(t: dict, scenario: str) -> str:
+    """Per run: x, y, yaw, vx RMSE and NEES; then the onboard wave estimate's errors."""
+    r = t["changing_sea"][scenario]
+    runs = [*CHANGING_SEA_RUNS, *(k for k in r["localization"] if k.startswith("fixed "))]
+    axes = ("x_m", "y_m", "yaw_rad", "vx_m_s")
+    rows = []
+    for run in runs:
+        loc = r["localization"][run]
+        label = {"proposed": "proposed (true schedule)", "proposed+auto": "proposed --wave auto"}
+        rows.append([label.get(run, run), *(cell(loc["rmse"][a], 4) for a in axes),
+                     cell(loc["nees_mean"], 2)])  # fmt: skip
+    header = ["filter", *(f"{AXIS_LABELS[a]} RMSE" for a in axes), "NEES (6 = consistent)"]
+    w = r["wave_estimate"]
+    if not w.get("windows"):
+        est = "The onboard wave estimate has no stationary window to compare."
+    else:
+        est = (
+            f"Onboard wave estimate in the stationary windows ({cell(w['windows'], 0)}): "
+            f"amplitude error median {cell(w['amplitude_error_median_pct'], 1)} %, largest "
+            f"{cell(w['amplitude_error_max_pct'], 1)} %; frequency error median "
+            f"{cell(w['frequency_error_median_pct'], 1)} %, largest "
+            f"{cell(w['frequency_error_max_pct'], 1)} %."
+        )
+    return _md(header, rows) + "\n\n" + est
+
+
+def claims_markdown(t: dict, key: str = "claims") -> str:
     """Claim | holds in k/n seeds per condition | by construction; then, where a claim does not
     hold in every seed of a condition, why (from the measured values)."""
     rows, why_not = [], []
-    for entry in t["claims"].values():
+    for entry in t.get(key, {}).values():
         row = [_titled(entry)]
         for c in t["conditions"]:
             f = entry[c]
@@ -248,11 +284,27 @@ def render_markdown(t: dict) -> str:
             localization_markdown(t, c, ("be", "an", "proposed")),
             f"## Table IV: mapping ({c})",
             table4_markdown(t, c),
+            f"## Beyond the paper: no wave probe ({c})",
+            "The proposed filter with the probe's condition, with the condition estimated from "
+            "the run's own sensors (`--wave auto`), the innovation-adaptive peer baseline "
+            "`adaptive-r` (no wave model) and the baseline.",
+            localization_markdown(t, c, ("baseline", "proposed", "proposed+auto", "adaptive-r")),
         ]
     if t.get("rock_survey"):
         parts += [
             "## Rock survey (free vehicle in waves; the paper shows it only as a figure)",
             rock_survey_markdown(t["rock_survey"]),
         ]
+    for scenario in t.get("changing_sea") or {}:
+        parts += [
+            f"## Beyond the paper: a changing sea ({scenario})",
+            "The sea state changes during the run (the scenario's schedule). The proposed "
+            "filter with the true schedule, with `--wave auto`, and with each fixed condition "
+            "for the whole run; `adaptive-r` and the baseline.",
+            changing_sea_markdown(t, scenario),
+        ]
     parts += ["## The paper's claims in simulation", claims_markdown(t)]
+    if t.get("field_claims"):
+        parts += ["## Beyond the paper: claims for the field", claims_markdown(t, "field_claims"),
+                  table1_claims_markdown(t, "changing_sea_claims", "a changing sea")]  # fmt: skip
     return "\n\n".join(parts) + "\n"

@@ -1,0 +1,97 @@
+"""`undertow waves`: the wave condition over time from a log's own sensors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ._app import (
+    ConfigOption,
+    TopicsOption,
+    _print_json,
+    _print_warnings,
+    app,
+    console,
+    err,
+    user_errors,
+)
+
+
+@app.command()
+@user_errors
+def waves(
+    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
+    plot: Annotated[
+        Path | None, typer.Option(help="Draw the estimate over time (and the truth) to this PNG.")
+    ] = None,
+    platform: Annotated[
+        str,
+        typer.Option(
+            help="auto | rigid (sensor held firm: carriage, station keeping) | free (vehicle "
+            "riding the orbital motion)."
+        ),
+    ] = "auto",
+    window_periods: Annotated[
+        float, typer.Option(help="Window length in wave periods (stepped by half a window).")
+    ] = 20.0,
+    water_depth: Annotated[
+        float | None,
+        typer.Option(help="Water depth h, m (default: barometer depth + DVL altitude)."),
+    ] = None,
+    config: ConfigOption = None,
+    topics: TopicsOption = None,
+) -> None:
+    """Estimate the sea state (amplitude, frequency, direction) per window from the barometer,
+    the DVL and the orientation, with no wave probe; compared with the truth when the log has
+    one (a simulated run, a wave probe).
+
+    Example: `undertow waves runs/a10/log --plot waves.png`
+    """
+    from ..jobs.waves import waves_file
+
+    result = waves_file(
+        log_path, config, topics=topics, platform=platform, window_periods=window_periods,
+        water_depth_m=water_depth, plot=plot,
+    )  # fmt: skip
+    _print_warnings(result.warnings)
+    if as_json:
+        _print_json(result.to_dict())
+    else:
+        console.print(window_table(result))
+        for note in result.estimate.notes:
+            err.print(f"note: {note}", highlight=False, soft_wrap=True)
+    if plot is not None:
+        err.print(f"wrote {plot}")
+
+
+def _num(value, fmt: str) -> str:
+    return "-" if value is None else format(value, fmt)
+
+
+def window_table(result):
+    """A rich Table, one row per estimation window (and the truth at its centre, if known)."""
+    from rich.table import Table
+
+    est = result.estimate
+    table = Table(title=f"sea state: {len(est.windows)} window(s) of {est.window_s:.0f} s")
+    columns = ["start s", "end s", "a m", "f Hz", "f_e Hz", "Hm0 m", "dir deg", "rel deg",
+               "platform", "explained"]  # fmt: skip
+    if result.truth is not None:
+        columns += [f"true a ({result.truth.source})", "true f"]
+    for col in columns:
+        table.add_column(col, justify="left" if col == "platform" else "right")
+    for w in est.windows:
+        row = [
+            f"{w.t_start:.1f}", f"{w.t_end:.1f}", f"{w.amplitude_m:.3f}",
+            _num(w.frequency_hz, ".3f"), _num(w.encounter_frequency_hz, ".3f"),
+            f"{w.significant_height_m:.3f}", _num(w.direction_deg, ".0f"),
+            _num(w.relative_direction_deg, ".0f"), w.platform, f"{w.explained:.2f}",
+        ]  # fmt: skip
+        if result.truth is not None:
+            a, f = result.truth.at(0.5 * (w.t_start + w.t_end))
+            row += [f"{float(a):.3f}", "-" if not float(f) == float(f) else f"{float(f):.3f}"]
+        table.add_row(*row)
+    return table
