@@ -12,15 +12,31 @@ import pytest
 
 from undertow.mapping.config import MappingConfig
 from undertow.study import claims, paper
-from undertow.study.claims import CLAIMS, TABLE1_CLAIMS, MissingQuantity, evaluate_seed
-from undertow.study.pipeline import MAP_RUNS, MEAN_STD_STATES, VARIANTS, WAVE_CONDITIONS
+from undertow.study.claims import (
+    CHANGING_SEA_CLAIMS,
+    CLAIMS,
+    FIELD_CLAIMS,
+    FIXED_RUNS,
+    TABLE1_CLAIMS,
+    MissingQuantity,
+    evaluate_seed,
+)
+from undertow.study.pipeline import (
+    FIELD_VARIANTS,
+    MAP_RUNS,
+    MEAN_STD_STATES,
+    VARIANTS,
+    WAVE_CONDITIONS,
+)
 from undertow.study.report import report_notes
 from undertow.study.tables import build_tables, render_markdown
 
-FILTERS = (*VARIANTS, "proposed+scale")
+FILTERS = (*VARIANTS, "proposed+scale", *FIELD_VARIANTS)
+SEAS = ("changing-sea-carriage", "changing-sea-survey")
+SEA_RUNS = ("baseline", "proposed", "proposed+auto", "adaptive-r", *FIXED_RUNS)
 
 
-def fake_result(seed: int, conditions=WAVE_CONDITIONS) -> dict:
+def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS) -> dict:
     """A seed result with every leaf :func:`run_seed` writes, random but positive."""
     rng = np.random.default_rng(seed)
 
@@ -50,6 +66,20 @@ def fake_result(seed: int, conditions=WAVE_CONDITIONS) -> dict:
         "calibration": {"dvl_scale_factor": draw(), "dvl_scale_factor_std": draw(1e-4)},
         "localization": {c: {v: trajectory() for v in FILTERS} for c in conditions},
         "mapping": {c: {f"{m}/{v}": evaluation() for m, v in MAP_RUNS} for c in conditions},
+        "changing_sea": {
+            s: {
+                "localization": {r: {**trajectory(), "nees_deviation": draw()} for r in SEA_RUNS},
+                "wave_estimate": {
+                    "windows": int(rng.integers(1, 9)),
+                    **{
+                        f"{q}_error_{s}_pct": draw(5)
+                        for q in ("amplitude", "frequency")
+                        for s in ("max", "median")
+                    },
+                },  # fmt: skip
+            }
+            for s in seas
+        },
     }
     result["claims"], result["claims_table1"] = evaluate_seed(result)
     return result
@@ -97,6 +127,34 @@ REFERENCE = {
         L["proposed+scale"]["rmse"]["x_m"] < 0.5 * L["proposed"]["rmse"]["x_m"]
     ),
 }
+REFERENCE_FIELD = {
+    **{
+        f"wave_auto_close_to_true_{a}": lambda L, M, axis=axis: (
+            abs(L["proposed+auto"]["rmse"][axis] - L["proposed"]["rmse"][axis])
+            < 0.1 * L["proposed"]["rmse"][axis]
+        )
+        for a, axis in (("y", "y_m"), ("yaw", "yaw_rad"), ("vx", "vx_m_s"))
+    },
+    **{
+        f"wave_auto_better_than_baseline_{a}": lambda L, M, axis=axis: (
+            L["proposed+auto"]["rmse"][axis] < L["baseline"]["rmse"][axis]
+        )
+        for a, axis in (("y", "y_m"), ("yaw", "yaw_rad"), ("vx", "vx_m_s"))
+    },
+    "wave_model_beats_adaptive_r": lambda L, M: (
+        L["proposed"]["rmse"]["vx_m_s"] < L["adaptive-r"]["rmse"]["vx_m_s"]
+    ),
+}
+REFERENCE_SEA = {
+    f"changing_sea_auto_beats_fixed_{k}:{s}": (
+        lambda R, s=s, get=get: all(
+            get(R[s]["localization"]["proposed+auto"]) < get(R[s]["localization"][f])
+            for f in FIXED_RUNS
+        )
+    )
+    for s in SEAS
+    for k, get in (("vx", lambda r: r["rmse"]["vx_m_s"]), ("nees", lambda r: r["nees_deviation"]))
+}
 REFERENCE_TABLE1 = {
     "shorter_waves_more_dvl_noise": lambda t: (
         t["wave-a0.10-f1.00"]["dvl_std_m_s"]["vx"] > t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
@@ -118,6 +176,14 @@ def test_verdicts_are_the_hand_written_predicates(seed):
             assert result["claims"][key][c] == expected, (key, c)
     for key, pred in REFERENCE_TABLE1.items():
         assert result["claims_table1"][key] == pred(result["table1"])
+    assert [c.id for c in FIELD_CLAIMS] == list(REFERENCE_FIELD)
+    for key, pred in REFERENCE_FIELD.items():
+        for c in WAVE_CONDITIONS:
+            expected = pred(result["localization"][c], result["mapping"][c])
+            assert result["claims"][key][c] == expected, (key, c)
+    assert sorted(c.id for c in CHANGING_SEA_CLAIMS) == sorted(REFERENCE_SEA)
+    for key, pred in REFERENCE_SEA.items():
+        assert result["claims_table1"][key] == pred(result["changing_sea"]), key
 
 
 def test_a_missing_quantity_is_an_error_naming_the_claim_and_the_path():
@@ -145,7 +211,7 @@ def test_a_quantity_path_is_checked_when_the_claim_is_written():
 
 def test_table1_claims_apply_only_where_their_conditions_ran():
     """A reduced study (one wave condition): no Table I verdict, n = 0 in the tables, no text."""
-    results = [fake_result(s, conditions=("wave-a0.10-f0.75",)) for s in (0, 1)]
+    results = [fake_result(s, conditions=("wave-a0.10-f0.75",), seas=()) for s in (0, 1)]
     assert results[0]["claims_table1"] == {}
     tables = build_tables(results)
     for entry in tables["table1_claims"].values():
