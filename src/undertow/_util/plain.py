@@ -18,7 +18,8 @@ def to_plain(value, drop_unknown: bool = False):
         return {k: v for k, v in items if not (drop_unknown and v is None)}
     if isinstance(value, list | tuple):
         items = [to_plain(v, drop_unknown) for v in value]
-        return None if drop_unknown and any(v is None for v in items) else items
+        lost = any(p is None and v is not None for p, v in zip(items, value, strict=True))
+        return None if drop_unknown and lost else items
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, np.ndarray):

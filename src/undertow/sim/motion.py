@@ -22,25 +22,41 @@ at rest (u_c = 0) F = rho C_M V_b U omega sin(theta) + 1/2 rho C_D A_f U^2 |cos 
 1/2 rho C_D A_f (2 |u_c| u_w - sign(u_c) u_w^2), nearly linear, at the encounter frequency
 omega + k V (oncoming waves).
 
-Free vehicle: lawnmower passes (straight legs along x joined by half circles) at a commanded
-depth, followed at speed V with ramps, plus the orbital particle displacement xi(x, d, t) at the
-vehicle (it is carried by the flow); roll and pitch follow the local slope of the orbital
-surface through the vehicle, scaled by an attitude gain.
+Free vehicle: a plan-view path (x_p(s), y_p(s), psi(s)) by arc length s -- lawnmower passes
+(straight legs along x joined by half circles) or way points joined by straight legs whose
+corners are circular arcs of radius r (tangent length r tan(|phi|/2) for a turn phi; yaw rate
+V / r on the arc) -- followed at speed V with ramps at a commanded depth d, plus the orbital
+particle displacement xi(x, d, t) at the vehicle (it is carried by the flow); roll and pitch
+follow the local slope of the orbital surface through the vehicle, scaled by an attitude gain G:
+
+    p(t) = (x_p, y_p, d) + xi(x_p, y_p, d, t),   yaw = psi,
+    pitch = G sigma cos(beta - psi),   roll = -G sigma sin(beta - psi),
+    sigma = d zeta_up / d s_beta = -k (W / omega) sin(theta).
+
+On a straight leg at speed V and heading psi the wave phase at the vehicle advances at
+d theta / dt = k V cos(beta - psi) - omega: the vehicle heaves at the encounter frequency
+omega_e = |omega - k V cos(beta - psi)| (Faltinsen, "Sea Loads on Ships and Offshore
+Structures", 1990, ch. 2).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from ..rotations import rpy_to_matrix
-from .scenario.model import CarriageModel, SurveyModel
+from .scenario.model import CarriageModel, SurveyModel, WaypointsModel
+from .wavefield import WaveField
 from .waves import LinearWave
 
 
 def trapezoid_distance(t, length: float, speed: float, accel: float, t0: float) -> np.ndarray:
-    """Distance s(t) of a rest-accelerate-cruise-decelerate-rest profile starting at t0."""
+    """Distance s(t) of a rest-accelerate-cruise-decelerate-rest profile starting at t0
+    (0 for a zero length: station keeping)."""
+    if length <= 0:
+        return np.zeros(np.shape(t))
     v = min(speed, np.sqrt(length * accel))
     ta = v / accel
     tc = (length - v * ta) / v
@@ -53,6 +69,8 @@ def trapezoid_distance(t, length: float, speed: float, accel: float, t0: float) 
 
 
 def trapezoid_duration(length: float, speed: float, accel: float) -> float:
+    if length <= 0:
+        return 0.0
     v = min(speed, np.sqrt(length * accel))
     return 2 * v / accel + (length - v * v / accel) / v
 
@@ -62,7 +80,7 @@ class CarriageMotion:
     """Robot rigidly on the towing carriage, heading +x."""
 
     config: CarriageModel
-    wave: LinearWave
+    wave: LinearWave | WaveField
 
     @property
     def duration(self) -> float:
@@ -82,7 +100,7 @@ class CarriageMotion:
         """delta(t) e_beta (N, 3): the quasi-static Morison deflection of the strut."""
         c, m, w = self.config, self.config.mount, self.wave
         t = np.asarray(t, float)
-        if w.a == 0.0:
+        if w.is_calm:
             return np.zeros((t.size, 3))
         p = self.carriage_position(t)
         h = 1e-3
@@ -103,12 +121,40 @@ class CarriageMotion:
         return self.carriage_position(t) + self.mount_deflection(t), np.zeros((t.size, 3))
 
 
+def free_pose(config, wave, path, t) -> tuple[np.ndarray, np.ndarray]:
+    """Pose of a free vehicle following ``path`` = (s, xy, psi) (module docstring): trapezoidal
+    speed (ramps ``ramp_s``) after ``hold_before_s``, carried by the orbital flow."""
+    c, w = config, wave
+    t = np.atleast_1d(np.asarray(t, float))
+    s_path, xy, heading = path
+    accel = c.speed_m_s / c.ramp_s if c.ramp_s > 0 else 1e6
+    s = trapezoid_distance(t, s_path[-1], c.speed_m_s, accel, c.hold_before_s)
+    x, y = np.interp(s, s_path, xy[:, 0]), np.interp(s, s_path, xy[:, 1])
+    yaw = np.interp(s, s_path, heading)
+    disp = w.particle_displacement(x, y, c.depth_m, t)
+    pos = np.stack([x, y, np.full_like(x, c.depth_m)], 1) + disp
+    rpy = np.zeros((t.size, 3))
+    rpy[:, 2] = yaw
+    if not w.is_calm:
+        slope = w.orbital_slope(x, y, c.depth_m, t)  # d zeta_up / d along
+        along_body = np.cos(w.beta - yaw)
+        rpy[:, 1] = c.attitude_gain * slope * along_body
+        rpy[:, 0] = -c.attitude_gain * slope * np.sin(w.beta - yaw)
+    return pos, rpy
+
+
+def _free_duration(config, length: float) -> float:
+    c = config
+    accel = c.speed_m_s / c.ramp_s if c.ramp_s > 0 else 1e6
+    return c.hold_before_s + trapezoid_duration(length, c.speed_m_s, accel) + c.hold_after_s
+
+
 @dataclass(frozen=True)
 class SurveyMotion:
     """Free vehicle flying lawnmower passes over the rock, carried by the orbital flow."""
 
     config: SurveyModel
-    wave: LinearWave
+    wave: LinearWave | WaveField
 
     def _path(self):
         c = self.config
@@ -134,30 +180,71 @@ class SurveyMotion:
 
     @property
     def duration(self) -> float:
-        c = self.config
         s, _, _ = self._path()
-        accel = c.speed_m_s / c.ramp_s if c.ramp_s > 0 else 1e6
-        return c.hold_before_s + trapezoid_duration(s[-1], c.speed_m_s, accel) + c.hold_after_s
+        return _free_duration(self.config, s[-1])
 
     def pose(self, t) -> tuple[np.ndarray, np.ndarray]:
-        c, w = self.config, self.wave
-        t = np.atleast_1d(np.asarray(t, float))
-        s_path, xy, heading = self._path()
-        accel = c.speed_m_s / c.ramp_s if c.ramp_s > 0 else 1e6
-        s = trapezoid_distance(t, s_path[-1], c.speed_m_s, accel, c.hold_before_s)
-        x, y = np.interp(s, s_path, xy[:, 0]), np.interp(s, s_path, xy[:, 1])
-        yaw = np.interp(s, s_path, heading)
-        disp = w.particle_displacement(x, y, c.depth_m, t)
-        pos = np.stack([x, y, np.full_like(x, c.depth_m)], 1) + disp
-        rpy = np.zeros((t.size, 3))
-        rpy[:, 2] = yaw
-        if w.a > 0:
-            _, W = w.velocity_amplitude(c.depth_m)
-            slope = -w.k * (W / w.omega) * np.sin(w.phase(x, y, t))  # d zeta_up / d along
-            along_body = np.cos(w.beta - yaw)
-            rpy[:, 1] = c.attitude_gain * slope * along_body
-            rpy[:, 0] = -c.attitude_gain * slope * np.sin(w.beta - yaw)
-        return pos, rpy
+        return free_pose(self.config, self.wave, self._path(), t)
+
+
+@dataclass(frozen=True)
+class WaypointMotion:
+    """Free vehicle on straight legs between way points, corners rounded (``waypoint_path``)."""
+
+    config: WaypointsModel
+    wave: LinearWave | WaveField
+
+    @cached_property
+    def path(self):
+        c = self.config
+        pts = np.asarray(c.points, float)
+        pts = np.concatenate([pts] + [pts[1:]] * (c.laps - 1))
+        return waypoint_path(pts, c.turn_radius_m)
+
+    @property
+    def duration(self) -> float:
+        return _free_duration(self.config, self.path[0][-1])
+
+    def pose(self, t) -> tuple[np.ndarray, np.ndarray]:
+        return free_pose(self.config, self.wave, self.path, t)
+
+
+def corner_geometry(points: np.ndarray, radius: float):
+    """Per interior point i: unit directions in/out, turn phi_i (rad, left positive) and the
+    tangent length T_i = r tan(|phi_i| / 2) (arc from P_i - T_i u_in to P_i + T_i u_out)."""
+    d = np.diff(points, axis=0)
+    length = np.linalg.norm(d, axis=1)
+    u = d / length[:, None]
+    cross = u[:-1, 0] * u[1:, 1] - u[:-1, 1] * u[1:, 0]
+    dot = np.sum(u[:-1] * u[1:], axis=1)
+    phi = np.arctan2(cross, dot)
+    return u, length, phi, radius * np.tan(np.abs(phi) / 2)
+
+
+def waypoint_path(points: np.ndarray, radius: float, ds: float = 0.01):
+    """(s, xy, psi) sampled every ~``ds`` m along the polyline with arcs of ``radius`` at the
+    corners; psi is exact (constant on a leg, linear in s on an arc), unwrapped."""
+    u, length, phi, tang = corner_geometry(points, radius)
+    heading = np.arctan2(u[:, 1], u[:, 0])
+    cut = np.concatenate([[0.0], tang]), np.concatenate([tang, [0.0]])
+    xy, psi = [points[:1]], [heading[:1]]
+    for i in range(len(u)):
+        a = points[i] + cut[0][i] * u[i]
+        b = points[i + 1] - cut[1][i] * u[i]
+        n = max(int(np.ceil(np.linalg.norm(b - a) / ds)), 1)
+        w = np.linspace(0.0, 1.0, n + 1)[1:]
+        xy.append(a + w[:, None] * (b - a))
+        psi.append(np.full(n, heading[i]))
+        if i + 1 < len(u) and phi[i] != 0.0:
+            side = np.sign(phi[i])
+            centre = b + side * radius * np.array([-u[i, 1], u[i, 0]])
+            m = max(int(np.ceil(radius * abs(phi[i]) / ds)), 2)
+            ang = heading[i] + np.linspace(0.0, phi[i], m + 1)[1:]
+            xy.append(centre + side * radius * np.stack([np.sin(ang), -np.cos(ang)], 1))
+            psi.append(ang)
+    xy, psi = np.concatenate(xy), np.unwrap(np.concatenate(psi))
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    return s, xy, psi
 
 
 @dataclass(frozen=True)

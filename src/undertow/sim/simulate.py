@@ -17,13 +17,15 @@ from .._util.atomic import output_folder
 from ..errors import ConfigError
 from ..log import GroundTruth, Log
 from ..rotations import wrap_angle
-from .motion import CarriageMotion, SurveyMotion, kinematics
+from .motion import CarriageMotion, SurveyMotion, WaypointMotion, kinematics
 from .scenario.checks import floor_cloud_count
 from .scenario.model import Scenario
+from .seastate import build_wave, wave_track
 from .sensors.dvl import simulate_dead_reckoning, simulate_dvl
 from .sensors.env import simulate_barometer, simulate_sonar, simulate_wave_probe
 from .sensors.imu import sample_times, simulate_imu
 from .tank import Tank
+from .wavefield import WaveField
 from .waves import LinearWave
 
 RNG_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe")
@@ -41,18 +43,6 @@ class SimulationResult:
     gyro_bias: np.ndarray | None = None
 
 
-def build_wave(s: Scenario) -> LinearWave:
-    return LinearWave(
-        a=s.wave.amplitude_m,
-        f=s.wave.frequency_hz,
-        h=s.water.depth_m,
-        beta=float(np.deg2rad(s.wave.heading_deg)),
-        phi_0=s.wave.phase_rad,
-        rho=s.water.density_kg_m3,
-        g=s.water.gravity_m_s2,
-    )
-
-
 def build_tank(s: Scenario) -> Tank:
     r = s.tank.rock
     return Tank(
@@ -61,9 +51,11 @@ def build_tank(s: Scenario) -> Tank:
     )  # fmt: skip
 
 
-def build_motion(s: Scenario, wave: LinearWave):
+def build_motion(s: Scenario, wave: LinearWave | WaveField):
     if s.motion.kind == "carriage":
         return CarriageMotion(s.motion.carriage, wave)
+    if s.motion.kind == "waypoints":
+        return WaypointMotion(s.motion.waypoints, wave)
     return SurveyMotion(s.motion.survey, wave)
 
 
@@ -119,17 +111,44 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
     log = Log(
         imu=imu, dvl=dvl, dead_reckoning=dr, pressure=pressure, sonar=sonar, wave_probe=probe,
         ground_truth=gt, mounting=mounting, source=f"simulator:{s.name}",
-        metadata={
-            "scenario": s.name,
-            "seed": s.seed,
-            "wave": {"amplitude_m": s.wave.amplitude_m, "frequency_hz": s.wave.frequency_hz},
-            "wavenumber_rad_m": wave.k,
-            "water_density_kg_m3": s.water.density_kg_m3,
-            "surface_pressure_pa": s.water.surface_pressure_pa,
-        },
+        metadata={"scenario": s.name, "seed": s.seed, **wave_metadata(s, wave, T)},
     )  # fmt: skip
     cloud = floor_cloud(s, tank, kin.position)
     return SimulationResult(log=log, floor_cloud=cloud, scenario=s, gyro_bias=gyro_bias)
+
+
+def wave_metadata(s: Scenario, wave: LinearWave | WaveField, duration: float) -> dict:
+    """The log's record of the sea: ``wave`` = {amplitude_m, frequency_hz} and
+    ``wavenumber_rad_m`` for a constant sea, the schedule's WaveTrack.to_dict() (nodes up to
+    ``duration``) for a changing one; the heading beta and the still-water depth h always."""
+    if s.wave.schedule is None:
+        wave_meta = {
+            "wave": {"amplitude_m": s.wave.amplitude_m, "frequency_hz": s.wave.frequency_hz},
+            "wavenumber_rad_m": wave.k,
+        }
+    else:
+        wave_meta = {"wave": _track_dict(wave_track(s, duration), s.wave.frequency_hz)}
+    return {
+        **wave_meta,
+        "wave_heading_deg": s.wave.heading_deg,
+        "water_depth_m": s.water.depth_m,
+        "water_density_kg_m3": s.water.density_kg_m3,
+        "surface_pressure_pa": s.water.surface_pressure_pa,
+    }
+
+
+def _track_dict(track, calm_f: float) -> dict:
+    """``track.to_dict()`` with each calm node's frequency the one the phase runs at there (f
+    linear between the nodes that have one): no None in the lists, which a bag sidecar would
+    drop (always calm: ``calm_f``), and the same track again from ``WaveTrack.from_dict`` (NaN
+    where a = 0)."""
+    out = track.to_dict()
+    has_f = np.isfinite(track.frequency_hz)
+    f = np.full(track.t.shape, calm_f)  # always calm: the wave.frequency_hz the phase runs at
+    if has_f.any():
+        f = np.interp(track.t, track.t[has_f], track.frequency_hz[has_f])
+    out["frequency_hz"] = [float(x) for x in f]
+    return out
 
 
 def floor_cloud(s: Scenario, tank: Tank, positions: np.ndarray) -> np.ndarray:

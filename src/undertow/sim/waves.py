@@ -14,6 +14,10 @@ Airy theory is written with z UP and z = 0 at the still surface (the water is -h
 The log's world frame has z DOWN (depth d = -z_up), so every method here takes the depth ``d``
 and returns vertical components positive DOWN: w_down = -w_up, zeta_down = -zeta_up.
 Deep water (k h > pi) everything decays as a e^{-k d}.
+
+A sea state that changes during a run is :class:`~undertow.sim.wavefield.WaveField`; both classes
+answer the same questions at given times (``velocity_amplitude_at(d, t)``, ``omega_at(t)``,
+``orbital_slope``, ``is_calm``), so every sensor model takes either.
 """
 
 from __future__ import annotations
@@ -131,3 +135,22 @@ class LinearWave:
             return np.zeros(np.broadcast(np.asarray(x), np.asarray(t)).shape)
         _, _, kp = self._depth_factors(d)
         return self.rho * self.g * self.a * kp * np.cos(self.phase(x, y, t))
+
+    @property
+    def is_calm(self) -> bool:
+        """True when there is no wave at any time (a = 0)."""
+        return self.a == 0.0
+
+    def omega_at(self, t) -> float:
+        """omega at the times ``t`` (constant here)."""
+        return self.omega
+
+    def velocity_amplitude_at(self, d, t) -> tuple[np.ndarray, np.ndarray]:
+        """(U, W) at depth d and times t (constant in time here: ``velocity_amplitude(d)``)."""
+        return self.velocity_amplitude(d)
+
+    def orbital_slope(self, x, y, d, t) -> np.ndarray:
+        """Along-wave slope of the orbital path surface through depth d,
+        d zeta_up / d s = -k (W / omega) sin(theta), s the along-wave coordinate."""
+        _, W = self.velocity_amplitude(d)
+        return -self.k * (W / self.omega) * np.sin(self.phase(x, y, t))

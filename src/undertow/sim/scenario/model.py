@@ -51,6 +51,24 @@ class WaterModel(_Model):
     surface_pressure_pa: float = Field(101_325.0, description="standard atmosphere")
 
 
+class WaveSegmentModel(_Model):
+    """One condition of a sea-state schedule, reached by a linear ramp from the one before."""
+
+    amplitude_m: float = Field(ge=0, description="a held in this segment; 0 = calm")
+    frequency_hz: float | None = Field(
+        None, gt=0, description="f; default: the previous segment's (the first: wave.frequency_hz)"
+    )
+    ramp_s: float = Field(
+        0.0,
+        ge=0,
+        description="linear ramp in a and f from the previous condition, starting at the previous"
+        " segment's until_s (the first segment: from calm at t = 0); >= 2 wave periods",
+    )
+    until_s: float | None = Field(
+        None, gt=0, description="when this condition ends (the next ramp starts); last: run end"
+    )
+
+
 class WaveModel(_Model):
     amplitude_m: float = Field(0.0, ge=0, description="a; 0 = calm (paper: 0.05, 0.1)")
     frequency_hz: float = Field(1.0, gt=0, description="f (paper: 0.75, 1.0)")
@@ -58,6 +76,12 @@ class WaveModel(_Model):
         180.0, description="propagation direction beta in world x-y; 180 = oncoming (toward -x)"
     )
     phase_rad: float = Field(0.0, description="phi_0 of theta = k x - omega t + phi_0")
+    schedule: list[WaveSegmentModel] | None = Field(
+        None,
+        min_length=1,
+        description="sea state changing during the run (segments in time order; then"
+        " amplitude_m must be 0); the phase is exact at the wave probe (sim/wavefield.py)",
+    )
 
 
 class RockModel(_Model):
@@ -96,7 +120,9 @@ class CarriageModel(_Model):
     start_x_m: float = Field(30.0, description="carriage start x in the tank")
     y_m: float = 0.0
     depth_m: float = Field(0.5, description="body-origin depth, assumed (the paper gives none)")
-    run_length_m: float = Field(36.6, gt=0, description="paper: 36.6 m along x")
+    run_length_m: float = Field(
+        36.6, ge=0, description="paper: 36.6 m along x; 0 = station keeping (at rest)"
+    )
     cruise_speed_m_s: float = Field(1.0, gt=0, description="assumed; below the A50 maximum")
     acceleration_m_s2: float = Field(0.5, gt=0, description="assumed carriage acceleration")
     hold_before_s: float = Field(5.0, ge=0, description="at rest before the run")
@@ -122,10 +148,33 @@ class SurveyModel(_Model):
     )
 
 
+class WaypointsModel(_Model):
+    """Free vehicle following straight legs between way points at constant depth, the corners
+    rounded with a turn radius (finite yaw rate V / r), carried by the orbital flow like the
+    survey; ``laps`` repeats the polyline (close it: last point = first)."""
+
+    points: list[tuple[float, float]] = Field(
+        [(40.0, -1.0), (56.0, -1.0), (56.0, 1.0), (40.0, 1.0), (40.0, -1.0)],
+        min_length=2,
+        description="(x, y) way points, m",
+    )
+    laps: int = Field(1, ge=1, description="times the polyline is followed")
+    turn_radius_m: float = Field(0.5, gt=0, description="radius of the rounded corners")
+    depth_m: float = Field(0.6, description="commanded body depth")
+    speed_m_s: float = Field(0.5, gt=0, description="BlueROV2 cruise speed, assumed")
+    ramp_s: float = Field(2.0, ge=0, description="speed ramp at start and end")
+    hold_before_s: float = Field(3.0, ge=0)
+    hold_after_s: float = Field(3.0, ge=0)
+    attitude_gain: float = Field(
+        0.5, ge=0, description="roll/pitch = gain x local orbital-path slope, assumed"
+    )
+
+
 class MotionModel(_Model):
-    kind: Literal["carriage", "survey"] = "carriage"
+    kind: Literal["carriage", "survey", "waypoints"] = "carriage"
     carriage: CarriageModel = CarriageModel()
     survey: SurveyModel = SurveyModel()
+    waypoints: WaypointsModel = WaypointsModel()
 
 
 class Scenario(_Model):

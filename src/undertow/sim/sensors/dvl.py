@@ -15,11 +15,12 @@ over the fixed floor in the DVL frame:
 A beam is valid when it hits the floor at 0.05 <= r <= 50 m. The wave term is the acoustic-path
 disturbance (bubbles, pressure fluctuation near the surface): its standard deviation scales with
 the orbital speed amplitude U(d) = a omega cosh(k(h-d))/sinh(kh) at the DVL depth d, kappa per
-axis from the scenario (or given directly). The paper's Table I values are measured data; the
-simulator does NOT copy them. The wave range noise scales likewise with the vertical orbital
-displacement RMS. c_set / c_true is the sound-speed scale error: each beam's radial velocity
-is c f_D / (2 f_0) (the Doppler relation, f_0 the carrier and f_D the Doppler shift), so a
-DVL with fixed beam angles scales every velocity by the sound speed it is set to.
+axis from the scenario (or given directly); in a changing sea a, omega, k are those at t_n.
+The paper's Table I values are measured data; the simulator does NOT copy them. The wave range
+noise scales likewise with the vertical orbital displacement RMS. c_set / c_true is the
+sound-speed scale error: each beam's radial velocity is c f_D / (2 f_0) (the Doppler relation,
+f_0 the carrier and f_D the Doppler shift), so a DVL with fixed beam angles scales every
+velocity by the sound speed it is set to.
 
 Dead reckoning (A50 ``position_local``): orientation = true body roll, pitch, yaw plus a
 constant-rate drift (uncalibrated gyro bias) and white noise; position integrated (forward
@@ -36,6 +37,7 @@ from ...rotations import rpy_to_matrix, wrap_angle
 from ..motion import kinematics
 from ..scenario.sensors import DeadReckoningModel, DvlModel
 from ..tank import Tank
+from ..wavefield import WaveField
 from ..waves import LinearWave
 from .imu import sample_times
 
@@ -61,7 +63,7 @@ def least_squares_velocity(B: np.ndarray, m: np.ndarray, valid: np.ndarray):
 
 def simulate_dvl(
     motion,
-    wave: LinearWave,
+    wave: LinearWave | WaveField,
     tank: Tank,
     config: DvlModel,
     mount: SensorMount,
@@ -79,8 +81,8 @@ def simulate_dvl(
     true_range = tank.cast_rays(origins, dirs.reshape(-1, 3), config.max_range).reshape(n, 4)
 
     depth = kin.position[:, 2]
-    U, W = wave.velocity_amplitude(depth)
-    zeta_rms = (W / wave.omega) / np.sqrt(2.0)
+    U, W = wave.velocity_amplitude_at(depth, t)  # U(d, t): the sea state at each report
+    zeta_rms = (W / wave.omega_at(t)) / np.sqrt(2.0)
     range_sigma = np.hypot(config.range_sigma, config.wave_range_noise_coefficient * zeta_rms)
     beam_range = true_range + range_sigma[:, None] * rng.standard_normal((n, 4))
     beam_valid = np.isfinite(beam_range)

@@ -12,7 +12,8 @@ flat echo is a confident one; a ray fan split by the rock edge is not). No retur
 [min_range, max_range]: range NaN, confidence 0.
 
 Wave probe at fixed (x_p, y_p): eta = a cos(k (x_p cos beta + y_p sin beta) - omega t + phi_0) +
-N(0, s_eta^2), positive UP.
+N(0, s_eta^2), positive UP. In a changing sea (sim/wavefield.py) a, omega, k and theta are
+those at each sample time.
 """
 
 from __future__ import annotations
@@ -23,13 +24,14 @@ from ...log import Pressure, SensorMount, SonarRange, WaveProbe
 from ..motion import kinematics
 from ..scenario.sensors import BarometerModel, SonarModel, WaveProbeModel
 from ..tank import Tank
+from ..wavefield import WaveField
 from ..waves import LinearWave
 from .imu import sample_times
 
 
 def simulate_barometer(
-    motion, wave: LinearWave, config: BarometerModel, mount: SensorMount, p_atm: float,
-    duration: float, rng,
+    motion, wave: LinearWave | WaveField, config: BarometerModel, mount: SensorMount,
+    p_atm: float, duration: float, rng,
 ) -> Pressure:  # fmt: skip
     t = sample_times(duration, config.rate_hz)
     pos = kinematics(motion, t, mount.translation).position
@@ -83,7 +85,7 @@ def simulate_sonar(
 
 
 def simulate_wave_probe(
-    wave: LinearWave, config: WaveProbeModel, duration: float, rng
+    wave: LinearWave | WaveField, config: WaveProbeModel, duration: float, rng
 ) -> WaveProbe:
     t = sample_times(duration, config.rate_hz)
     eta = wave.elevation(config.x_m, config.y_m, t) + rng.normal(0.0, config.noise_sigma, t.size)
