@@ -44,7 +44,7 @@ def test_waves_json_against_the_simulated_truth(simulated_run, tmp_path):
 def test_waves_table_names_the_truth(simulated_run):
     r = runner.invoke(app, ["waves", str(simulated_run("wave-a0.10-f1.00") / "log")])
     assert r.exit_code == 0, r.output
-    assert "true a (scenario)" in r.output and "rigid" in r.output
+    assert "true: scenario" in r.output and "rigid" in r.output
 
 
 @pytest.mark.parametrize(

@@ -73,22 +73,31 @@ def _num(value, fmt: str) -> str:
 
 def window_table(result):
     """A rich Table, one row per estimation window (and the truth at its centre, if known)."""
+    from rich import box
     from rich.table import Table
 
     est = result.estimate
-    table = Table(title=f"sea state: {len(est.windows)} window(s) of {est.window_s:.0f} s")
-    columns = ["start s", "end s", "a m", "f Hz", "f_e Hz", "Hm0 m", "dir deg", "rel deg",
-               "platform", "explained"]  # fmt: skip
+    table = Table(
+        title=f"sea state: {len(est.windows)} window(s) of {est.window_s:.0f} s",
+        caption="t window centre, a amplitude, f wave and fe encounter frequency, dir "
+        "propagation direction (world, deg), rel relative to the heading, fit variance "
+        "explained; --json for the window spans"
+        + (f"; true: {result.truth.source}" if result.truth is not None else ""),
+        box=box.SIMPLE_HEAD,
+        pad_edge=False,
+        padding=(0, 1),
+    )
+    columns = ["t s", "a m", "f Hz", "fe Hz", "dir", "rel", "platform", "fit"]
     if result.truth is not None:
-        columns += [f"true a ({result.truth.source})", "true f"]
+        columns += ["true a", "true f"]
     for col in columns:
-        table.add_column(col, justify="left" if col == "platform" else "right")
+        table.add_column(col, justify="left" if col == "platform" else "right", no_wrap=True)
     for w in est.windows:
         row = [
-            f"{w.t_start:.1f}", f"{w.t_end:.1f}", f"{w.amplitude_m:.3f}",
+            f"{0.5 * (w.t_start + w.t_end):.1f}", f"{w.amplitude_m:.3f}",
             _num(w.frequency_hz, ".3f"), _num(w.encounter_frequency_hz, ".3f"),
-            f"{w.significant_height_m:.3f}", _num(w.direction_deg, ".0f"),
-            _num(w.relative_direction_deg, ".0f"), w.platform, f"{w.explained:.2f}",
+            _num(w.direction_deg, ".0f"), _num(w.relative_direction_deg, ".0f"), w.platform,
+            f"{w.explained:.2f}",
         ]  # fmt: skip
         if result.truth is not None:
             a, f = result.truth.at(0.5 * (w.t_start + w.t_end))

@@ -37,8 +37,10 @@ def plot_wave_estimate(estimate, path: str | Path, truth: WaveTrack | None = Non
     ax_f.set_ylabel("frequency f (Hz)")
     ax_f.set_xlabel("time (s)")
     ax_a.legend(loc="best", fontsize=8)
-    for ax in (ax_a, ax_f):
+    for ax in (ax_a, ax_f):  # from zero: an error reads against the size of the wave
         ax.grid(True, alpha=0.3)
+        top = ax.get_ylim()[1]
+        ax.set_ylim(0.0, top * 1.1 if np.isfinite(top) and top > 0 else 1.0)
     if title:
         ax_a.set_title(title)
     return save_figure(fig, path)
