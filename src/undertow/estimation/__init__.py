@@ -1,17 +1,22 @@
-"""State estimation: the paper's 18-state UKF, wave noise profiles, smoother, calibration."""
+"""State estimation: the paper's 18-state UKF, wave noise profiles, smoother, calibration, and the
+sea state estimated from the robot's own sensors."""
 
 from .calibration import Calibration, calibrate
 from .config import LocalizerConfig
 from .localizer import Localizer, localize
 from .noise import NoiseProfile
 from .smoother import smooth
+from .waves import SeaStateEstimate, WaveWindow, estimate_sea_state
 
 __all__ = [
     "Calibration",
     "Localizer",
     "LocalizerConfig",
     "NoiseProfile",
+    "SeaStateEstimate",
+    "WaveWindow",
     "calibrate",
+    "estimate_sea_state",
     "localize",
     "smooth",
 ]
