@@ -183,3 +183,29 @@ def test_characterize_without_a_calm_run_warns():
         t = np.arange(0, 60, 0.01)
         probe = WaveProbe(t=t, elevation=0.1 * np.cos(2 * np.pi * 0.75 * t))
         characterize([_ramp_hold_ramp(5, np.array([0.01, 0.01, 0.01]), wave_probe=probe)])
+
+
+def test_without_a_probe_the_onboard_estimate_gives_the_condition(simulation):
+    """A run with no wave probe (at sea) is characterized at the condition the onboard
+    estimator infers from the barometer and DVL; with a probe, the probe is the reference and
+    the onboard estimate is reported next to it. Both against the scenario's true condition."""
+    from undertow.estimation.characterize import characterize
+
+    log = simulation("wave-a0.10-f0.75").log
+    a_true = log.metadata["wave"]["amplitude_m"]
+    f_true = log.metadata["wave"]["frequency_hz"]
+    with_probe = characterize_run(log)
+    assert with_probe.wave.amplitude_m == pytest.approx(a_true, rel=0.05)  # the probe
+    assert with_probe.onboard["amplitude_m"] == pytest.approx(a_true, rel=0.15)
+    assert with_probe.onboard["frequency_hz"] == pytest.approx(f_true, rel=0.05)
+    no_probe = characterize_run(log.replace(wave_probe=None))
+    assert no_probe.wave.amplitude_m == no_probe.onboard["amplitude_m"]
+    assert no_probe.wave.frequency_hz == pytest.approx(f_true, rel=0.05)
+    assert any("estimated from the onboard sensors" in n for n in no_probe.notes)
+    calm = simulation("calm").log.replace(wave_probe=None)
+    result = characterize([calm, log.replace(wave_probe=None)])
+    rows = result.table()
+    assert rows[0]["calm"] and not rows[1]["calm"]
+    wave = result.profile.conditions[1]
+    assert wave.amplitude_m == pytest.approx(a_true, rel=0.15)
+    assert wave.frequency_hz == pytest.approx(f_true, rel=0.05)
