@@ -947,7 +947,7 @@ def _window_result(data, t0, t1, fit, win, notes, sensors, beta_note=None) -> Wa
         notes.append("encounter frequency <= 0: the vehicle outruns the waves (assumed not)")
     direction = relative = None
     if fit.get("direction_known", False) and win.has_track:
-        relative = float((np.rad2deg(wrap_angle(b - heading)) + 180) % 360 - 180)
+        relative = float(180.0 - (180.0 - np.rad2deg(wrap_angle(b - heading))) % 360)
         if data.frame == "world":
             direction = float(np.rad2deg(b) % 360)
     if beta_note:
