@@ -154,8 +154,8 @@ def test_output_rate_missing_stream_and_bad_config():
     log = make_log(duration=5.0)
     traj = Localizer("baseline", output_rate_hz=2.0).run(log)
     np.testing.assert_allclose(traj.t, np.arange(0, 5.0, 0.5))
-    with pytest.raises(MissingStreamError):
-        Localizer().run(log.replace(imu=None))
+    with pytest.raises(MissingStreamError):  # no orientation source: neither IMU nor DR
+        Localizer().run(log.replace(imu=None, dead_reckoning=None))
     with pytest.raises(ConfigError):
         Localizer(variant="fancy")
     with pytest.raises(ConfigError):

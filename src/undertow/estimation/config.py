@@ -23,13 +23,16 @@ NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
 PositiveVec3 = tuple[Positive, Positive, Positive]
 NonNegativeVec3 = tuple[NonNegative, NonNegative, NonNegative]
-Variant = Literal["baseline", "be", "an", "proposed"]
+Variant = Literal["baseline", "be", "an", "proposed", "adaptive-r"]
 VARIANTS: tuple[str, ...] = Variant.__args__
 # the default gate ("default"): an innovation of the DVL, DR or barometer whose NIS exceeds this,
 # a 20-sigma Mahalanobis distance, is dropped; the IMU is not gated (its range envelope catches
 # spikes, and a turn's legitimate innovations reach NIS ~5000: a gate would lock it out)
 DEFAULT_GATE = "default"
 DEFAULT_GATE_NIS = 20.0**2
+# bias-state groups a log can leave without a sensor (ProcessModel.hold_*): the DR bias b^g
+# (x[12:15], needs the DVL's dead reckoning) and the IMU gyro bias b-bar^g (x[15:18], the IMU)
+HELD_GROUPS = ("dr_bias", "gyro_bias")
 
 
 def _gate(value):
@@ -118,6 +121,13 @@ class LocalizerConfig(BaseModel):
     alpha: float = Field(1.0, ge=0.5, le=2.0, allow_inf_nan=False)
     beta: float = Field(2.0, ge=0.0, le=10.0, allow_inf_nan=False)
     kappa: float = Field(0.0, ge=0.0, le=3.0 * 18, allow_inf_nan=False)
+    # adaptive-r: forgetting factor alpha of R_k = alpha R_{k-1} + (1 - alpha)(eps eps^T +
+    # H P^+ H^T) (model._adapt_r). Akhlaghi et al. (2017) use alpha = 0.3 on 1-per-step power
+    # system data; here R must follow the wave-induced variance, stationary over many wave
+    # periods, not each wave's phase: 1 / (1 - alpha) = 50 updates, 6-10 s of the A50's
+    # 5-8 Hz (6-10 periods of a 1 Hz wave), within the 0.95-0.99 fading factors usual for
+    # Sage-Husa estimators (Sage and Husa 1969).
+    adaptive_r_alpha: float = Field(0.98, gt=0.0, lt=1.0, allow_inf_nan=False)
 
     @field_validator("initial_state", "initial_std")
     @classmethod
@@ -128,16 +138,26 @@ class LocalizerConfig(BaseModel):
 
     @property
     def estimates_bias(self) -> bool:
-        return self.variant in ("be", "proposed")
+        return self.variant in ("be", "proposed", "adaptive-r")
+
+    @property
+    def adapts_r(self) -> bool:
+        """adaptive-r: the DVL and DR noise R adapted from the residuals (model._adapt_r)."""
+        return self.variant == "adaptive-r"
 
     @property
     def adds_wave_noise(self) -> bool:
         return self.variant in ("an", "proposed")
 
-    def process_model(self) -> model.ProcessModel:
+    def process_model(self, held=()) -> model.ProcessModel:
         """The record the filter and the smoother predict with: unscented weights of n = 18,
-        Gamma densities, the mean drifts (zeros for the variants without bias states)."""
+        Gamma densities, the mean drifts (zeros for the variants without bias states).
+        ``held``: names of :data:`HELD_GROUPS` held at 0 because the log has no sensor that
+        informs them."""
         wm, wc, lam = _weights(model.N_STATE, self.alpha, self.beta, self.kappa)
+        unknown = set(held) - set(HELD_GROUPS)
+        if unknown:
+            raise ValueError(f"held bias groups {sorted(unknown)}: expected {HELD_GROUPS}")
         drift = self.dr_bias_drift_rad_s + self.gyro_bias_drift_rad_s2
         return model.ProcessModel(
             wm=wm,
@@ -148,6 +168,8 @@ class LocalizerConfig(BaseModel):
             mu_bias=np.array(drift, float) if self.estimates_bias else np.zeros(6),
             dt_max=float(self.max_dt_s),
             freeze_bias=not self.estimates_bias,
+            hold_dr_bias="dr_bias" in held,
+            hold_gyro_bias="gyro_bias" in held,
         )
 
     def sensor_model(self, mounting: Mounting) -> model.SensorModel:
@@ -168,4 +190,6 @@ class LocalizerConfig(BaseModel):
             dvl_r=np.array(mounting.dvl.translation, float),
             baro_r=np.array(mounting.barometer.translation, float),
             gate=gate,
+            adapt_r=self.adapts_r,
+            adapt_alpha=float(self.adaptive_r_alpha),
         )

@@ -4,6 +4,28 @@
 Variants (the paper's ablation, tab:ablation): ``baseline`` (no bias states, no wave noise),
 ``be`` (bias estimation), ``an`` (added wave noise gamma in R), ``proposed`` (both). Without
 bias estimation the six bias states are held at 0 with a tiny variance and no correlation.
+``adaptive-r``, a peer baseline outside the paper: bias estimation as ``be``, no wave noise, and
+the DVL and DR noise R adapted from the residuals after each update (Akhlaghi, Zhou and Huang
+2017; :func:`~undertow.estimation.model._adapt_r`):
+
+    R_k = alpha R_{k-1} + (1 - alpha) (eps_k eps_k^T + H P_k^+ H^T),   eps_k = z_k - h(x_k^+)
+
+starting from the nominal R, alpha = ``adaptive_r_alpha`` (0.98).
+
+Wave noise (variants ``an``, ``proposed``): a constant condition adds gamma^2 to every DVL
+(and DR) row; a condition that changes over time (a :class:`~undertow.wavetrack.WaveTrack`, a
+log whose ``metadata["wave"]`` is a track with ``t`` lists, or ``wave="auto"``: estimated from
+the log by :mod:`undertow.estimation.waves`) adds each row's gamma(t)^2, gamma interpolated in
+time between the track's nodes (:class:`~undertow.estimation.noise.TrackNoise`). Nodes outside
+the characterized conditions: the nearest one for an estimated track (one warning naming how
+many), else the ``extrapolate`` policy.
+
+Sensors: the filter needs DVL velocity and an orientation source (the IMU gyro or the DVL's
+dead-reckoning attitude); barometer and DR are optional. A state no sensor of the log informs is
+left to the motion model and named in ``metadata["unobserved"]`` (one warning): without the IMU
+its gyro bias b-bar^g is held at 0, without DR the DR bias b^g is held at 0 (and the initial
+attitude comes from the ground truth, else the IMU's orientation report, else zeros), without a
+barometer the depth is integrated from the DVL velocity only.
 
 Measurements of all streams are merged and processed in time order (a prediction per
 measurement, as in the paper); see :mod:`undertow.estimation.model` for the equations.
@@ -36,10 +58,11 @@ from pathlib import Path
 import numpy as np
 
 from .._util.validate import validate
-from ..errors import ConfigError
+from ..errors import ConfigError, MissingStreamError
 from ..log import Log
-from ..rotations import matrix_to_rpy, rpy_to_matrix
+from ..rotations import matrix_to_rpy, quaternion_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
+from ..wavetrack import WaveTrack
 from . import model
 from .calibration import Calibration
 from .config import LocalizerConfig
@@ -51,7 +74,7 @@ from .health import (
     pressure_inside,
     warn_unhealthy,
 )
-from .noise import NoiseProfile, WaveNoise
+from .noise import NoiseProfile, TrackNoise, WaveNoise
 from .smoother import smooth as urts_smooth
 
 # a run where more than this fraction of the processed measurements needed a covariance repair
@@ -61,13 +84,21 @@ TROUBLE_FRACTION = 0.5
 # in the log that recorded it
 WAVE_GIVEN = "given"
 WAVE_DEFAULT = "default"
+WAVE_ESTIMATED = "estimated from the log (undertow.estimation.waves)"
+WAVE_AUTO = "auto"
+
+
+class MissingSensorError(ConfigError, MissingStreamError):
+    """The log lacks what the filter needs: DVL velocity and an orientation source (one line).
+    A ConfigError as a wrong input, and a MissingStreamError for callers that catch those."""
 
 
 class Localizer:
     """The paper's UKF. ``Localizer(variant="proposed", wave="wave-a0.10-f1.00").run(log)``.
 
     ``profile``: a NoiseProfile, a YAML path or None (the paper's Table I); ``wave``: condition
-    name, (amplitude, frequency) or None (``log.metadata["wave"]`` if present, else calm);
+    name, (amplitude, frequency), a :class:`~undertow.wavetrack.WaveTrack` (or its dict),
+    ``"auto"`` (estimated from the log) or None (``log.metadata["wave"]`` if present, else calm);
     ``variant`` and the other keyword arguments are :class:`LocalizerConfig` fields (unset ones
     keep the config's defaults).
     """
@@ -86,19 +117,21 @@ class Localizer:
 
     def run(self, log: Log) -> Trajectory:
         """Filter the whole log; (x, P) at every processed measurement time (or output rate).
-        The metadata records the wave condition used and where it came from."""
+        The metadata records the wave condition used and where it came from, and the states
+        the log's sensors leave unobserved."""
         cfg = self.config
-        log.require("dvl", "imu", stage="Localizer")
+        unobserved, held = sensor_coverage(log, cfg)
         check_mounting(log.mounting)
-        wave, wave_source = wave_condition(self.wave, log)
-        noise = self.profile.noise(wave, extrapolate=self.extrapolate)
+        noise, wave_meta = self._wave_noise(log)
         meas, rejected = _measurements(log, cfg, noise)
         if meas.size == 0:
             raise ConfigError("Localizer: the log has no finite, valid DVL/IMU measurements")
         x0, P0 = _initial_state(log, cfg)
+        r_adapted = np.zeros((len(model.KIND_NAMES), 3, 3))
         out_t, out_x, out_P, counts, nis = model._run_filter(
-            meas, float(meas["t"][0]), x0, P0, cfg.process_model(),
+            meas, float(meas["t"][0]), x0, P0, cfg.process_model(held=held),
             cfg.sensor_model(log.mounting), _output_times(meas["t"], cfg.output_rate_hz),
+            r_adapted,
         )  # fmt: skip
         counts = {**rejected, **dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))}
         _warn_if_frozen(counts, int(meas.size))
@@ -110,13 +143,56 @@ class Localizer:
             "counts": counts,
             "sensors": sensors,
             "nis": _nis_summary(nis),
-            "wave_noise": noise.to_dict() if cfg.adds_wave_noise else None,
-            "wave_condition": noise.condition,
-            "wave_condition_source": wave_source,
+            **wave_meta,
+            "unobserved": unobserved,
+            "held_bias": held,
             "config": cfg.model_dump(),
             "source": log.source,
         }
+        if cfg.adapts_r:
+            metadata["adaptive_r"] = _adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
+
+    def _wave_noise(self, log: Log):
+        """(noise, metadata): the run's wave noise (:class:`WaveNoise` for a constant condition,
+        :class:`TrackNoise` for one that changes) and its metadata entries (module doc)."""
+        wave, source = wave_condition(self.wave, log)
+        meta = {}
+        nearest = False
+        if isinstance(wave, str) and wave.strip().lower() == WAVE_AUTO:
+            wave, estimate = _estimated_track(log)
+            source, nearest = WAVE_ESTIMATED, True
+            meta["wave_estimate"] = estimate.to_dict()
+        elif isinstance(wave, dict) and "t" in wave:
+            wave = WaveTrack.from_dict(wave)
+        if isinstance(wave, WaveTrack):
+            nearest = nearest or wave.source == "estimated"
+            if wave.is_constant:
+                a, f = float(wave.amplitude_m[0]), float(wave.frequency_hz[0])
+                wave = "calm" if a == 0 else (a, f)
+        extrapolate = self.extrapolate or nearest
+        if isinstance(wave, WaveTrack):
+            noise = self.profile.noise_track(wave, extrapolate=extrapolate)
+            meta["wave_track"] = wave.to_dict()
+            outside = sum(n.how == "nearest" for n in noise.nodes)
+        else:
+            noise = self.profile.noise(wave, extrapolate=extrapolate)
+            outside = int(noise.how == "nearest")
+        if nearest and outside and not self.extrapolate:
+            warnings.warn(
+                f"Localizer: {outside} of {len(getattr(noise, 'nodes', [noise]))} estimated wave "
+                "condition node(s) lie outside the noise profile's characterized conditions; "
+                "the nearest characterized condition is used for them",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+        meta = {
+            "wave_noise": noise.to_dict() if self.config.adds_wave_noise else None,
+            "wave_condition": noise.condition,
+            "wave_condition_source": source,
+            **meta,
+        }
+        return noise, meta
 
 
 def localize(
@@ -191,7 +267,8 @@ def wave_condition(wave, log: Log) -> tuple[object, str]:
     """The wave condition a run uses and where it comes from: ``wave`` when given, else the
     log's metadata (a simulated log, or a bag whose sidecar ``undertow.yaml`` records it), else
     calm. Returns (condition, source): source is :data:`WAVE_GIVEN`, :data:`WAVE_DEFAULT` or
-    where in the log the condition was found (e.g. ``"the bag's sidecar undertow.yaml"``)."""
+    where in the log the condition was found (e.g. ``"the bag's sidecar undertow.yaml"``).
+    The condition may be a WaveTrack or its dict (``t`` lists), or ``"auto"``."""
     if wave is not None:
         return wave, WAVE_GIVEN
     recorded = log.metadata.get("wave")
@@ -201,6 +278,89 @@ def wave_condition(wave, log: Log) -> tuple[object, str]:
             return recorded, "the bag's sidecar undertow.yaml"
         return recorded, f"the metadata of {log.source}" if log.source else "the log's metadata"
     return "calm", WAVE_DEFAULT
+
+
+def _estimated_track(log: Log):
+    """(track, estimate): the sea state estimated from the log itself (wave="auto")."""
+    try:
+        from .waves import estimate_sea_state
+    except ImportError as exc:  # pragma: no cover - the module ships with the package
+        msg = f"Localizer: wave 'auto' needs undertow.estimation.waves ({exc})"
+        raise ConfigError(msg) from None
+    estimate = estimate_sea_state(log)
+    return estimate.track(), estimate
+
+
+def sensor_coverage(log: Log, cfg: LocalizerConfig) -> tuple[list[str], list[str]]:
+    """(unobserved, held): one line per state the log's sensors leave to the motion model, and
+    the bias groups (config.HELD_GROUPS) held at 0 for want of their sensor; one warning names
+    them. A log without DVL velocity or without an orientation source (IMU gyro or DR attitude)
+    is one :class:`MissingSensorError` line."""
+    has = {n: getattr(log, n) is not None and len(getattr(log, n)) > 0
+           for n in ("dvl", "imu", "dead_reckoning", "pressure")}  # fmt: skip
+    where = f" ({log.source})" if log.source else ""
+    if not has["dvl"]:
+        raise MissingSensorError(
+            f"Localizer: the log{where} has no DVL velocity (stream dvl): the filter needs it "
+            "and an orientation source (an IMU gyro or the DVL's dead reckoning, position_local); "
+            f"it has: {', '.join(log.streams()) or 'none'}"
+        )
+    if not (has["imu"] or has["dead_reckoning"]):
+        raise MissingSensorError(
+            f"Localizer: the log{where} has DVL velocity but no orientation source: needs an "
+            "IMU gyro (stream imu) or the DVL's dead reckoning (position_local, stream "
+            f"dead_reckoning); it has: {', '.join(log.streams())}"
+        )
+    unobserved, held = [], []
+    if not has["imu"]:
+        held.append("gyro_bias")
+        unobserved.append("no IMU: the IMU gyro bias b-bar^g (x[15:18]) is held at 0; the "
+                          "angular velocity is inferred from the DR attitude alone")  # fmt: skip
+    if not has["dead_reckoning"]:
+        held.append("dr_bias")
+        start = _start_attitude(log)[1]
+        unobserved.append(
+            "no DVL dead reckoning: the DR bias b^g (x[12:15]) is held at 0; roll, pitch and yaw "
+            f"are integrated from the IMU gyro only, their variance grows; {start}"
+        )
+        if cfg.estimates_bias and has["imu"]:
+            unobserved.append(
+                "no DVL dead reckoning: the IMU gyro bias b-bar^g (x[15:18]) is not separable from "
+                "the angular velocity (only its prior, e.g. gyro_bias_rad_s of `undertow "
+                "calibrate`, and the DVL lever arm inform it)"
+            )
+    if not has["pressure"]:
+        unobserved.append("no barometer: depth from DVL integration only, its variance grows")
+    if unobserved:
+        warnings.warn(f"Localizer: {'; '.join(unobserved)}", RuntimeWarning, stacklevel=3)
+    return unobserved, held
+
+
+def _start_attitude(log: Log) -> tuple[np.ndarray | None, str]:
+    """(rpy or None, where from) of the initial attitude of a log without DR: the first
+    ground-truth pose, else the IMU's first orientation report, else None (zeros)."""
+    gt = log.ground_truth
+    if gt is not None and len(gt):
+        ok = np.flatnonzero(_finite_rows(np.asarray(gt.orientation, float)))
+        if ok.size:
+            return np.array(gt.orientation[ok[0]], float), "initial attitude from the ground truth"
+    imu = log.imu
+    if imu is not None and imu.orientation is not None and len(imu):
+        q = np.asarray(imu.orientation, float)
+        ok = np.flatnonzero(_finite_rows(q) & (np.linalg.norm(q, axis=1) > 0.5))
+        if ok.size:
+            rpy = quaternion_to_rpy(q[ok[0]] / np.linalg.norm(q[ok[0]]))
+            return np.asarray(rpy, float), "initial attitude from the IMU's orientation report"
+    return None, "initial attitude zeros (no ground truth or IMU orientation report)"
+
+
+def _adapted_summary(r_adapted: np.ndarray, rows: np.ndarray, alpha: float) -> dict:
+    """adaptive-r's final R per adapted sensor (DVL, DR) with the run's alpha."""
+    out = {"alpha": float(alpha)}
+    for kd in (model.DVL, model.DR):
+        if rows[kd]:
+            out[model.KIND_NAMES[kd]] = {"final_R": r_adapted[kd].tolist()}
+    return out
 
 
 def _warn_if_frozen(counts: dict, n_measurements: int) -> None:
@@ -241,7 +401,7 @@ def _nis_summary(stats: np.ndarray) -> dict:
     return out
 
 
-def _measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise):
+def _measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise):
     """The merged, time-sorted :data:`~undertow.estimation.model.MEASUREMENT` array (at equal
     times IMU, DVL, DR, baro) and the rows rejected up front, by stream."""
     parts, rejected = [], {}
@@ -276,9 +436,12 @@ def _diag(std, n: int, cfg: LocalizerConfig) -> np.ndarray:
     return np.tile(np.diag(np.maximum(np.asarray(std, float), cfg.std_floor) ** 2), (n, 1, 1))
 
 
-def _imu_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
-    """IMU angular velocity z (rad/s, IMU frame), R = diag(imu_gyro_std_rad_s^2)."""
+def _imu_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
+    """IMU angular velocity z (rad/s, IMU frame), R = diag(imu_gyro_std_rad_s^2). None
+    without an IMU."""
     imu = log.imu
+    if imu is None or not len(imu):
+        return None
     w = imu.angular_velocity
     ok = _finite_rows(w)
     rejected["rejected_imu"] = int(np.sum(~ok))
@@ -286,10 +449,11 @@ def _imu_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
     return imu.t, model.IMU, w, _diag(cfg.imu_gyro_std_rad_s, len(imu), cfg), ok
 
 
-def _dvl_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
+def _dvl_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
     """DVL velocity z = v_measured / scale (m/s, DVL frame) with the log's covariance (scaled
     by 1 / scale^2, symmetrized) or diag(dvl_velocity_std_m_s^2), its diagonal floored at
-    dvl_std_floor_m_s^2, plus gamma_DVL^2 for the variants with wave noise."""
+    dvl_std_floor_m_s^2, plus gamma_DVL^2 (at the row's time, for a track) for the variants with
+    wave noise."""
     dvl = log.dvl
     v = dvl.velocity / cfg.dvl_scale_factor
     cov = np.array(dvl.covariance, float) / cfg.dvl_scale_factor**2
@@ -299,7 +463,7 @@ def _dvl_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
     i = np.arange(3)
     R[:, i, i] = np.maximum(R[:, i, i], cfg.dvl_std_floor_m_s**2)
     if cfg.adds_wave_noise:
-        R[:, i, i] += noise.dvl_std**2
+        R[:, i, i] += noise.std_at("dvl", dvl.t) ** 2
     finite = _finite_rows(v)
     rejected["rejected_dvl_invalid"] = int(np.sum(~dvl.valid))
     rejected["rejected_dvl_nonfinite"] = int(np.sum(dvl.valid & ~finite))
@@ -307,7 +471,7 @@ def _dvl_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
     return dvl.t, model.DVL, v, R, ok
 
 
-def _dr_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
+def _dr_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
     """DR orientation z (rad; reported for the DVL frame, R_dr = R_body R_mount, it is moved to
     the body: R_body = R_dr R_mount^T), R = diag(dr_orientation_std_rad^2) plus gamma_DR^2 for
     the variants with wave noise. None when the log has no DR."""
@@ -321,12 +485,12 @@ def _dr_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
     R = _diag(cfg.dr_orientation_std_rad, len(dr), cfg)
     if cfg.adds_wave_noise:
         i = np.arange(3)
-        R[:, i, i] += noise.dr_std**2
+        R[:, i, i] += noise.std_at("dr", dr.t) ** 2
     rejected["rejected_dead_reckoning"] = int(np.sum(~ok))
     return dr.t, model.DR, rpy, R, ok
 
 
-def _pressure_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise, rejected: dict):
+def _pressure_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
     """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2. None without pressure."""
     p = log.pressure
     if p is None or not len(p):
@@ -343,9 +507,9 @@ def _finite_rows(a: np.ndarray) -> np.ndarray:
 
 
 def _initial_state(log: Log, cfg: LocalizerConfig):
-    """x0 from the config, else zeros with the first DR orientation and the first depth, and the
-    configured start position (DVL and IMU observe no absolute x, y: the user gives the start);
-    P0 = diag(max(initial_std, 1e-9)^2)."""
+    """x0 from the config, else zeros with the first DR orientation (without DR:
+    :func:`_start_attitude`) and the first depth, and the configured start position (DVL and IMU
+    observe no absolute x, y: the user gives the start); P0 = diag(max(initial_std, 1e-9)^2)."""
     P0 = np.diag(np.maximum(np.asarray(cfg.initial_std, float), 1e-9) ** 2)
     if cfg.initial_state is not None:
         return np.array(cfg.initial_state, float), P0
@@ -357,6 +521,10 @@ def _initial_state(log: Log, cfg: LocalizerConfig):
             rpy = np.array(dr.orientation[ok[0]], float)
             if cfg.dr_orientation_frame == "dvl":
                 rpy = matrix_to_rpy(rpy_to_matrix(rpy) @ log.mounting.dvl.rotation_matrix().T)
+            x0[3:6] = rpy
+    else:
+        rpy, _ = _start_attitude(log)
+        if rpy is not None:
             x0[3:6] = rpy
     if log.pressure is not None and len(log.pressure):
         d = log.pressure.depth(cfg.water_density_kg_m3, cfg.surface_pressure_pa)

@@ -38,6 +38,20 @@ drawing sigma points, with H read off _h itself (:func:`_jacobians`). The barome
 makes its model nonlinear in the angles: it updates through sigma points drawn again from the
 predicted (x, P).
 
+Bias states no sensor informs are held at 0 with a tiny variance and no correlation: all six
+for the variants without bias estimation (``ProcessModel.freeze_bias``), the DR bias b^g for a
+log without DR, the IMU gyro bias b-bar^g for one without IMU (``hold_dr_bias``,
+``hold_gyro_bias``); the held states are one contiguous range (:func:`held_range`).
+
+The variant ``adaptive-r`` (``SensorModel.adapt_r``) replaces the rows' R of the DVL and DR by
+a running estimate per kind, updated after each applied update (:func:`_adapt_r`; Akhlaghi,
+Zhou and Huang 2017):
+
+    eps_k = z_k - h(x_k^+),   R_k = alpha R_{k-1} + (1 - alpha) (eps_k eps_k^T + H P_k^+ H^T)
+
+starting from the first row's (nominal) R. The other variants take the same path as before
+(the branch is off), bit for bit.
+
 The filter's boundary (:func:`_run_filter`) is a few named things: the merged, time-sorted
 measurements as one structured array (:data:`MEASUREMENT`: t, kind, z, R), the process model
 and the unscented weights as one record (:class:`ProcessModel`), the sensors' mounting and
@@ -113,6 +127,10 @@ class ProcessModel(NamedTuple):
     mu_bias: np.ndarray  # (6,) mean bias drifts (mu_b, mu-bar_b); zeros when freeze_bias
     dt_max: float  # longest prediction step, s
     freeze_bias: bool  # no bias states: held at 0 with a tiny variance and no correlation
+    # held like freeze_bias, one group each, when no sensor informs it (a log without the DR
+    # orientation holds b^g = x[12:15], one without the IMU gyro b-bar^g = x[15:18])
+    hold_dr_bias: bool = False
+    hold_gyro_bias: bool = False
 
 
 class SensorModel(NamedTuple):
@@ -123,6 +141,10 @@ class SensorModel(NamedTuple):
     dvl_r: np.ndarray  # (3,) DVL lever arm r_dvl, body frame, m
     baro_r: np.ndarray  # (3,) barometer lever arm r_bar, body frame, m
     gate: np.ndarray  # (4,) per kind: largest NIS applied (inf: no gate)
+    # innovation-based adaptive R of the DVL and DR (variant adaptive-r, :func:`_adapt_r`):
+    # on/off and the forgetting factor alpha
+    adapt_r: bool = False
+    adapt_alpha: float = 1.0
 
 
 def pack_measurements(t, kind, z, R) -> np.ndarray:
@@ -256,9 +278,10 @@ def _jacobians(sensors):
 
 
 @njit(cache=True)
-def _freeze_bias(x, P):
-    """Baseline / AN variants: bias states held at 0 with a tiny variance and no correlation."""
-    for i in range(12, 18):
+def _freeze_bias(x, P, first=12, last=18):
+    """Baseline / AN variants: bias states held at 0 with a tiny variance and no correlation
+    (states first..last-1: all six, or one group a log without its sensor cannot inform)."""
+    for i in range(first, last):
         x[i] = 0.0
         for j in range(18):
             P[i, j] = 0.0
@@ -303,7 +326,7 @@ def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
 
 
 @njit(cache=True)
-def _run_filter(meas, t0, x0, P0, process, sensors, out_times):
+def _run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None):
     """Walk the merged measurements ``meas`` (:data:`MEASUREMENT`, time-sorted) from (t0, x0,
     P0) with the model ``process`` (:class:`ProcessModel`) and ``sensors``
     (:class:`SensorModel`): predict to each measurement time (none if dt <= 0, dt capped at
@@ -319,6 +342,10 @@ def _run_filter(meas, t0, x0, P0, process, sensors, out_times):
     factorized), NIS = nu^T S^-1 nu. For a consistent filter E[NIS] = dim z (KIND_DIM) and
     NIS <= CHI2_95[kind] with probability 0.95.
 
+    ``r_adapted`` (4, 3, 3), optional: receives the final adapted R per kind when
+    ``sensors.adapt_r`` (the nominal R of the first row of a kind never adapted; zeros for a
+    kind without rows).
+
     The records are unpacked here into explicit arguments of :func:`_filter`: numba keeps
     arguments in registers through the loop, while it reloads arrays taken out of a tuple in
     the loop (about 10 % more time per step in benchmarks/bench_ukf.py).
@@ -328,10 +355,26 @@ def _run_filter(meas, t0, x0, P0, process, sensors, out_times):
         n_out = _distinct_times(t)
     else:
         n_out = out_times.size
-    wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias = process
+    wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias, hold_dr, hold_gyro = process
+    first, last = held_range(freeze_bias, hold_dr, hold_gyro)
+    if r_adapted is None:
+        Ra = np.zeros((4, 3, 3))
+    else:
+        Ra = r_adapted
     return _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
-                   freeze_bias, _jacobians(sensors), sensors.gate, sensors, out_times,
-                   n_out)  # fmt: skip
+                   last > first, first, last, _jacobians(sensors), sensors.gate, sensors,
+                   out_times, n_out, sensors.adapt_r, sensors.adapt_alpha, Ra)  # fmt: skip
+
+
+@njit(cache=True)
+def held_range(freeze_bias, hold_dr, hold_gyro):
+    """The held bias states as a range first..last-1 (empty: first == last): all six when the
+    variant has no bias states, else b^g (12:15) and/or b-bar^g (15:18) when held."""
+    first = 12 if (freeze_bias or hold_dr) else 15
+    last = 18 if (freeze_bias or hold_gyro) else 15
+    if last < first:
+        last = first
+    return first, last
 
 
 @njit(cache=True)
@@ -359,13 +402,16 @@ def _distinct_times(t):
 
 
 @njit(cache=True)
-def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze, H, gate,
-            sensors, out_times, n_out):  # fmt: skip
-    """The loop of :func:`_run_filter` over its unpacked records; H = _jacobians(sensors)."""
+def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze, first,
+            last, H, gate, sensors, out_times, n_out, adapt, alpha, Ra):  # fmt: skip
+    """The loop of :func:`_run_filter` over its unpacked records; H = _jacobians(sensors);
+    states first..last-1 held when ``freeze``; ``adapt``: the DVL and DR use the adapted R of
+    :func:`_adapt_r` (in Ra, per kind) instead of their rows' R."""
     x = x0.copy()
     P = P0.copy()
     if freeze:
-        _freeze_bias(x, P)
+        _freeze_bias(x, P, first, last)
+    adapted = np.zeros(4, dtype=np.bool_)  # Ra[kind] holds that kind's running R
     counts = np.zeros(len(COUNT_NAMES), dtype=np.int64)
     nis = np.zeros((4, len(NIS_FIELDS)))
     out_t = np.empty(n_out)
@@ -393,6 +439,12 @@ def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, f
             zk[a] = z[k, a]
             for b in range(zk.size):
                 Rk[a, b] = R[k, a, b]
+        use_ra = adapt and (kd == DVL or kd == DR) and _all_finite(Rk)
+        if use_ra:
+            if not adapted[kd]:  # start from the nominal R
+                Ra[kd] = Rk
+                adapted[kd] = True
+            Rk[:, :] = Ra[kd]
         if not (_all_finite(zk) and _all_finite(Rk)):
             counts[NONFINITE_REJECTED] += 1
         else:
@@ -401,14 +453,16 @@ def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, f
                 if dt > dt_max:
                     dt = dt_max
                     counts[DT_CAPPED] += 1
-                _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, ws, factored, xb,
-                              Pb, counts)  # fmt: skip
+                _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, first, last, ws,
+                              factored, xb, Pb, counts)  # fmt: skip
                 t_cur = tk
             else:
                 counts[NO_PREDICT] += 1
             factored = False
-            _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, H, gate, sensors, ws, xb, Pb,
-                         counts, nis)  # fmt: skip
+            used = _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, first, last, H, gate,
+                                sensors, ws, xb, Pb, counts, nis)  # fmt: skip
+            if use_ra and used:
+                _adapt_r(Ra[kd], alpha, zk, x, P, H[kd], kd == DR)
         if out_times is None and k_out < n_out and (k == N - 1 or t[k + 1] != tk):
             # the repair the next sigma-point draw would make, done now: every emitted
             # covariance is symmetric positive definite (the next draw then needs none)
@@ -441,7 +495,8 @@ def _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
 
 
 @njit(cache=True)
-def _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, ws, factored, xb, Pb, counts):
+def _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, first, last, ws, factored, xb,
+                  Pb, counts):  # fmt: skip
     """Predict (x, P) over dt; a prediction that leaves them non-finite is undone (counted)."""
     xb[:] = x
     Pb[:, :] = P
@@ -451,15 +506,16 @@ def _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, ws, factored
         P[:, :] = Pb
         counts[REVERTS] += 1
     if freeze:
-        _freeze_bias(x, P)
+        _freeze_bias(x, P, first, last)
 
 
 @njit(cache=True)
-def _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, H, gate, sensors, ws, xb, Pb, counts,
-                 nis):  # fmt: skip
+def _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, first, last, H, gate, sensors, ws, xb, Pb,
+                 counts, nis):  # fmt: skip
     """Update (x, P) with z of kind kd: in closed form for the linear IMU, DVL and DR models,
     through sigma points for the barometer. A gated, failed or non-finite update is undone
-    (counted); every innovation evaluated adds to the NIS accumulators."""
+    (counted); every innovation evaluated adds to the NIS accumulators. Returns whether the
+    update was applied."""
     xb[:] = x
     Pb[:, :] = P
     if kd == BARO:
@@ -478,11 +534,51 @@ def _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, H, gate, sensors, ws, xb
         nis[kd, 1] += 1.0
         if v <= CHI2_95[kd]:
             nis[kd, 2] += 1.0
-    if status == 0 and _all_finite(x) and _all_finite(P):
+    used = status == 0 and _all_finite(x) and _all_finite(P)
+    if used:
         counts[USED + kd] += 1
     else:
         counts[GATED + kd if status == 1 else REVERTS] += 1
         x[:] = xb
         P[:, :] = Pb
     if freeze:
-        _freeze_bias(x, P)
+        _freeze_bias(x, P, first, last)
+    return used
+
+
+@njit(cache=True)
+def _adapt_r(Ra, alpha, z, x, P, H, angles):
+    """Innovation-based adaptive R (Akhlaghi, Zhou and Huang, "Adaptive adjustment of noise
+    covariance in Kalman filter for dynamic state estimation", IEEE PES General Meeting 2017,
+    eq. 12; after Mehra 1970 and Sage and Husa 1969), in place, after an applied update:
+
+        eps_k = z_k - h(x_k^+)                 (the residual after the update, angles wrapped)
+        R_k   = alpha R_{k-1} + (1 - alpha) (eps_k eps_k^T + H P_k^+ H^T)
+
+    For a linear h, eps = R S^-1 nu, so E[eps eps^T] + H P^+ H^T = R S^-1 R + (S - R)
+    - (S - R) S^-1 (S - R) = R: the update is unbiased when R is right, and drifts to the
+    residuals' actual spread when it is not. The result is symmetrized."""
+    m = 3
+    n = x.size
+    eps = np.empty(m)
+    for a in range(m):
+        s = 0.0
+        for j in range(n):
+            s += H[a, j] * x[j]
+        e = z[a] - s
+        eps[a] = _wrap(e) if angles else e
+    HP = np.empty((m, n))
+    for a in range(m):
+        for j in range(n):
+            s = 0.0
+            for i in range(n):
+                s += H[a, i] * P[i, j]
+            HP[a, j] = s
+    for a in range(m):
+        for b in range(a, m):
+            s = 0.0
+            for j in range(n):
+                s += HP[a, j] * H[b, j]
+            v = alpha * 0.5 * (Ra[a, b] + Ra[b, a]) + (1.0 - alpha) * (eps[a] * eps[b] + s)
+            Ra[a, b] = v
+            Ra[b, a] = v

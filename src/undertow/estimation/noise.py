@@ -14,6 +14,13 @@ name (``wave-a0.10-f1.00``: a and f to 0.01), so a profile characterized at the 
 a = 0.0999 m serves a query for 0.10 m. When all nodes share one frequency (one characterized
 wave plus calm) the interpolation is linear in amplitude at that frequency. A query outside the
 nodes raises :class:`ConfigError` unless ``extrapolate=True``, which returns the nearest node.
+
+A condition that changes over time (a :class:`~undertow.wavetrack.WaveTrack` of nodes
+(t_i, a_i, f_i)) gives :class:`TrackNoise` (:meth:`NoiseProfile.noise_track`): gamma_i =
+noise((a_i, f_i)) at each node (calm nodes calm), and at a measurement time t the std devs
+interpolated linearly in time between the nodes, held before the first and after the last:
+
+    gamma(t) = gamma_i + (gamma_{i+1} - gamma_i) (t - t_i) / (t_{i+1} - t_i),  t_i <= t <= t_{i+1}
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from pydantic import BaseModel, Field
 from .._util.atomic import atomic_path
 from .._util.validate import read_yaml, validate
 from ..errors import ConfigError
+from ..wavetrack import WaveTrack
 
 _NAME = re.compile(r"^wave-a(\d+(?:\.\d*)?)-f(\d+(?:\.\d*)?)$")
 
@@ -68,6 +76,42 @@ class WaveNoise:
             "dr_std": [float(v) for v in self.dr_std],
             "how": self.how,
         }
+
+    def std_at(self, which: str, t: np.ndarray) -> np.ndarray:
+        """The std devs of ``which`` ("dvl" or "dr") at the times t: the same (3,) at all."""
+        return self.dvl_std if which == "dvl" else self.dr_std
+
+
+@dataclass(frozen=True)
+class TrackNoise:
+    """The extra noise of a wave condition that changes over time: one :class:`WaveNoise` per
+    node of ``track``, interpolated linearly in time (held outside the nodes)."""
+
+    track: WaveTrack
+    nodes: list[WaveNoise]
+
+    @property
+    def condition(self) -> str:
+        return f"time-varying ({len(self.nodes)} nodes)"
+
+    def std_at(self, which: str, t: np.ndarray) -> np.ndarray:
+        """(len(t), 3) std devs of ``which`` ("dvl" or "dr") at the times t (module doc)."""
+        values = np.array([n.dvl_std if which == "dvl" else n.dr_std for n in self.nodes])
+        t = np.asarray(t, float)
+        return np.stack([np.interp(t, self.track.t, values[:, j]) for j in range(3)], axis=1)
+
+    def to_dict(self) -> list[dict]:
+        """Per node: its time, condition, std devs and how they were found."""
+        return [
+            {
+                "t": float(ti),
+                "condition": n.condition,
+                "dvl_std": [float(v) for v in n.dvl_std],
+                "dr_std": [float(v) for v in n.dr_std],
+                "how": n.how,
+            }
+            for ti, n in zip(self.track.t, self.nodes, strict=True)
+        ]
 
 
 def _same_condition(c: WaveCondition, name: str, a: float, f: float | None) -> bool:
@@ -237,6 +281,19 @@ class NoiseProfile:
             )
         i = int(np.argmin(np.sum((nodes - q) ** 2, axis=1)))
         return self._result(name, a, f, values[i, :3], values[i, 3:], "nearest")
+
+    def noise_track(self, track: WaveTrack, extrapolate: bool = False) -> TrackNoise:
+        """:class:`TrackNoise` of ``track``: :meth:`noise` at each node (with ``extrapolate``:
+        the nearest characterized condition outside them; else a node outside is one
+        ConfigError line naming its time)."""
+        nodes = []
+        for ti, a, f in zip(track.t, track.amplitude_m, track.frequency_hz, strict=True):
+            wave = "calm" if a == 0 else (float(a), float(f))
+            try:
+                nodes.append(self.noise(wave, extrapolate=extrapolate))
+            except ConfigError as exc:
+                raise ConfigError(f"wave track node at t = {ti:.3f} s: {exc}") from None
+        return TrackNoise(track, nodes)
 
     def _nodes(self):
         waves = [c for c in self.conditions if c.amplitude_m > 0]

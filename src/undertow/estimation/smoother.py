@@ -99,15 +99,19 @@ def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, 
 
 
 @njit(cache=True)
-def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze):
+def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias,
+                  hold_dr=False, hold_gyro=False):  # fmt: skip
     """URTS backward pass of the 18-state model over filtered (t, xf (N, 18), Pf (N, 18, 18))
     with the filter's process model: the fields of its
-    :class:`~undertow.estimation.model.ProcessModel` as arguments (``*process``).
+    :class:`~undertow.estimation.model.ProcessModel` as arguments (``*process``); the bias
+    states the filter held are held here too.
 
     Returns (xs, Ps, counts) with counts as in SMOOTHER_COUNT_NAMES.
     """
     n = model.N_STATE
     N = t.size
+    first, last = model.held_range(freeze_bias, hold_dr, hold_gyro)
+    freeze = last > first
     xs = xf.copy()
     Ps = Pf.copy()
     counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
@@ -123,7 +127,7 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
         Pm[:, :] = Pf[k]
         status = model._predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws)
         if freeze:
-            model._freeze_bias(m, Pm)
+            model._freeze_bias(m, Pm, first, last)
         x[:] = xf[k]
         P[:, :] = Pf[k]
         flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], wc,
@@ -133,7 +137,7 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
             continue
         counts[0] += max(status, 0) + flag
         if freeze:
-            model._freeze_bias(x, P)
+            model._freeze_bias(x, P, first, last)
         xs[k] = x
         Ps[k] = P
     return xs, Ps, counts
@@ -143,7 +147,8 @@ def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Tra
     """Unscented RTS smoothing of a filtered trajectory (see the module docstring).
 
     ``config``: the LocalizerConfig the trajectory was filtered with; None takes it from
-    ``trajectory.metadata["config"]`` (set by :meth:`Localizer.run`). The result has
+    ``trajectory.metadata["config"]`` (set by :meth:`Localizer.run`); the bias groups the filter
+    held for want of their sensor (``metadata["held_bias"]``) are held here too. The result has
     ``metadata["smoothed"] = True`` and ``metadata["smoother_counts"]``.
     """
     meta = trajectory.metadata or {}
@@ -162,7 +167,8 @@ def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Tra
     if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
         raise DataError("smooth: trajectory times must be finite and strictly increasing")
     x, P = np.ascontiguousarray(trajectory.x), np.ascontiguousarray(trajectory.P)
-    xs, Ps, counts = _run_smoother(t, x, P, *config.process_model())
+    held = meta.get("held_bias") or ()
+    xs, Ps, counts = _run_smoother(t, x, P, *config.process_model(held=held))
     metadata = {
         **meta,
         "smoothed": True,
