@@ -24,7 +24,9 @@ from ._app import (
 @app.command()
 @user_errors
 def info(
-    path: Annotated[Path, typer.Argument(help="ROS 1 bag, ROS 2 bag directory, or A50 JSON log.")],
+    path: Annotated[
+        Path, typer.Argument(help="ROS 1 bag, ROS 2 bag directory, A50 JSON log, or MAVLink .tlog.")
+    ],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
     topics: TopicsOption = None,
     config: ConfigOption = None,

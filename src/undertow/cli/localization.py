@@ -31,7 +31,9 @@ QuietOption = Annotated[
 @app.command()
 @user_errors
 def localize(
-    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
+    log_path: Annotated[
+        Path, typer.Argument(metavar="LOG", help="Bag, A50 JSON log or MAVLink .tlog.")
+    ],
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
     variant: Annotated[
         str | None,

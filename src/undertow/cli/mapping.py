@@ -25,7 +25,9 @@ from ._app import (
 @app.command("map")
 @user_errors
 def map_command(
-    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
+    log_path: Annotated[
+        Path, typer.Argument(metavar="LOG", help="Bag, A50 JSON log or MAVLink .tlog.")
+    ],
     trajectory: Annotated[
         Path, typer.Option(help="Localization folder or trajectory.npz (with covariances).")
     ],

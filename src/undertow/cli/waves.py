@@ -22,7 +22,9 @@ from ._app import (
 @app.command()
 @user_errors
 def waves(
-    log_path: Annotated[Path, typer.Argument(metavar="LOG", help="Bag or A50 JSON log.")],
+    log_path: Annotated[
+        Path, typer.Argument(metavar="LOG", help="Bag, A50 JSON log or MAVLink .tlog.")
+    ],
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
     plot: Annotated[
         Path | None, typer.Option(help="Draw the estimate over time (and the truth) to this PNG.")

@@ -382,9 +382,7 @@ class Characterization:
                     ),
                     "frequency_hz": run.wave.frequency_hz if run.wave else None,
                     "onboard_amplitude_m": run.onboard["amplitude_m"] if run.onboard else None,
-                    "onboard_frequency_hz": (
-                        run.onboard["frequency_hz"] if run.onboard else None
-                    ),
+                    "onboard_frequency_hz": (run.onboard["frequency_hz"] if run.onboard else None),
                     "dvl_std_m_s": list(run.dvl_std_m_s),
                     "dvl_extra_std_m_s": list(extra),
                     "depth_std_m": run.depth_std_m,

@@ -2,7 +2,8 @@
 
 :func:`read_log` guesses the format from the path: a ``.bag`` file is ROS 1; a directory with
 ``metadata.yaml`` or a ``.mcap``/``.db3`` file is ROS 2; ``.txt/.json/.jsonl/.log`` is Water
-Linked TCP JSON; named pipes, devices and sockets are refused before opening.
+Linked TCP JSON; ``.tlog`` (or any other file whose first bytes are a timestamped MAVLink
+record) is a MAVLink telemetry log; named pipes, devices and sockets are refused before opening.
 :func:`write_log` writes a ROS 2 mcap bag; TUM trajectories and PLY clouds have their own small
 modules.
 """
@@ -19,6 +20,7 @@ from .info import LogSummary, StreamSummary, summarize
 from .ply import read_ply, write_ply
 from .rosbag import read_rosbag
 from .rosbag_write import write_log
+from .tlog import TLOG_SUFFIXES, looks_like_tlog, read_tlog
 from .topics import TopicMap
 from .tum import read_tum, write_tum
 
@@ -26,7 +28,8 @@ ROS2_SUFFIXES = (".mcap", ".db3")
 
 
 def detect_format(path) -> str:
-    """'ros1', 'ros2' or 'a50_json' for ``path``; ReaderError naming the file otherwise."""
+    """'ros1', 'ros2', 'a50_json' or 'tlog' for ``path``; ReaderError naming the file
+    otherwise."""
     path = Path(path)
     suffix = path.suffix.lower()
     check_regular(path, directory_ok=True)  # a named pipe must not block, a device be read
@@ -44,16 +47,33 @@ def detect_format(path) -> str:
         return "ros2"
     if suffix in JSON_SUFFIXES:
         return "a50_json"
+    if suffix in TLOG_SUFFIXES or _sniff_tlog(path):
+        return "tlog"
     raise ReaderError(
         f"{path}: unknown log format '{suffix or path.name}' (expected .bag, a ROS 2 bag "
-        f"directory, .mcap, .db3, or {', '.join(JSON_SUFFIXES)})"
+        f"directory, .mcap, .db3, .tlog, or {', '.join(JSON_SUFFIXES)})"
     )
 
 
-def read_log(path, topics: TopicMap | None = None) -> Log:
-    """Read any supported log into a Log (format guessed from the path)."""
-    if detect_format(path) == "a50_json":
+def _sniff_tlog(path: Path) -> bool:
+    """True when the file's first bytes are a timestamped MAVLink record (a renamed .tlog)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(300)
+    except OSError:
+        return False
+    return looks_like_tlog(head)
+
+
+def read_log(path, topics: TopicMap | None = None, mavlink=None) -> Log:
+    """Read any supported log into a Log (format guessed from the path). ``mavlink``: a
+    :class:`~undertow.io.mavlink.MavlinkConfig` for ``.tlog`` files (default: ATTITUDE gyro,
+    SCALED_PRESSURE2 pressure)."""
+    fmt = detect_format(path)
+    if fmt == "a50_json":
         return read_a50_json(path)
+    if fmt == "tlog":
+        return read_tlog(path, mavlink)
     return read_rosbag(path, topics)
 
 
@@ -66,6 +86,7 @@ __all__ = [
     "read_log",
     "read_ply",
     "read_rosbag",
+    "read_tlog",
     "read_tum",
     "summarize",
     "write_log",
