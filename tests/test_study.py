@@ -11,7 +11,9 @@ from undertow.study.runner import run_study
 
 pytestmark = pytest.mark.slow  # the study runs whole seeds (and a process cluster)
 
-SMALL = StudySettings(conditions=("wave-a0.10-f0.75",), rock_survey=None)
+SMALL = StudySettings(
+    conditions=("wave-a0.10-f0.75",), rock_survey=None, changing_sea=("changing-sea-carriage",)
+)
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +36,8 @@ def test_writes_tables_runs_figures_and_report(study):
     assert (out / "runs" / cond / "sim" / "log" / "metadata.yaml").is_file()
     assert (out / "runs" / cond / "localization" / "proposed" / "trajectory.tum").is_file()
     assert (out / "runs" / cond / "maps" / "adaptive_proposed" / "map.ply").is_file()
-    assert len(study.figures) == 7 and all(p.is_file() for _, p in study.figures)
+    assert len(study.figures) == 8 and all(p.is_file() for _, p in study.figures)
+    assert "waves_changing-sea-carriage.png" in [p.name for _, p in study.figures]
     HTMLParser().feed((out / "report.html").read_text())
 
 

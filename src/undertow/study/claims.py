@@ -529,6 +529,13 @@ def evaluate_seed(result: Mapping) -> tuple[dict, dict]:
     }
     run = list(result["table1"])
     once = {c.id: c.holds_in(result) for c in TABLE1_CLAIMS if c.applies(run)}
-    scenarios = list(result.get("changing_sea", {}))
-    once.update({c.id: c.holds_in(result) for c in CHANGING_SEA_CLAIMS if c.applies(scenarios)})
+    once.update({c.id: c.holds_in(result) for c in CHANGING_SEA_CLAIMS if sea_applies(c, result)})
     return claims, once
+
+
+def sea_applies(claim: Claim, result: Mapping) -> bool:
+    """A changing-sea claim applies where its scenario ran with every fixed condition it
+    compares (the study's wave conditions)."""
+    scenario = claim.left[0].path[1]
+    ran = result.get("changing_sea", {}).get(scenario, {}).get("localization", {})
+    return all(run in ran for run in FIXED_RUNS)
