@@ -266,3 +266,15 @@ def test_a_settings_mounting_too_large_or_not_finite_is_one_line(tmp_path, value
     path.write_text(f"mounting: {{imu: {{rotation: {value}}}}}\n")
     with pytest.raises(ConfigError, match=r"mounting\.imu\.rotation"):
         Settings.from_yaml(path)
+
+
+def test_a_settings_key_with_a_newline_is_named_on_one_line(tmp_path):
+    """Found by hypothesis (test_settings_yaml): an extra key "\\n" made a two-line error."""
+    from undertow.errors import ConfigError
+    from undertow.settings import Settings
+
+    path = tmp_path / "settings.yaml"
+    path.write_text('"\\n": 1\n')
+    with pytest.raises(ConfigError) as info:
+        Settings.from_yaml(path)
+    assert "\n" not in str(info.value) and "'\\n'" in str(info.value)

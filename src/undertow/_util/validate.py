@@ -31,8 +31,17 @@ def validate(model: type[M], data, prefix: str) -> M:
         return model.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        where = ".".join(str(p) for p in err["loc"]) or "(top level)"
+        where = ".".join(_key(p) for p in err["loc"]) or "(top level)"
         raise ConfigError(f"{prefix}{where}: {err['msg']}") from None
+
+
+def _key(part) -> str:
+    """A key of an error's location as text on one line: quoted (repr) when it is empty or holds
+    whitespace or control characters, as a user's stray key may (found by hypothesis)."""
+    text = str(part)
+    return (
+        text if text and text.isprintable() and not any(c.isspace() for c in text) else repr(text)
+    )
 
 
 def refuse_renamed(data, prefix: str, where: tuple = ()) -> None:
@@ -40,9 +49,9 @@ def refuse_renamed(data, prefix: str, where: tuple = ()) -> None:
     if isinstance(data, dict):
         for key, value in data.items():
             if isinstance(key, str) and key in RENAMED:
-                path = ".".join((*where, key))
+                path = ".".join((*where, _key(key)))
                 raise ConfigError(f"{prefix}{path}: renamed, use {RENAMED[key]!r}")
-            refuse_renamed(value, prefix, (*where, str(key)))
+            refuse_renamed(value, prefix, (*where, _key(key)))
     elif isinstance(data, list):
         for i, value in enumerate(data):
             refuse_renamed(value, prefix, (*where, str(i)))
