@@ -3,6 +3,7 @@ print)."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Annotated
 
@@ -13,6 +14,7 @@ from ._app import (
     ConfigOption,
     TopicsOption,
     _print_json,
+    _print_warnings,
     _progress,
     app,
     console,
@@ -39,7 +41,14 @@ def info(
     from ..settings import Settings
 
     settings = Settings.from_yaml(config) if config else None
-    result = info_file(path, topics=topics, settings=settings)
+    # every warning once, each time (not left to the process's warning registry, which hides a
+    # warning already shown from the same line: a second `info` in one process would miss it)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = info_file(path, topics=topics, settings=settings)
+    lines = list(result.warnings)
+    lines += [str(w.message) for w in caught if str(w.message) not in lines]
+    _print_warnings(dict.fromkeys(lines))
     if as_json:
         _print_json(result.to_dict())
     else:
