@@ -36,6 +36,16 @@ def _find_real_data() -> Path:
 REAL_DATA = _find_real_data()
 
 
+def one_error_line(result):
+    """The single ``error:`` line of a CLI result that exited with status 1 (a user error), with
+    no traceback; fails otherwise."""
+    lines = [ln for ln in result.output.splitlines() if ln.strip()]
+    assert result.exit_code == 1, result.output
+    assert len(lines) == 1 and lines[0].startswith("error:"), result.output
+    assert "Traceback" not in result.output
+    return lines[0]
+
+
 def _freeze(obj) -> None:
     """Make every numpy array held by ``obj`` (a dataclass, at any depth) read-only."""
     if isinstance(obj, np.ndarray):

@@ -6,19 +6,12 @@ import socket
 import time
 
 import pytest
+from conftest import one_error_line as _one_error_line
 from typer.testing import CliRunner
 
 from undertow.cli import app
 
 runner = CliRunner()
-
-
-def _one_error_line(result):
-    lines = [ln for ln in result.output.splitlines() if ln.strip()]
-    assert result.exit_code == 1, result.output
-    assert len(lines) == 1 and lines[0].startswith("error:"), result.output
-    assert "Traceback" not in result.output
-    return lines[0]
 
 
 def _free_port() -> int:
@@ -118,6 +111,7 @@ def test_characterize_a_circle_says_there_is_no_constant_speed_segment():
     """The real circle run has 303 valid DVL samples but turns all the time: the error names
     the missing constant-speed segment, not a shortage of samples."""
     from conftest import REAL_DATA
+    from conftest import one_error_line as _one_error_line
 
     bag = REAL_DATA / "a50_ros1_circle.bag"
     if not bag.exists():

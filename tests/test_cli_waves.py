@@ -8,20 +8,13 @@ import numpy as np
 import pytest
 import yaml
 from conftest import REAL_DATA
+from conftest import one_error_line as _one_error_line
 from typer.testing import CliRunner
 
 from undertow.cli import app
 from undertow.trajectory import Trajectory
 
 runner = CliRunner()
-
-
-def _one_error_line(result):
-    lines = [ln for ln in result.output.splitlines() if ln.strip()]
-    assert result.exit_code == 1, result.output
-    assert len(lines) == 1 and lines[0].startswith("error:"), result.output
-    assert "Traceback" not in result.output
-    return lines[0]
 
 
 def test_waves_json_against_the_simulated_truth(simulated_run, tmp_path):

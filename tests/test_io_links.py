@@ -19,6 +19,7 @@ from conftest import REAL_DATA
 from undertow.io import read_log
 from undertow.io.a50_json import velocity_report_line
 from undertow.io.links import A50TcpLink, Backoff, ClockPolicy, LinkCounters, records_to_log
+from undertow.io.links.common import RECORD_FIELDS
 
 V1 = REAL_DATA / "a50_tcp_json_v1_straight.txt"
 CORPUS = Path(__file__).resolve().parents[1] / "fuzz" / "corpus"
@@ -210,17 +211,7 @@ def test_simulated_log_matches_the_offline_reader(simulation, tmp_path):
     path.write_text("\n".join(lines) + "\n")
     offline = read_log(path)
     live = records_to_log(records)
-    for name in (
-        "t",
-        "velocity",
-        "valid",
-        "fom",
-        "covariance",
-        "altitude",
-        "beam_range",
-        "beam_valid",
-        "beam_velocity",
-    ):
+    for name in ("t", *RECORD_FIELDS["dvl"]):
         np.testing.assert_array_equal(getattr(live.dvl, name), getattr(offline.dvl, name), name)
     for name in ("t", "position", "orientation", "std"):
         np.testing.assert_array_equal(

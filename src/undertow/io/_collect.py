@@ -56,6 +56,20 @@ def check_regular(path: Path, directory_ok: bool = False) -> None:
     raise ReaderError(f"{path}: is {kind}, not {what} (refused before opening)")
 
 
+def read_regular_bytes(path: Path) -> bytes:
+    """The bytes of the regular file ``path``; a missing, special (:func:`check_regular`),
+    unreadable or too large file is one ReaderError line naming it."""
+    if not path.exists():
+        raise ReaderError(f"{path}: no such file")
+    check_regular(path)
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise ReaderError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    except MemoryError:
+        raise ReaderError(f"{path}: too large to read into memory") from None
+
+
 class Notes:
     """Counted notes about recoverable problems met while reading ``source``."""
 

@@ -17,7 +17,7 @@ import numpy as np
 from .._util.atomic import atomic_path
 from ..errors import DataError, ReaderError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
-from ._collect import MALFORMED, check_regular
+from ._collect import MALFORMED, read_regular_bytes
 from .tum import _atomic_write_text
 
 _TYPES = {
@@ -113,13 +113,7 @@ def _parse_header(path: Path, data: bytes):
 def read_ply(path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """(points (N,3) float64, {property: (N,) array}) of the vertex element of a PLY file."""
     path = Path(path)
-    if not path.exists():
-        raise ReaderError(f"{path}: no such file")
-    check_regular(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ReaderError(f"{path}: cannot read: {exc.strerror or exc}") from exc
+    data = read_regular_bytes(path)
     try:
         return _read_ply(path, data)
     except (*MALFORMED, MemoryError) as exc:

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import ReaderError
 from ..log import Log, Mounting
-from ._collect import Notes, check_regular
+from ._collect import Notes, read_regular_bytes
 from .links.common import records_to_log
 from .mavlink import MavlinkConfig, MavlinkMapper
 
@@ -184,15 +184,7 @@ def _v2_id(frame: bytes) -> int:
 
 
 def _read_bytes(path: Path) -> bytes:
-    if not path.exists():
-        raise ReaderError(f"{path}: no such file")
-    check_regular(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ReaderError(f"{path}: cannot read: {exc.strerror or exc}") from exc
-    except MemoryError:
-        raise ReaderError(f"{path}: too large to read into memory") from None
+    data = read_regular_bytes(path)
     if not data:
         raise ReaderError(f"{path}: empty file (no MAVLink records)")
     return data
