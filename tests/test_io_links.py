@@ -484,7 +484,7 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation):
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     with link:
-        time.sleep(0.2)
+        _wait(lambda: link.counters.connects >= 1, link)  # bound before anything is sent
         for k, (_, msg) in enumerate(rows):
             sender.sendto(msg.pack(mav), ("127.0.0.1", port))
             if k == 50:  # a whole frame whose CRC fails
