@@ -13,7 +13,15 @@ dropped (:class:`~undertow.io.links.common.LinkCounters`) and delivers
 from __future__ import annotations
 
 from .a50_tcp import A50TcpLink
-from .common import Backoff, ClockPolicy, Link, LinkCounters, Record, records_to_log
+from .common import (
+    Backoff,
+    ClockPolicy,
+    Link,
+    LinkCounters,
+    Record,
+    ScaledClock,
+    records_to_log,
+)
 
 _LAZY = {"MavlinkLink": "mavlink_udp", "Ping1DLink": "ping1d"}
 
@@ -36,5 +44,6 @@ __all__ = [
     "MavlinkLink",
     "Ping1DLink",
     "Record",
+    "ScaledClock",
     "records_to_log",
 ]

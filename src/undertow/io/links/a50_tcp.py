@@ -172,10 +172,11 @@ class A50TcpLink(Link):
         clock: ClockPolicy | None = None,
         backoff: Backoff | None = None,
         max_queue: int = 10_000,
+        now=None,
     ) -> None:
         counters = LinkCounters()
         clock = clock or ClockPolicy(counters, max_offset_s=max_offset_s)
-        super().__init__(callback, backoff=backoff, max_queue=max_queue, clock=clock)
+        super().__init__(callback, backoff=backoff, max_queue=max_queue, clock=clock, now=now)
         self.host, self.port = host, int(port)
         self.source = f"tcp://{host}:{self.port}"
         self.decoder = A50LineDecoder(self.counters, self.clock, self.source)
@@ -227,7 +228,7 @@ class A50TcpLink(Link):
             if not chunk:
                 return  # closed by the sensor
             last = time.monotonic()
-            arrival = time.time()
+            arrival = self.now()
             for line in lines.feed(chunk):
                 for record in self.decoder.decode(line, arrival):
                     self._emit(record)

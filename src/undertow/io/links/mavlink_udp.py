@@ -18,6 +18,7 @@ A link silent for ``idle_timeout_s`` re-opens its connection (counted as a disco
 from __future__ import annotations
 
 import math
+import socket
 import time
 
 from ...errors import ConfigError
@@ -45,6 +46,7 @@ class MavlinkLink(Link):
         max_offset_s: float = 1.0,
         backoff: Backoff | None = None,
         max_queue: int = 10_000,
+        now=None,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ConfigError(f"mavlink time_source: '{time_source}' is not one of {TIME_SOURCES}")
@@ -54,6 +56,7 @@ class MavlinkLink(Link):
             backoff=backoff,
             max_queue=max_queue,
             clock=ClockPolicy(counters, max_offset_s=max_offset_s),
+            now=now,
         )
         self.address = str(address)
         self.baud = int(baud)
@@ -73,6 +76,7 @@ class MavlinkLink(Link):
             )
         except Exception as exc:  # pymavlink raises bare Exceptions for bad addresses
             raise OSError(f"{self.address}: {exc}") from None
+        _grow_receive_buffer(conn)
         self._conn = conn
         return conn
 
@@ -85,6 +89,9 @@ class MavlinkLink(Link):
                 pass
 
     def _run_session(self, conn) -> None:
+        sock = getattr(conn, "port", None)
+        if isinstance(sock, socket.socket) and sock.type == socket.SOCK_DGRAM:
+            return self._run_udp(conn, sock)
         last = time.monotonic()
         while not self.stopping:
             try:
@@ -98,7 +105,30 @@ class MavlinkLink(Link):
                     raise OSError(f"no MAVLink for {self.idle_timeout_s} s")
                 continue
             last = time.monotonic()
-            self.handle(msg, time.time())
+            self.handle(msg, self.now())
+
+    def _run_udp(self, conn, sock) -> None:
+        """UDP: one blocking read per datagram, decoded by the connection's own parser
+        (``recv_match`` polls, which costs several times the decoding at telemetry rates)."""
+        sock.settimeout(0.2)
+        last = time.monotonic()
+        while not self.stopping:
+            try:
+                data = sock.recv(65535)
+            except TimeoutError:
+                if time.monotonic() - last > self.idle_timeout_s:
+                    raise OSError(f"no MAVLink for {self.idle_timeout_s} s") from None
+                continue
+            except OSError:
+                if self.stopping:
+                    return
+                raise
+            last = time.monotonic()
+            arrival = self.now()
+            if conn.first_byte:  # MAVLink 1 or 2, from the first packet (as recv_match does)
+                conn.auto_mavlink_version(data)
+            for msg in conn.mav.parse_buffer(data) or ():
+                self.handle(msg, arrival)
 
     def handle(self, msg, arrival: float) -> None:
         """Map one decoded message received at ``arrival`` (Unix s) and deliver its records."""
@@ -124,3 +154,19 @@ class MavlinkLink(Link):
                     record.stream, t, record.data, arrival, record.sensor_time, record.source
                 )
             self._emit(record)
+
+
+#: the UDP receive buffer asked for (the kernel caps it at twice net.core.rmem_max)
+RECEIVE_BUFFER_BYTES = 4 << 20
+
+
+def _grow_receive_buffer(conn) -> None:
+    """A larger socket receive buffer for a UDP connection: each small datagram takes about
+    1 kB of buffer in the kernel, so the default (~208 kB) holds only a few hundred MAVLink
+    messages, about a second of an autopilot's telemetry while this process is busy."""
+    sock = getattr(conn, "port", None)
+    if isinstance(sock, socket.socket) and sock.type == socket.SOCK_DGRAM:
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
+        except OSError:
+            pass

@@ -145,12 +145,13 @@ class Ping1DLink(Link):
         max_timeouts: int = 5,
         backoff: Backoff | None = None,
         max_queue: int = 10_000,
+        now=None,
     ) -> None:
         if not 0 < rate_hz <= 100:
             raise ConfigError("ping rate_hz: expected 0 < rate <= 100")
         counters = LinkCounters()
         super().__init__(
-            callback, backoff=backoff, max_queue=max_queue, clock=ClockPolicy(counters)
+            callback, backoff=backoff, max_queue=max_queue, clock=ClockPolicy(counters), now=now
         )
         self.kind, self.address, self.port_or_baud = parse_device(device)
         self.source = str(device)
@@ -195,7 +196,7 @@ class Ping1DLink(Link):
         while not self.stopping:
             errors = device.parser.errors + device.unrecognized
             msg = device.legacyRequest(PING1D_DISTANCE, self.request_timeout_s)
-            arrival = time.time()
+            arrival = self.now()
             self.counters.malformed += device.parser.errors + device.unrecognized - errors
             reply = (
                 None if msg is None else {n: getattr(msg, n, None) for n in msg.payload_field_names}

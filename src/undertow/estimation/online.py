@@ -1,0 +1,543 @@
+"""The paper's UKF online: measurements arrive in chunks (each a :class:`~undertow.log.Log` of the
+records released since the last one, in time order) and the filter advances with each.
+
+:class:`OnlineLocalizer` builds the same rows as :class:`~undertow.estimation.Localizer` (same
+envelopes, noise, floors, the same merged order: time, then IMU, DVL, DR, barometer) and runs
+the same numba loop (:func:`~undertow.estimation.model.resume_filter`) from the state the last
+chunk left. For a fixed wave condition, a log pushed in any pieces gives bit for bit the t, x,
+P and counts of ``Localizer(...).run(log)``. Two things the offline run decides with the whole
+log in hand are made exact by rewinding to a saved filter state (a checkpoint):
+
+- rows at the same time are ordered by sensor; a chunk that ends inside a time's rows (never
+  with the pipeline, whose chunks are split by time) is merged with the next one's: the state
+  before the last time's rows is kept until a later time arrives;
+- the depth-rate check (:func:`~undertow.estimation.health.depth_jumps`) judges a depth by
+  the median of HALF_WINDOW depths on each side: until HALF_WINDOW later depths are in, a depth
+  is judged on those so far (as if the log ended there) and the state before it is kept; when
+  the later depths change the verdict (a spike seen late, rare), the filter rewinds there and
+  the states since are recomputed (``revised``: how many of the states :meth:`push` returns
+  replace ones returned before).
+
+So every state :meth:`push` returns is what the offline filter would give were the log to end
+with this chunk; ``trajectory().metadata["online"]["final_states"]`` counts the leading states
+no later chunk can change (what the online mapper uses).
+
+The filter starts once the data released so far has DVL velocity and an orientation source
+(IMU gyro or DR attitude) and every stream in ``expected`` has a row, or ``start_timeout_s``
+of log time after the first record; it then filters everything released so far, from the
+initial state :func:`~undertow.estimation.localizer._initial_state` takes from that data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..log import STREAM_NAMES, Log, Mounting
+from ..trajectory import Trajectory
+from . import model
+from .health import HALF_WINDOW, check_mounting, depth_jumps, per_sensor
+from .localizer import (
+    WAVE_AUTO,
+    WAVE_GIVEN,
+    Localizer,
+    _adapted_summary,
+    _dr_rows,
+    _dvl_rows,
+    _imu_rows,
+    _initial_state,
+    _nis_summary,
+    _padded,
+    _pressure_rows,
+    sensor_coverage,
+)
+
+FILTER_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure")
+
+
+class OnlineLocalizer:
+    """``OnlineLocalizer("proposed", wave=(0.1, 1.0), mounting=m).push(chunk)`` per chunk.
+
+    ``variant``, ``profile``, ``wave`` (a fixed condition: name, (a, f), a WaveTrack or None for
+    calm; not ``"auto"``: the live pipeline estimates the sea state itself and calls
+    :meth:`set_wave`), ``extrapolate`` and ``params`` as :class:`Localizer`; ``mounting``: the
+    session's (chunks carry the default one); ``expected``: streams to wait for before starting
+    (at most ``start_timeout_s`` of log time after the first record).
+    ``output_rate_hz`` is refused: the online filter outputs every measurement time."""
+
+    def __init__(self, variant: str | None = None, profile=None, wave=None, *,
+                 mounting: Mounting | None = None, expected: set[str] | None = None,
+                 start_timeout_s: float = 5.0, extrapolate: bool = False,
+                 **params) -> None:  # fmt: skip
+        if isinstance(wave, str) and wave.strip().lower() == WAVE_AUTO:
+            raise ConfigError("OnlineLocalizer: wave 'auto' is offline only; give a condition "
+                              "and update it with set_wave()")  # fmt: skip
+        self._offline = Localizer(variant, profile, wave, extrapolate, **params)
+        self.config = self._offline.config
+        if self.config.output_rate_hz is not None:
+            raise ConfigError("OnlineLocalizer: output_rate_hz is offline only (the online "
+                              "filter outputs every measurement time)")  # fmt: skip
+        self.mounting = mounting if mounting is not None else Mounting()
+        check_mounting(self.mounting)
+        self.expected = set(expected or ())
+        unknown = sorted(self.expected - set(STREAM_NAMES))
+        if unknown:
+            raise ConfigError(f"OnlineLocalizer: expected stream(s) {', '.join(unknown)} not "
+                              f"among {', '.join(STREAM_NAMES)}")  # fmt: skip
+        if not start_timeout_s >= 0:
+            raise ConfigError(f"OnlineLocalizer: start_timeout_s {start_timeout_s} must be >= 0")
+        self.start_timeout_s = float(start_timeout_s)
+        self.ready = False
+        self.missing: list[str] = []
+        self.revised = 0
+        self._waiting: list[Log] = []
+        self._span = (np.inf, -np.inf)  # log time of the first and the latest record
+        self._have: set[str] = set()
+        self._noise = None
+        self._wave_changes: list[dict] = []
+        self._config_dump = self.config.model_dump()
+        self._run: _Run | None = None
+        self._preview = None  # the filter state the last peek reached
+        self._update_missing()
+
+    def set_wave(self, condition) -> None:
+        """Wave noise of ``condition`` (name, (a, f) or "calm") for the rows of later chunks."""
+        noise = self._offline.profile.noise(condition, extrapolate=self._offline.extrapolate)
+        self._noise = noise
+        t = None if not np.isfinite(self._span[1]) else float(self._span[1])
+        self._wave_changes.append({"t": t, **noise.to_dict()})
+        if self._run is not None:
+            self._run.noise = noise
+
+    def push(self, chunk: Log) -> Trajectory | None:
+        """Filter the chunk's measurements; the states recorded (x, P at each new time), or None
+        when there are none (not started yet, or nothing new). ``self.revised`` of them (the
+        first ones) replace states an earlier push returned (see the module docstring)."""
+        chunk = chunk.replace(mounting=self.mounting)
+        self.revised = 0
+        if self._run is None:
+            self._waiting.append(chunk)
+            self._note(chunk)
+            if not self._update_missing():
+                return None
+            chunk = concat_logs(self._waiting, self.mounting)
+            self._waiting = []
+            self._start(chunk)
+        else:
+            self._note(chunk)
+        n0, n_kept = self._run.feed(chunk)
+        self.revised = n0 - n_kept
+        if self._run.out.n <= n_kept:
+            return None
+        return self._run.states(n_kept)
+
+    def peek(self, chunk: Log, *, resume: bool = False) -> Trajectory | None:
+        """The states the chunk would give if pushed now, computed on a copy (the filter is
+        not changed: a preview of records not yet released); None before the start.
+
+        ``resume``: continue from the state the previous peek reached instead of the committed
+        one (the caller guarantees the chunk's filter records all come after the previous
+        peek's, and that nothing the committed filter took since is missing from the peeks:
+        a preview advanced by the new records only, O(new rows)). Its pressure rows are judged
+        by the depth-rate check with the committed depths and its own (not the previous
+        peeks'), so it may differ from a fresh peek: a display, resynchronized by a fresh one.
+        Without a previous peek it starts from the committed state."""
+        if self._run is None:
+            return None
+        start = self._preview if resume else None
+        t, x, P, self._preview = self._run.peek(chunk.replace(mounting=self.mounting), start)
+        return Trajectory(t, x, P, variant=self.config.variant) if t.size else None
+
+    def latest(self) -> Trajectory | None:
+        """The last state recorded (one), or None."""
+        if self._run is None or self._run.out.n == 0:
+            return None
+        return self._run.states(self._run.out.n - 1)
+
+    def trajectory(self) -> Trajectory:
+        """All states so far (views: a later push may revise those after ``final_states``),
+        with the metadata of :meth:`Localizer.run` and ``"online"``."""
+        if self._run is None:
+            empty = Trajectory(np.zeros(0), np.zeros((0, 18)), np.zeros((0, 18, 18)))
+            return dataclasses.replace(empty, variant=self.config.variant,
+                                       metadata={"online": self._online_meta()})  # fmt: skip
+        traj = self._run.states(0)
+        return dataclasses.replace(traj, metadata=self._metadata())
+
+    def committed(self) -> Trajectory:
+        """All states so far (views) with only ``metadata["online"]["final_states"]``: what
+        :meth:`trajectory` gives without the summaries (cheap enough for every chunk)."""
+        if self._run is None:
+            return self.trajectory()
+        meta = {"online": {"final_states": self._run.final_states()}}
+        return dataclasses.replace(self._run.states(0), metadata=meta)
+
+    def _note(self, chunk: Log) -> None:
+        for name, stream in chunk.streams().items():
+            if len(stream):
+                self._have.add(name)
+                self._span = (min(self._span[0], float(stream.t[0])),
+                              max(self._span[1], float(stream.t[-1])))  # fmt: skip
+
+    def _update_missing(self) -> bool:
+        """Refresh ``missing`` and ``ready``; True when the filter can start."""
+        if self._run is not None:
+            return True
+        need = []
+        if "dvl" not in self._have:
+            need.append("dvl: no DVL velocity yet (the filter needs it)")
+        if not {"imu", "dead_reckoning"} & self._have:
+            need.append("orientation: no IMU gyro (imu) or DVL dead reckoning (dead_reckoning) "
+                        "yet (the filter needs one)")  # fmt: skip
+        waiting = [f"{s}: expected, no data yet" for s in sorted(self.expected - self._have)]
+        timed_out = self._span[1] - self._span[0] >= self.start_timeout_s
+        self.missing = need + waiting
+        self.ready = not need and (not waiting or timed_out)
+        return self.ready
+
+    def _start(self, log: Log) -> None:
+        cfg = self.config
+        unobserved, held = sensor_coverage(log, cfg)
+        if self._noise is None:
+            self._noise, self._wave_meta = self._offline._wave_noise(log)
+        else:
+            self._wave_meta = {"wave_condition_source": "set_wave"}
+        x0, P0 = _initial_state(log, cfg)
+        self._start_meta = {
+            "unobserved": unobserved,
+            "held_bias": held,
+            "start_t": float(self._span[0]),
+            "started_at": float(self._span[1]),
+            "started_without": [m.split(":")[0] for m in self.missing],
+        }
+        self.missing = []
+        self._run = _Run(cfg, self._noise, x0, P0, cfg.process_model(held=held),
+                         cfg.sensor_model(self.mounting))  # fmt: skip
+
+    def _online_meta(self) -> dict:
+        meta = {"ready": self.ready, "missing": list(self.missing),
+                "wave_changes": list(self._wave_changes)}  # fmt: skip
+        if self._run is not None:
+            meta.update(self._start_meta)
+            meta.update(self._run.bookkeeping())
+        return meta
+
+    def _metadata(self) -> dict:
+        cfg, run = self.config, self._run
+        counts = run.counts()
+        rows = run.rows_per_kind()
+        noise = run.noise
+        metadata = {
+            "variant": cfg.variant,
+            "counts": counts,
+            "sensors": per_sensor(counts, rows),
+            "nis": _nis_summary(run.state.nis),
+            **self._wave_meta,
+            "wave_noise": noise.to_dict() if cfg.adds_wave_noise else None,
+            "wave_condition": noise.condition,
+            "unobserved": self._start_meta["unobserved"],
+            "held_bias": self._start_meta["held_bias"],
+            "config": self._config_dump,
+            "source": "online",
+            "online": self._online_meta(),
+        }
+        metadata.setdefault("wave_condition_source", WAVE_GIVEN)
+        if cfg.adapts_r:
+            kinds = np.array([rows[k] for k in model.KIND_NAMES])
+            metadata["adaptive_r"] = _adapted_summary(run.state.Ra, kinds, cfg.adaptive_r_alpha)
+        return metadata
+
+
+def concat_logs(logs: list[Log], mounting: Mounting) -> Log:
+    """One Log of consecutive chunks (each stream's rows in chunk order)."""
+    streams = {}
+    for name in STREAM_NAMES:
+        parts = [getattr(log, name) for log in logs]
+        parts = [p for p in parts if p is not None and len(p)]
+        if not parts:
+            continue
+        if len(parts) == 1:
+            streams[name] = parts[0]
+            continue
+        changes = {"t": np.concatenate([p.t for p in parts])}
+        for field in parts[0]._shapes:
+            values = [getattr(p, field) for p in parts]
+            if all(v is None for v in values):
+                continue
+            like = next(v for v in values if v is not None)
+            fill = False if like.dtype == np.bool_ else np.nan
+            changes[field] = np.concatenate([
+                v if v is not None else np.full((len(p), *like.shape[1:]), fill, like.dtype)
+                for v, p in zip(values, parts, strict=True)
+            ])  # fmt: skip
+        streams[name] = dataclasses.replace(parts[0], **changes)
+    return Log(**streams, mounting=mounting)
+
+
+class _Outputs:
+    """The states recorded so far, in arrays grown by doubling (views handed out)."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.t = np.empty(64)
+        self.x = np.empty((64, model.N_STATE))
+        self.P = np.empty((64, model.N_STATE, model.N_STATE))
+
+    def append(self, t, x, P) -> None:
+        k = t.size
+        if self.n + k > self.t.size:
+            size = max(2 * self.t.size, self.n + k)
+            for name in ("t", "x", "P"):
+                old = getattr(self, name)
+                new = np.empty((size, *old.shape[1:]))
+                new[: self.n] = old[: self.n]
+                setattr(self, name, new)
+        self.t[self.n : self.n + k] = t
+        self.x[self.n : self.n + k] = x
+        self.P[self.n : self.n + k] = P
+        self.n += k
+
+
+class _DepthRate:
+    """The depth-rate verdicts (health.depth_jumps) of the in-envelope depths seen so far:
+    final for depth j once HALF_WINDOW later ones are in, else judged as if the log ended now.
+    Keeps the depths from HALF_WINDOW before the first undecided one."""
+
+    def __init__(self, cfg) -> None:
+        self.cfg = cfg
+        self.checked = cfg.max_vertical_speed_m_s is not None
+        self.base = 0  # global index of the first depth kept
+        self.t, self.d = np.zeros(0), np.zeros(0)
+        self.jump = np.zeros(0, bool)  # verdicts in use, of the depths kept
+        self.final_jumps = 0  # jumps among the depths no longer kept
+
+    @property
+    def count(self) -> int:
+        return self.base + self.t.size
+
+    def is_final(self, j) -> np.ndarray:
+        return (np.asarray(j) < self.count - HALF_WINDOW) | (not self.checked)
+
+    def add(self, t, d) -> int | None:
+        """Add depths; the global index of the first one whose verdict changed, or None."""
+        if t.size == 0:
+            return None
+        n_old = self.t.size
+        # the first depths kept are final (their window reaches before the kept ones)
+        k = min(max(self.count - HALF_WINDOW, 0) - self.base, n_old) if self.checked else n_old
+        self.t, self.d = np.concatenate([self.t, t]), np.concatenate([self.d, d])
+        jump = depth_jumps(self.t, self.d, self.cfg)
+        jump[:k] = self.jump[:k]
+        changed = np.flatnonzero(jump[:n_old] != self.jump)
+        self.jump = jump
+        return None if changed.size == 0 else self.base + int(changed[0])
+
+    def peek(self, t, d) -> np.ndarray:
+        """The verdicts the new depths (t, d) would get now (nothing kept)."""
+        jump = depth_jumps(np.concatenate([self.t, t]), np.concatenate([self.d, d]), self.cfg)
+        return jump[self.t.size :]
+
+    def jumped(self, j: np.ndarray) -> np.ndarray:
+        return self.jump[np.asarray(j) - self.base]
+
+    def trim(self) -> None:
+        first_open = max(self.count - HALF_WINDOW, 0)
+        base = max(self.base, first_open - HALF_WINDOW)
+        drop = base - self.base
+        if drop > 0:
+            self.final_jumps += int(self.jump[:drop].sum())
+            self.t, self.d, self.jump = self.t[drop:], self.d[drop:], self.jump[drop:]
+            self.base = base
+
+    def rejected(self) -> int:
+        return self.final_jumps + int(self.jump.sum())
+
+
+class _Run:
+    """The filter once started: candidate rows (pressure rows before the depth-rate verdict),
+    checkpoints (position in the candidate rows -> filter state and outputs count), the rows
+    since the oldest checkpoint, the outputs."""
+
+    def __init__(self, cfg, noise, x0, P0, process, sensors) -> None:
+        self.cfg, self.noise, self.process, self.sensors = cfg, noise, process, sensors
+        self.state = model.start_state(np.nan, x0, P0, process, np.zeros((4, 3, 3)))
+        self.out = _Outputs()
+        self.depth = _DepthRate(cfg)
+        self.rejected: dict[str, int] = {}
+        self.candidates = np.zeros(len(model.KIND_NAMES), np.int64)
+        self.late = 0
+        self.t_seen = -np.inf  # latest record time fed
+        self.tail = np.zeros(0, model.MEASUREMENT)  # candidate rows from position pos0 on
+        self.tail_p = np.zeros(0, np.int64)  # their depth index (-1: not a pressure row)
+        self.pos0 = 0
+        self.checkpoints: dict[int, tuple[model.FilterState, int]] = {}
+        self.group = None  # position of the first row at the latest time
+
+    def feed(self, chunk: Log) -> tuple[int, int]:
+        """Filter a chunk; returns (outputs before, outputs kept before the new ones)."""
+        n_before = self.out.n
+        rows, depth_idx, depths = self._rows(self._drop_late(chunk))
+        changed = self.depth.add(*depths)
+        rewind = None
+        if rows.size and self.tail.size and rows["t"][0] == self.tail["t"][-1]:
+            rewind = self.group
+        if changed is not None:
+            at = self.pos0 + int(np.flatnonzero(self.tail_p == changed)[0])
+            rewind = at if rewind is None else min(rewind, at)
+        start = self.pos0 + self.tail.size
+        if rewind is not None:
+            state, n_out = self.checkpoints[rewind]
+            self.checkpoints = {p: c for p, c in self.checkpoints.items() if p < rewind}
+            self.state = state.copy()
+            self.out.n = n_out
+            k = rewind - self.pos0
+            rows = np.concatenate([self.tail[k:], rows])
+            depth_idx = np.concatenate([self.tail_p[k:], depth_idx])
+            order = np.lexsort((rows["kind"], rows["t"]))
+            rows, depth_idx = rows[order], depth_idx[order]
+            self.tail, self.tail_p = self.tail[:k], self.tail_p[:k]
+            start = rewind
+        n_kept = min(self.out.n, n_before)
+        self._filter(rows, depth_idx, start)
+        self._trim()
+        return n_before, n_kept
+
+    def _drop_late(self, chunk: Log, commit: bool = True) -> Log:
+        """The chunk without the filter streams' records before the latest one fed (counted
+        when ``commit``)."""
+        changes = {}
+        latest = self.t_seen
+        for name in FILTER_STREAMS:
+            stream = getattr(chunk, name)
+            if stream is None or not len(stream):
+                continue
+            late = stream.t < self.t_seen
+            if late.any():
+                self.late += int(late.sum()) if commit else 0
+                changes[name] = stream.select(~late)
+            latest = max(latest, float(stream.t[-1]))
+        if commit:
+            self.t_seen = latest
+        return chunk.replace(**changes) if changes else chunk
+
+    def _rows(self, chunk: Log, commit: bool = True):
+        """(candidate rows merged in the offline order, their depth index, (t, depth) of the
+        new in-envelope depths); ``commit``: count them."""
+        cfg, floor2, rejected = self.cfg, self.cfg.std_floor**2, {}
+        parts = []
+        for name, build in (("imu", _imu_rows), ("dvl", _dvl_rows),
+                            ("dead_reckoning", _dr_rows)):  # fmt: skip
+            stream = getattr(chunk, name)
+            if stream is not None and len(stream):
+                t, kind, z, R, ok = build(chunk, cfg, self.noise, rejected, warn=False)
+                parts.append((*_padded(t[ok], kind, z[ok], R[ok], floor2), np.full(ok.sum(), -1)))
+        depths = (np.zeros(0), np.zeros(0))
+        if chunk.pressure is not None and len(chunk.pressure):
+            t, kind, z, R, ok = _pressure_rows(chunk, cfg, self.noise, rejected, warn=False,
+                                               jumps=False)  # fmt: skip
+            idx = self.depth.count + np.arange(int(ok.sum()))
+            parts.append((*_padded(t[ok], kind, z[ok], R[ok], floor2), idx))
+            depths = (t[ok], z[ok, 0])
+        for key, value in rejected.items() if commit else ():
+            self.rejected[key] = self.rejected.get(key, 0) + value
+        if not parts:
+            return np.zeros(0, model.MEASUREMENT), np.zeros(0, np.int64), depths
+        t, kind, z, R, idx = (np.concatenate(c) for c in zip(*parts, strict=True))
+        order = np.lexsort((kind, t))
+        if commit:
+            np.add.at(self.candidates, kind, 1)
+        rows = model.pack_measurements(t[order], kind[order], z[order], R[order])
+        return rows, idx[order], depths
+
+    def peek(self, chunk: Log, start=None) -> tuple:
+        """(t, x, P, state reached) of the chunk filtered on a copy of the state (``start``,
+        default the committed one; nothing kept); depths judged on those so far, as :meth:`feed`
+        would."""
+        rows, depth_idx, (t, d) = self._rows(self._drop_late(chunk, False), commit=False)
+        accepted = depth_idx < 0
+        if t.size:
+            jump = self.depth.peek(t, d)
+            is_p = ~accepted
+            accepted[is_p] = ~jump[depth_idx[is_p] - self.depth.count]
+        state = (self.state if start is None else start).copy()
+        rows = rows[accepted]
+        if np.isnan(state.clock[0]) and rows.size:
+            state.clock[0] = rows["t"][0]
+        return (*model.resume_filter(rows, state, self.process, self.sensors, True), state)
+
+    def _filter(self, rows, depth_idx, start: int) -> None:
+        """Filter the candidate rows from position ``start``, with a checkpoint before every
+        pressure row not finally judged and before the rows at the latest time."""
+        if rows.size == 0:
+            return
+        is_p = depth_idx >= 0
+        accepted = ~is_p
+        accepted[is_p] = ~self.depth.jumped(depth_idx[is_p])
+        open_p = is_p.copy()
+        open_p[is_p] = ~self.depth.is_final(depth_idx[is_p])
+        last = int(np.searchsorted(rows["t"], rows["t"][-1]))
+        self.group = start + last
+        cuts = np.flatnonzero(open_p).tolist()
+        cuts = sorted(set(cuts) | {last})
+        k = 0
+        for cut in cuts:
+            self._advance(rows[k:cut][accepted[k:cut]], flush=False)
+            self.checkpoints[start + cut] = (self.state.copy(), self.out.n)
+            k = cut
+        self._advance(rows[k:][accepted[k:]], flush=True)
+        self.tail = np.concatenate([self.tail, rows])
+        self.tail_p = np.concatenate([self.tail_p, depth_idx])
+
+    def _advance(self, rows, flush: bool) -> None:
+        """Filter the accepted rows; with ``flush``, record the last time's state too (the
+        offline run records it when the next row's time differs: a checkpoint precedes the
+        rows at the latest time, for a next chunk that starts at that time)."""
+        if rows.size == 0 and not (flush and self.state.clock[3]):
+            return
+        if np.isnan(self.state.clock[0]):
+            self.state.clock[0] = rows["t"][0]  # t0: the first measurement's time
+        out_t, out_x, out_P = model.resume_filter(rows, self.state, self.process, self.sensors,
+                                                  flush)  # fmt: skip
+        self.out.append(out_t, out_x, out_P)
+
+    def _trim(self) -> None:
+        """Drop the checkpoints no later chunk can need, and the rows before the oldest kept."""
+        keep = {}
+        for pos, cp in self.checkpoints.items():
+            k = pos - self.pos0
+            p = self.tail_p[k]
+            if pos == self.group or (p >= 0 and not self.depth.is_final(p)):
+                keep[pos] = cp
+        self.checkpoints = keep
+        first = min(keep, default=self.pos0 + self.tail.size)
+        k = first - self.pos0
+        self.tail, self.tail_p = self.tail[k:], self.tail_p[k:]
+        self.pos0 = first
+        self.depth.trim()
+
+    def states(self, n0: int) -> Trajectory:
+        n = self.out.n
+        out = self.out
+        return Trajectory(out.t[n0:n], out.x[n0:n], out.P[n0:n], variant=self.cfg.variant)
+
+    def counts(self) -> dict:
+        rejected = dict(self.rejected)
+        if "rejected_pressure" in rejected:
+            rejected["rejected_pressure_rate"] = self.depth.rejected()
+        filt = dict(zip(model.COUNT_NAMES, self.state.counts.tolist(), strict=True))
+        return {**rejected, **filt}
+
+    def rows_per_kind(self) -> dict:
+        rows = self.candidates.copy()
+        rows[model.BARO] -= self.depth.rejected()
+        return dict(zip(model.KIND_NAMES, rows.tolist(), strict=True))
+
+    def final_states(self) -> int:
+        return int(min((n for _, n in self.checkpoints.values()), default=self.out.n))
+
+    def bookkeeping(self) -> dict:
+        final = self.final_states()
+        return {"final_states": final, "late_rows": self.late,
+                "checkpoints": len(self.checkpoints)}  # fmt: skip

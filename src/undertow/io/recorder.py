@@ -1,0 +1,580 @@
+"""The live recording: a ROS 2 bag directory (mcap storage) written as records arrive.
+
+Raw records (:class:`~undertow.io.links.common.Record`) go on the standard topics of
+:class:`~undertow.io.topics.TopicMap` (first names) with the message types of
+:func:`~undertow.io.rosbag_write.write_log` (message builders shared with it), so
+:func:`undertow.io.read_log` and ``undertow localize``/``map`` replay a recording, and ROS 2
+tools and Foxglove open it. The DVL is written in the ``driver`` flavor
+(``waterlinked_a50_ros_driver/msg/DVL`` on ``/dvl/data`` plus the json_v3 report line on
+``/dvl/json_data``): it is the flavor that carries every DVL field of a record at full precision
+(``fom`` and float64 beam velocities; the covariance through the JSON line, which the reader
+matches by (time, vx, vy, vz)); ``marine_acoustic_msgs/Dvl`` has no figure of merit and float32
+beam velocities.
+
+The estimates, on topics of their own (the readers ignore them):
+
+- ``/undertow/pose``: ``geometry_msgs/PoseWithCovarianceStamped`` in ``world`` (undertow's
+  north-east-down world frame) from the 18-state (x, P) of :mod:`undertow.estimation.model`:
+  position eta[0:3] = x[0:3], orientation the quaternion of (phi, theta, psi) = x[3:6], and the
+  6x6 covariance P[0:6, 0:6] row-major over (x, y, z, phi, theta, psi). The message defines the
+  last three as rotations about the X, Y, Z axes; Euler-angle perturbations equal those to first
+  order only near zero roll, pitch and yaw (elsewhere they differ by the Euler-rate transform), so
+  the block is the filter's Euler-angle covariance as is, not rotated;
+- ``/undertow/wave``: ``geometry_msgs/Vector3Stamped`` in ``world``: vector.x = amplitude a (m),
+  vector.y = frequency f (Hz), vector.z = 0;
+- ``/undertow/status``: ``std_msgs/String``, one JSON object (rates, counters, filter health);
+- ``/undertow/late/<stream>``: records that arrived after the reorder horizon (not given to the
+  filter), with their stream's message type (``/undertow/late/dvl_json`` for the DVL's line).
+
+The high-rate messages of fixed layout (``sensor_msgs/Imu``, ``sensor_msgs/FluidPressure``, the
+pose) are not built and serialized one by one: their CDR bytes are a template of the first such
+message rosbags serializes, with the stamp and the float64 fields packed in place (kept only when
+it reproduces rosbags' bytes of that message; the same bytes, a fifth of the time).
+
+Header stamps are the record time t (s) as ``sec = floor(t)``, ``nanosec = round((t - sec) 1e9)``;
+the bag's record time is the same instant in ns.
+
+**What a replay reads back.** :meth:`Recorder.write_record` returns the record exactly as
+``read_log(recording)`` will give it (the promise the live pipeline relies on: the filter is fed
+what a replay sees): t = sec + nanosec 1e-9 as the reader computes it; values quantized by the
+message field types and the reader's conventions:
+
+- sonar: ``sensor_msgs/Range`` is float32 (range, field of view, min/max range); the limits of
+  the session's first sonar record are written on every message (the reader keeps the first);
+  the Ping's confidence has no field in the message and is not returned (no estimator uses it);
+- DVL: an altitude that is not a finite number >= 0 reads back NaN; an invalid beam's range NaN;
+  missing fields read back as NaN (fom, covariance, beam values) / False (beam_valid); the
+  covariance reads back NaN when a velocity component is NaN (the JSON match fails);
+- dead reckoning: the attitude passes through a quaternion (roll, pitch, yaw recomputed from
+  it), the std through its square (std = sqrt(std^2)), NaN when missing;
+- IMU: which optional parts (acceleration, orientation) the stream has is fixed by the session's
+  first IMU record (the reader keeps a part only when every message has it): a later record
+  missing such a part gets NaN there, a part the first record lacked is not recorded;
+- pressure is written in Pa as given; note that the reader converts a whole pressure stream whose
+  median is below 20 000 Pa from hPa (x100): live links deliver Pa (about 1e5 underwater).
+
+Same-time records of one stream come back in write order.
+
+**Atomicity.** The bag is written in ``<name>.partial-XXXXXXXX/<name>`` next to the target and
+renamed into place by :meth:`Recorder.close` (after ``metadata.yaml`` and the sidecar
+``undertow.yaml`` with the mounting, as ``write_log`` writes); :meth:`Recorder.abort` removes it;
+nothing half-written ever appears at the target. After a crash the ``.partial`` folder stays (it
+is not one of the temporary folders :mod:`undertow._util.atomic` cleans up): its ``.mcap`` holds
+every chunk written so far (:meth:`Recorder.flush` closes a chunk; done every ``flush_every_s``
+of record time) but has no summary or footer, which rosbags, and so ``read_log``, refuse
+("File end magic is invalid"); ``mcap recover IN.mcap -o OUT.mcap`` (the MCAP command line tool,
+https://mcap.dev/guides/cli: "Recover data from a potentially corrupt MCAP file") rebuilds a
+readable file from it, which ``read_log`` reads as a lone ``.mcap`` (mounting from its
+``/tf_static``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import struct
+import tempfile
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import yaml
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+from .._util.plain import to_plain
+from ..errors import ConfigError, DataError
+from ..log import Mounting, SonarRange
+from ..rotations import quaternion_to_rpy, rpy_to_quaternion
+from .a50_json import MAX_REPORT_INTERVAL_MS, velocity_report_line
+from .links.common import RECORD_FIELDS, Record
+from .msgdefs import A50_DVL
+from .rosbag import SIDECAR
+from .rosbag_streams import TF_MESSAGE
+from .rosbag_write import (
+    TF_STATIC_QOS,
+    MessageBuilder,
+    dead_reckoning_message,
+    dvl_driver_message,
+    imu_message,
+    pressure_message,
+    sonar_message,
+    tf_static_message,
+)
+from .topics import SENSOR_NAMES, TopicMap
+
+#: topics of the estimates (the raw streams use TopicMap's first names)
+POSE_TOPIC = "/undertow/pose"
+WAVE_TOPIC = "/undertow/wave"
+STATUS_TOPIC = "/undertow/status"
+LATE_PREFIX = "/undertow/late/"
+#: builtin_interfaces/Time holds seconds in an int32 and the mcap record time is unsigned
+MAX_TIME_S = 2.0**31 - 1.0
+_SONAR_DEFAULTS = {
+    "field_of_view": SonarRange.field_of_view,
+    "min_range": SonarRange.min_range,
+    "max_range": SonarRange.max_range,
+}
+
+
+def _floats(value, n: int) -> tuple[float, ...]:
+    if value is None:
+        return (math.nan,) * n
+    if type(value) is tuple and len(value) == n and all(type(v) is float for v in value):
+        return value  # already n Python floats (what the links deliver)
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size != n:
+        raise ValueError(f"expected {n} values, got {arr.size}")
+    return tuple(float(v) for v in arr)
+
+
+def _float(value) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _strict_json(value):
+    """Non-finite floats -> None, in nested dicts and lists."""
+    if isinstance(value, dict):
+        return {k: _strict_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_strict_json(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+_STAMP = struct.Struct("<iI")
+_ZEROS9 = (0.0,) * 9
+_NO_ESTIMATE9 = (-1.0,) + (0.0,) * 8  # sensor_msgs/Imu: covariance[0] = -1, no estimate
+
+
+def _stamp(t: float) -> tuple[int, int, int]:
+    """(sec, nanosec, record time ns) of a header stamp, as MessageBuilder.header computes them."""
+    sec = math.floor(t)
+    nanosec = int(round((t - sec) * 1e9))
+    if nanosec >= 1_000_000_000:
+        sec, nanosec = sec + 1, nanosec - 1_000_000_000
+    return sec, nanosec, sec * 1_000_000_000 + nanosec
+
+
+class _CdrTemplate:
+    """The CDR bytes of a message whose fields after its ``std_msgs/Header`` are ``n`` float64
+    (sensor_msgs/Imu, sensor_msgs/FluidPressure), written without building the message: the
+    bytes of a first message serialized by rosbags, with the stamp (int32 sec, uint32 nanosec
+    right after the 4-byte encapsulation header) and the trailing little-endian doubles
+    replaced (OMG CDR: the frame id's length, bytes and padding stay those of the template).
+    :meth:`make` keeps a template only when it reproduces rosbags' bytes of that message."""
+
+    def __init__(self, serialized: bytes, n: int) -> None:
+        self.doubles = struct.Struct(f"<{n}d")
+        self.encapsulation = serialized[:4]
+        self.middle = serialized[4 + _STAMP.size : len(serialized) - self.doubles.size]
+
+    def pack(self, sec: int, nanosec: int, values) -> bytes:
+        return b"".join((self.encapsulation, _STAMP.pack(sec, nanosec), self.middle,
+                         self.doubles.pack(*values)))  # fmt: skip
+
+    @classmethod
+    def make(cls, serialized, t: float, values) -> _CdrTemplate | None:
+        serialized = bytes(serialized)
+        try:
+            template = cls(serialized, len(values))
+            sec, nanosec, _ = _stamp(t)
+            same = template.pack(sec, nanosec, values) == serialized
+        except (struct.error, OverflowError):
+            same = False
+        return template if same else None
+
+
+def _f32(value: float) -> float:
+    with np.errstate(over="ignore"):
+        return float(np.float32(value))
+
+
+class Recorder:
+    """A ROS 2 bag (mcap) recording written record by record (see the module docstring).
+
+    ``path``: the bag directory to create (refused if it exists, unless ``overwrite``);
+    ``mounting``: the session's :class:`~undertow.log.Mounting` (``/tf_static`` and the sidecar);
+    ``metadata``: plain values for the sidecar; ``topics``: the topic names (default TopicMap).
+    """
+
+    def __init__(
+        self,
+        path,
+        mounting: Mounting | None = None,
+        metadata: dict | None = None,
+        *,
+        topics: TopicMap | None = None,
+        overwrite: bool = False,
+        flush_every_s: float = 1.0,
+    ) -> None:
+        self.path = Path(path)
+        if self.path.exists() and not (overwrite and self.path.is_dir()):
+            raise ConfigError(f"{self.path}: recording already exists (choose another --out)")
+        self.mounting = mounting or Mounting()
+        self.metadata = dict(metadata or {})
+        self.topics = topics or TopicMap()
+        self.flush_every_s = float(flush_every_s)
+        self.counts: dict[str, int] = {}
+        self._b = MessageBuilder()
+        self._frame = {s: getattr(self.topics.frames, s)[0] for s in SENSOR_NAMES}
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._holder = Path(
+            tempfile.mkdtemp(prefix=f"{self.path.name}.partial-", dir=self.path.parent)
+        )
+        self._bag = self._holder / self.path.name
+        self._writer = Writer(self._bag, version=9, storage_plugin=StoragePlugin.MCAP)
+        try:
+            self._writer.open()
+        except Exception as exc:  # rosbags' WriterError or an OSError: nothing may stay behind
+            shutil.rmtree(self._holder, ignore_errors=True)
+            raise ConfigError(f"{self.path}: cannot start the recording ({exc})") from None
+        self._conns: dict[str, object] = {}
+        self._lock = threading.Lock()
+        self._state = "open"
+        self._imu_parts: tuple[bool, bool] | None = None  # (acceleration, orientation)
+        self._sonar_limits: tuple[float, float, float] | None = None
+        self._dvl_last_t: float | None = None
+        self._dvl_keys: set[tuple] = set()
+        self._last_flush: float | None = None
+        self._templates: dict[tuple, _CdrTemplate | None] = {}
+
+    # -- raw records --------------------------------------------------------------------------
+    def write_record(self, record: Record) -> Record:
+        """Write ``record`` on its stream's standard topic; return it as ``read_log`` reads it."""
+        with self._lock:
+            self._check_open()
+            t = self._check_time(record)
+            data, messages = self._messages(t, record, "")
+            self._write_all(messages)
+            t_read = self._t_read(messages[0][1])
+            return Record(
+                record.stream, t_read, data, record.arrival, record.sensor_time, record.source
+            )
+
+    def write_late(self, record: Record) -> None:
+        """Write a record that came after the reorder horizon on ``/undertow/late/<stream>``."""
+        with self._lock:
+            self._check_open()
+            t = self._check_time(record)
+            _, messages = self._messages(t, record, LATE_PREFIX)
+            self._write_all(messages)
+
+    # -- estimates ----------------------------------------------------------------------------
+    def write_pose(self, t: float, x, P) -> None:
+        """(x, P) of the 18-state filter on ``/undertow/pose`` (module docstring)."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        P = np.asarray(P, dtype=np.float64)
+        if x.size < 6 or P.shape[0] < 6 or P.ndim != 2:
+            raise DataError("write_pose: x needs 6+ states and P a square matrix")
+        b = self._b
+        with self._lock:
+            self._check_open()
+            t = self._time(t, "pose")
+            cov = np.ascontiguousarray(P[:6, :6]).reshape(36)
+            msgtype = "geometry_msgs/msg/PoseWithCovarianceStamped"
+
+            def build():
+                h, ns = b.header(t, "world")
+                return ns, b.T[msgtype](header=h, pose=b.pose_cov(x[0:3], x[3:6], cov))
+
+            # the message's fields after the header: position, quaternion (as pose_cov makes
+            # it), covariance: 43 float64
+            values = (*x[0:3].tolist(), *rpy_to_quaternion(x[3:6]).tolist(), *cov.tolist())
+            message = self._templated((POSE_TOPIC,), msgtype, t, values, build)
+            self._write_all([(POSE_TOPIC, *message)])
+
+    def write_wave(self, t: float, amplitude_m: float, frequency_hz: float) -> None:
+        """The wave estimate on ``/undertow/wave``: vector (a m, f Hz, 0)."""
+        b = self._b
+        with self._lock:
+            self._check_open()
+            t = self._time(t, "wave")
+            h, ns = b.header(t, "world")
+            msgtype = "geometry_msgs/msg/Vector3Stamped"
+            msg = b.T[msgtype](header=h, vector=b.vec((amplitude_m, frequency_hz, 0.0)))
+            self._write_all([(WAVE_TOPIC, ns, msgtype, msg)])
+
+    def write_status(self, t: float, status: dict) -> None:
+        """``status`` as one JSON object (``std_msgs/String``) on ``/undertow/status``; NaN and
+        infinities become null (strict JSON)."""
+        text = json.dumps(_strict_json(to_plain(status)), default=str, allow_nan=False)
+        with self._lock:
+            self._check_open()
+            t = self._time(t, "status")
+            _, ns = self._b.header(t, "")
+            msg = self._b.T["std_msgs/msg/String"](data=text)
+            self._write_all([(STATUS_TOPIC, ns, "std_msgs/msg/String", msg)])
+
+    # -- finishing ----------------------------------------------------------------------------
+    def flush(self) -> None:
+        """Close the pending mcap chunk and push it to the file (what a crash keeps)."""
+        storage = getattr(self._writer, "storage", None)
+        chunk = getattr(storage, "chunk", None)
+        if chunk is not None and chunk.bio.tell() and hasattr(storage, "close_chunk"):
+            storage.close_chunk()
+            storage.bio.flush()
+
+    def close(self) -> Path:
+        """Finish the bag (metadata.yaml, sidecar undertow.yaml) and rename it into place."""
+        with self._lock:
+            if self._state == "closed":
+                return self.path
+            self._check_open()
+            self._writer.close()
+            sidecar = {
+                "source": "undertow live",
+                "flavor": "driver",
+                "mounting": to_plain(drop_unknown=True, value=self.mounting.to_dict()),
+                "metadata": to_plain(drop_unknown=True, value=self.metadata) or {},
+            }
+            text = yaml.safe_dump(sidecar, sort_keys=False)
+            (self._bag / SIDECAR).write_text(text, encoding="utf-8")
+            if self.path.is_dir():  # overwrite: the old recording goes with the holder
+                os.replace(self.path, self._holder / ".old")
+            os.replace(self._bag, self.path)
+            shutil.rmtree(self._holder, ignore_errors=True)
+            self._state = "closed"
+            return self.path
+
+    def abort(self) -> None:
+        """Drop the recording: nothing is left at the target nor next to it."""
+        with self._lock:
+            if self._state != "open":
+                return
+            self._state = "aborted"
+            try:
+                self._writer.close()
+            except Exception:  # a half-open writer: the folder goes anyway
+                pass
+            shutil.rmtree(self._holder, ignore_errors=True)
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+    # -- internals ----------------------------------------------------------------------------
+    def _check_open(self) -> None:
+        if self._state != "open":
+            raise DataError(f"{self.path}: recording is {self._state}; nothing more is written")
+
+    def _time(self, t, what: str) -> float:
+        t = float(t)
+        if not (0.0 <= t < MAX_TIME_S):
+            raise DataError(f"{what}: time {t} s is not in [0, 2^31) s (a ROS 2 stamp)")
+        return t
+
+    def _check_time(self, record: Record) -> float:
+        if record.stream not in RECORD_FIELDS:
+            raise DataError(f"record stream '{record.stream}' is not one of {list(RECORD_FIELDS)}")
+        return self._time(record.t, f"{record.stream} record")
+
+    @staticmethod
+    def _t_read(ns: int) -> float:
+        """The time the reader computes from a header stamp (sec, nanosec) = divmod(ns, 1e9):
+        sec + nanosec 1e-9 (the record time in ns is the stamp's)."""
+        sec, nanosec = divmod(ns, 1_000_000_000)
+        return sec + nanosec * 1e-9
+
+    def _connection(self, topic: str, msgtype: str):
+        conn = self._conns.get(topic)
+        if conn is None:
+            qos = (TF_STATIC_QOS,) if msgtype == TF_MESSAGE else ()
+            conn = self._writer.add_connection(
+                topic, msgtype, typestore=self._b.store, offered_qos_profiles=qos
+            )
+            self._conns[topic] = conn
+        return conn
+
+    def _write_all(self, messages) -> None:
+        if not self._conns:  # the mounting first, at the first message's time
+            topic = self.topics.tf_static[0]
+            ns, msg = tf_static_message(self._b, self.topics, self.mounting, messages[0][1] * 1e-9)
+            messages = [(topic, ns, TF_MESSAGE, msg), *messages]
+        store = self._b.store
+        for topic, ns, msgtype, msg in messages:
+            data = msg if isinstance(msg, bytes) else store.serialize_cdr(msg, msgtype)
+            self._writer.write(self._connection(topic, msgtype), ns, data)
+            self.counts[topic] = self.counts.get(topic, 0) + 1
+        t = messages[-1][1] * 1e-9
+        if self._last_flush is None:
+            self._last_flush = t
+        elif t - self._last_flush >= self.flush_every_s:
+            self.flush()
+            self._last_flush = t
+
+    def _messages(self, t: float, record: Record, late: str):
+        try:
+            return getattr(self, f"_{record.stream}")(t, record, late)
+        except (TypeError, ValueError) as exc:  # a field that is not numbers of its shape
+            raise DataError(f"{record.stream} record: malformed field ({exc})") from None
+
+    def _topic(self, stream: str, late: str) -> str:
+        return late + stream if late else self.topics.first(stream)
+
+    # -- one method per stream: (data as read back, [(topic, ns, msgtype, message)]) ----------
+    def _imu(self, t: float, record: Record, late: str):
+        d = record.data
+        parts = (d.get("linear_acceleration") is not None, d.get("orientation") is not None)
+        if late:
+            has_a, has_q = parts
+        else:
+            if self._imu_parts is None:
+                self._imu_parts = parts
+            has_a, has_q = self._imu_parts
+        w = _floats(d.get("angular_velocity"), 3)
+        acc = _floats(d.get("linear_acceleration"), 3) if has_a else (0.0,) * 3
+        q = _floats(d.get("orientation"), 4) if has_q else (0.0,) * 4
+        data = {"angular_velocity": w}
+        if has_a:
+            data["linear_acceleration"] = acc
+        if has_q:
+            data["orientation"] = q
+        topic, msgtype = self._topic("imu", late), "sensor_msgs/msg/Imu"
+        values = (*q, *(_ZEROS9 if has_q else _NO_ESTIMATE9), *w, *_ZEROS9, *acc,
+                  *(_ZEROS9 if has_a else _NO_ESTIMATE9))  # fmt: skip
+
+        def build():
+            return imu_message(self._b, t, self._frame["imu"], w, acc, q, has_a, has_q)
+
+        message = self._templated((topic, has_a, has_q), msgtype, t, values, build)
+        return data, [(topic, *message)]
+
+    def _pressure(self, t: float, record: Record, late: str):
+        p = _float(record.data.get("pressure"))
+        topic, msgtype = self._topic("pressure", late), "sensor_msgs/msg/FluidPressure"
+
+        def build():
+            return pressure_message(self._b, t, self._frame["barometer"], p)
+
+        return {"pressure": p}, [(topic, *self._templated((topic,), msgtype, t, (p, 0.0), build))]
+
+    def _templated(self, key: tuple, msgtype: str, t: float, values: tuple, build):
+        """(ns, msgtype, CDR bytes) of a message of fixed layout: packed on the key's template
+        (:class:`_CdrTemplate`), made from the first such message rosbags serializes."""
+        template = self._templates.get(key)
+        if template is not None:
+            sec, nanosec, ns = _stamp(t)
+            return ns, msgtype, template.pack(sec, nanosec, values)
+        ns, msg = build()
+        if key in self._templates:  # no template reproduces this type's bytes: rosbags
+            return ns, msgtype, msg
+        serialized = bytes(self._b.store.serialize_cdr(msg, msgtype))
+        self._templates[key] = _CdrTemplate.make(serialized, t, values)
+        return ns, msgtype, serialized
+
+    def _sonar(self, t: float, record: Record, late: str):
+        d = record.data
+        limits = tuple(_f32(d.get(k, v)) for k, v in _SONAR_DEFAULTS.items())
+        if not late:
+            if self._sonar_limits is None:
+                self._sonar_limits = limits
+            limits = self._sonar_limits
+        rng = _f32(_float(d.get("range")))
+        ns, msg = sonar_message(self._b, t, self._frame["sonar"], limits, rng)
+        data = {"range": rng, **dict(zip(_SONAR_DEFAULTS, limits, strict=True))}
+        return data, [(self._topic("sonar", late), ns, "sensor_msgs/msg/Range", msg)]
+
+    def _dead_reckoning(self, t: float, record: Record, late: str):
+        d = record.data
+        position = _floats(d.get("position"), 3)
+        rpy = _floats(d.get("orientation"), 3)
+        std = np.float64(_float(d.get("std")))
+        ns, msg = dead_reckoning_message(self._b, t, position, np.array(rpy), std)
+        var = float(std**2)
+        q = msg.pose.pose.orientation  # the reader's roll, pitch, yaw: from this quaternion
+        rpy_read = quaternion_to_rpy(np.array([[q.x, q.y, q.z, q.w]]))[0]
+        data = {
+            "position": position,
+            "orientation": tuple(float(a) for a in rpy_read),
+            "std": math.sqrt(var) if var >= 0 else math.nan,
+        }
+        msgtype = "geometry_msgs/msg/PoseWithCovarianceStamped"
+        return data, [(self._topic("dead_reckoning", late), ns, msgtype, msg)]
+
+    def _dvl(self, t: float, record: Record, late: str):
+        dvl = _dvl_row(t, record.data)
+        time_ms = self._dvl_interval_ms(t, late, dvl)
+        tov = record.sensor_time if math.isfinite(record.sensor_time) else t
+        ns, msg = dvl_driver_message(self._b, dvl, 0, self._frame["dvl"], time_ms)
+        line = velocity_report_line(dvl, 0, time_ms, tov)
+        string = self._b.T["std_msgs/msg/String"](data=line)
+        messages = [
+            (self._topic("dvl", late), ns, A50_DVL, msg),
+            (self._topic("dvl_json", late), ns, "std_msgs/msg/String", string),
+        ]
+        return _dvl_read_back(dvl), messages
+
+    def _dvl_interval_ms(self, t: float, late: str, dvl: SimpleNamespace) -> float:
+        """The driver's ``time`` field (ms since the previous report, in [0, a day]), made
+        unique with its velocity among the session's reports: the reader matches a report's
+        JSON line (its covariance) by (time, vx, vy, vz)."""
+        if late:
+            return 0.0
+        last, self._dvl_last_t = self._dvl_last_t, t
+        time_ms = 0.0 if last is None else min(max((t - last) * 1e3, 0.0), MAX_REPORT_INTERVAL_MS)
+        v = tuple(float(x) for x in dvl.velocity[0])
+        step_to = math.inf  # the reader keeps `time` in [0, MAX]: at the top, search downwards
+        while (time_ms, *v) in self._dvl_keys:
+            if time_ms >= MAX_REPORT_INTERVAL_MS:
+                step_to = 0.0
+            time_ms = float(np.nextafter(time_ms, step_to))
+        self._dvl_keys.add((time_ms, *v))
+        return time_ms
+
+
+_BEAM_IDS = np.arange(4).reshape(1, 4)
+
+
+def _dvl_row(t: float, d: dict) -> SimpleNamespace:
+    """A one-row stand-in of a :class:`~undertow.log.Dvl` (the fields the driver message and
+    the JSON line read) from a record's fields, missing ones as ``Dvl.from_velocity`` fills
+    them (valid True, NaN values, beams not valid)."""
+
+    def arr(key, shape, fill, dtype=np.float64):
+        value = d.get(key)
+        if value is None:
+            return np.full((1, *shape), fill, dtype=dtype)
+        return np.asarray(value, dtype=dtype).reshape((1, *shape))
+
+    return SimpleNamespace(
+        t=np.array([t]),
+        velocity=arr("velocity", (3,), np.nan),
+        valid=arr("valid", (), True, np.bool_),
+        fom=arr("fom", (), np.nan),
+        covariance=arr("covariance", (3, 3), np.nan),
+        altitude=arr("altitude", (), np.nan),
+        beam_id=_BEAM_IDS,
+        beam_range=arr("beam_range", (4,), np.nan),
+        beam_valid=arr("beam_valid", (4,), False, np.bool_),
+        beam_velocity=arr("beam_velocity", (4,), np.nan),
+    )
+
+
+def _dvl_read_back(dvl: SimpleNamespace) -> dict:
+    """The DVL fields as the bag reader gives them back (module docstring)."""
+    alt = float(dvl.altitude[0])
+    ok = dvl.beam_valid[0]
+    v = dvl.velocity[0]
+    cov = None if np.isnan(v).any() else dvl.covariance[0]  # NaN != NaN: no JSON match
+    return {
+        "velocity": tuple(float(x) for x in v),
+        "valid": bool(dvl.valid[0]),
+        "fom": float(dvl.fom[0]),
+        "covariance": np.full((3, 3), np.nan) if cov is None else np.array(cov, dtype=np.float64),
+        "altitude": alt if math.isfinite(alt) and alt >= 0 else math.nan,
+        "beam_range": tuple(np.where(ok, dvl.beam_range[0], np.nan).tolist()),
+        "beam_valid": tuple(bool(k) for k in ok),
+        "beam_velocity": tuple(float(x) for x in dvl.beam_velocity[0]),
+    }
+
+
+__all__ = ["Recorder", "POSE_TOPIC", "WAVE_TOPIC", "STATUS_TOPIC", "LATE_PREFIX"]

@@ -1,0 +1,1 @@
+"""``undertow live``: sensor links, the online filter and map, the recording and the live view."""

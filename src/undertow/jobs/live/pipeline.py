@@ -1,0 +1,551 @@
+"""`undertow live` as a library: sensor links in, the online filter, map and sea state, a
+recording of everything, and the final results out.
+
+Data flow (one thread does the work; each link has its own thread that only queues):
+
+    links -> recorder (every raw record, as it arrives) -> reorder buffer -> chunks (time order)
+          -> OnlineLocalizer (committed states, recorded) -> OnlineMapper (every MAP_EVERY_S:
+             the pings the trajectory covers)
+          -> OnlineSeaState (--wave auto: a new condition for the filter every update)
+    each DVL report -> a preview pose (before the commit of the same step): the committed
+                       filter run on a copy over the records still in the buffer, or the last
+                       preview's state advanced by the records since (same states when the
+                       depth-rate check agrees; a fresh one every PREVIEW_RESYNC_S), published
+                       to the live view at once
+
+The committed estimate lags real time by the reorder buffer (``reorder_s``); it is what a replay
+of the recording reproduces exactly (``undertow localize``/``map`` on the recording, same
+variant, wave condition and bounds). The preview has no lag and is not recorded.
+
+Time: every link stamps with one clock, ``time.time`` or a :class:`ScaledClock` when the
+sensors are a recording played ``time_scale`` times faster than real time (``undertow serve
+--rate``), so the buffer and the filter work in sensor seconds either way.
+
+Stopping: :meth:`LiveSession.request_stop` (SIGINT/SIGTERM in the command), ``duration_s``, or
+``idle_stop_s`` without a record after data came. Then the buffer is flushed, the results are
+written (each folder atomically) and the recording is closed.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import math
+import threading
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..._util.atomic import check_output_folder
+from ..._util.plain import to_plain
+from ...errors import ConfigError
+from ...estimation.calibration import Calibration
+from ...estimation.config import LocalizerConfig
+from ...estimation.localizer import calibration_fields
+from ...estimation.online import FILTER_STREAMS, OnlineLocalizer, concat_logs
+from ...estimation.waves_online import OnlineSeaState
+from ...io.links.common import Record, ScaledClock, records_to_log
+from ...io.recorder import Recorder
+from ...io.results import save_map, save_trajectory
+from ...log import Mounting
+from ...mapping.online import OnlineMapper
+from ...mapping.samples import rays_from_pose
+from ...settings import LIVE_VARIANCE_BOUNDS, Settings
+from .links import expected_streams, open_links
+from .reorder import ReorderBuffer
+
+#: wall seconds between status updates (status line, /undertow/status, the view's map)
+STATUS_PERIOD_S = 1.0
+#: wall seconds the main loop waits for a record before it checks the clock again
+POLL_S = 0.02
+#: every n-th committed state goes into the path shown in the view
+PATH_DECIMATION = 10
+#: sensor seconds between fresh previews (the committed filter over the whole buffer); between
+#: them a preview advances the last one's state by the records that came since
+PREVIEW_RESYNC_S = 1.0
+#: records kept for the next preview at most (past it, the next preview is a fresh one)
+MAX_UNPREVIEWED = 2000
+#: sensor seconds between online map updates (the chunks released meanwhile at once: the map
+#: is the same to rounding, module :mod:`undertow.mapping.online`, for a tenth of the calls)
+MAP_EVERY_S = 1.0
+
+
+@dataclass
+class LiveStats:
+    """What the session saw: records per stream, late records, latencies (wall s, DVL arrival
+    to its preview pose), states committed, pings mapped."""
+
+    records: dict = field(default_factory=dict)
+    late: int = 0
+    states: int = 0
+    pings: int = 0
+    latency_s: list = field(default_factory=list)
+    started_filter_at: float | None = None
+    span_s: float = 0.0
+
+    def latency_summary(self) -> dict:
+        lat = np.asarray(self.latency_s, float)
+        if lat.size == 0:
+            return {"n": 0}
+        return {"n": int(lat.size), "median_ms": float(np.median(lat) * 1e3),
+                "p99_ms": float(np.percentile(lat, 99) * 1e3),
+                "max_ms": float(lat.max() * 1e3)}  # fmt: skip
+
+
+@dataclass
+class LiveResult:
+    """The session's output folder and its parts (None where nothing was made)."""
+
+    out_dir: Path
+    recording: Path | None
+    localization: Path | None
+    map: Path | None
+    summary: dict
+    warnings: list[str] = field(default_factory=list)
+
+
+class LiveSession:
+    """One live run (module docstring). ``settings``: a :class:`~undertow.settings.Settings`
+    whose ``live`` section names the links; its ``localizer`` and ``mapping`` sections set the
+    filter and the map (the adaptive map gets fixed variance bounds,
+    :data:`~undertow.settings.LIVE_VARIANCE_BOUNDS` unless set)."""
+
+    def __init__(self, settings: Settings, out_dir: str | Path, *, mounting: Mounting | None = None,
+                 profile=None, calibration=None, overwrite: bool = False,
+                 view=None) -> None:  # fmt: skip
+        self.settings = settings
+        self.live = settings.live
+        self.out_dir = Path(out_dir)
+        check_output_folder(self.out_dir, overwrite)
+        self.overwrite = overwrite
+        self.mounting = mounting or Mounting()
+        self.clock = ScaledClock(self.live.time_scale)
+        # records from the link threads; only a DVL report (whose pose is previewed at once)
+        # wakes the loop, the rest wait for its next tick (POLL_S): fewer wake-ups per record
+        self._queue: collections.deque = collections.deque()
+        self._wake = threading.Event()
+        self.links = open_links(self.live, self._ingest, self.clock)
+        self.expected = expected_streams(self.links)
+        wave = self.live.wave
+        self.auto_wave = isinstance(wave, str) and wave.strip().lower() == "auto"
+        self.localizer = OnlineLocalizer(
+            profile=profile, wave=None if self.auto_wave else wave, mounting=self.mounting,
+            expected=self.expected, **_filter_params(settings, calibration),
+        )  # fmt: skip
+        self.mapping_config = _live_mapping(settings)
+        self.mapper = OnlineMapper(self.mapping_config) if self.live.map else None
+        self.sea = None
+        if self.auto_wave:
+            self.sea = OnlineSeaState(self.mounting, window_s=self.live.wave_window_s,
+                                      update_s=self.live.wave_update_s)  # fmt: skip
+        self.buffer = ReorderBuffer()
+        self.stats = LiveStats()
+        self.view = view
+        self.recorder: Recorder | None = None
+        self._stop = threading.Event()
+        self._pending_dvl: list[float] = []
+        self._unpreviewed: list[Record] = []  # filter records buffered since the last preview
+        self._preview_t: float | None = None  # the newest record time the preview state took
+        self._resync_at = -math.inf
+        self._first_wall: float | None = None
+        self._last_wall: float | None = None
+        self._next_status = 0.0
+        self._path: list = []
+        self._early: list = []  # chunks released before the filter started (for the map)
+        self._first_t: float | None = None
+        self._said_missing = False
+        self.on_notice = None  # called once with a line when the filter cannot start
+        self._to_map: list = []  # chunks released since the last map update
+        self._next_map = -math.inf
+        self._next_pose = -math.inf
+        self._next_commit = -math.inf
+        self.status_callback = None  # called with the status dict every STATUS_PERIOD_S
+        self.notes: list[str] = []
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def start(self) -> LiveSession:
+        _warm_up(self.localizer.config.variant, self.mapping_config if self.mapper else None)
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.recorder = Recorder(self.out_dir / "recording", self.mounting,
+                                 metadata={"live": self.live.model_dump()})  # fmt: skip
+        for link in self.links.values():
+            link.start()
+        return self
+
+    def wait_connected(self, timeout: float = 5.0) -> bool:
+        """Wait until every link has connected (a UDP link: bound its socket); False if one
+        has not within ``timeout`` s (it keeps trying in the background)."""
+        deadline = time.monotonic() + timeout
+        while any(link.counters.connects == 0 for link in self.links.values()):
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
+        return True
+
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    def run(self) -> LiveResult:
+        """Work until stopped (module docstring), then finish."""
+        started = time.monotonic()
+        while not self._stop.is_set():
+            self.step(POLL_S)
+            if (
+                self.live.duration_s is not None
+                and time.monotonic() - started > self.live.duration_s
+            ):
+                break
+            idle = self.live.idle_stop_s
+            if idle is not None and self._last_wall is not None:
+                if time.perf_counter() - self._last_wall > idle:
+                    break
+        return self.finish()
+
+    def abort(self) -> None:
+        """Stop at once: links closed, the recording closed as far as written, no results."""
+        for link in self.links.values():
+            link.stop(timeout=1.0)
+        if self.recorder is not None:
+            self.recorder.close()
+        if self.view is not None:
+            self.view.close()
+
+    # -- the work ----------------------------------------------------------------------------
+    def _ingest(self, record: Record) -> None:  # a link thread: only queue
+        self._queue.append((time.perf_counter(), record))
+        if record.stream == "dvl":
+            self._wake.set()
+
+    def _drain(self) -> list:
+        batch = []
+        try:
+            while True:
+                batch.append(self._queue.popleft())
+        except IndexError:
+            return batch
+
+    def step(self, timeout: float = POLL_S) -> None:
+        """Take what arrived (waiting at most ``timeout`` s for the first), preview the DVL
+        reports that came, release what the horizon passed, report status when due."""
+        self._wake.wait(timeout)
+        self._wake.clear()
+        # the horizon from the clock read before the queue is emptied: a record stamped before
+        # it is in this batch, so the loop falling behind never makes a record late
+        horizon = self.clock() - self.live.reorder_s
+        for wall, record in self._drain():
+            self._take(wall, record)
+        if self._pending_dvl:  # first: a DVL report's pose does not wait for the commit
+            self._preview()
+        if horizon >= self._next_commit:
+            self._next_commit = horizon + self.live.commit_every_s
+            self._commit(horizon)
+        if time.perf_counter() >= self._next_status:
+            self._next_status = time.perf_counter() + STATUS_PERIOD_S
+            self._status()
+
+    def _take(self, wall: float, record: Record) -> None:
+        if self._first_wall is None:
+            self._first_wall = wall
+        self._last_wall = wall
+        record = self.recorder.write_record(record)
+        counts = self.stats.records
+        counts[record.stream] = counts.get(record.stream, 0) + 1
+        if not self.buffer.add(record):
+            self.stats.late += 1
+            self.recorder.write_late(record)
+            return
+        if record.stream in FILTER_STREAMS and self._preview_t is not None:
+            if len(self._unpreviewed) >= MAX_UNPREVIEWED:  # no DVL for long: resync later
+                self._unpreviewed, self._preview_t = [], None
+            else:
+                self._unpreviewed.append(record)
+        if record.stream == "dvl":
+            self._pending_dvl.append(wall)
+
+    def _commit(self, horizon: float) -> None:
+        released = self.buffer.release(horizon)
+        if not released:
+            return
+        if self.sea is not None:
+            update = self.sea.push(released)
+            if update is not None:
+                self.localizer.set_wave(update.condition)
+                w = update.window
+                self.recorder.write_wave(update.t, w.amplitude_m, w.frequency_hz or math.nan)
+                if self.view is not None:
+                    self.view.publish_wave(update.t, w.amplitude_m, w.frequency_hz or math.nan)
+        chunk = records_to_log(released).replace(mounting=self.mounting)
+        self.localizer.push(chunk)
+        if not self.localizer.ready:  # the filter will start from these records: keep them
+            self._early.append(chunk)
+            self._say_missing(released)
+            return
+        trajectory = self.localizer.committed()
+        self._record_final(trajectory, final_only=not math.isinf(horizon))
+        if self.mapper is not None:
+            self._to_map += [*self._early, chunk]
+            if horizon >= self._next_map:
+                self._next_map = horizon + MAP_EVERY_S
+                self._update_map(trajectory)
+        self._early = []
+        if self.view is not None:
+            self._show_rays(chunk, trajectory)
+
+    def _say_missing(self, released) -> None:
+        """Once, when the filter still cannot start well after the first record: what is
+        missing (the records keep being recorded, and filtered once the sensors appear)."""
+        if self._first_t is None:
+            self._first_t = released[0].t
+        waited = released[-1].t - self._first_t
+        if self._said_missing or waited < self.localizer.start_timeout_s:
+            return
+        self._said_missing = True
+        note = (f"the filter is waiting after {waited:.0f} s of data: "
+                + "; ".join(self.localizer.missing))  # fmt: skip
+        self.notes.append(note)
+        if self.on_notice is not None:
+            self.on_notice(note)
+
+    def _record_final(self, trajectory, final_only: bool = True) -> None:
+        """Record the states no later data can revise (all of them at the end)."""
+        n = len(trajectory.t)
+        if final_only:
+            n = int(trajectory.metadata.get("online", {}).get("final_states", n))
+        if n <= self.stats.states:
+            return
+        if self.stats.started_filter_at is None:
+            self.stats.started_filter_at = float(trajectory.t[0])
+        k0, self.stats.states = self.stats.states, n
+        period = 1.0 / self.live.record_pose_hz if self.live.record_pose_hz else 0.0
+        for k in range(k0, n):
+            t = float(trajectory.t[k])
+            if t >= self._next_pose or k == n - 1 and not final_only:
+                self.recorder.write_pose(t, trajectory.x[k], trajectory.P[k])
+                self._next_pose = t + period
+        self.stats.span_s = float(trajectory.t[n - 1] - trajectory.t[0])
+        self._path.extend(trajectory.position[k0:n:PATH_DECIMATION].tolist())
+
+    def _update_map(self, trajectory) -> None:
+        """The chunks released since the last update, to the map as one."""
+        if self._to_map:
+            chunk = concat_logs(self._to_map, self.mounting)
+            self._to_map = []
+            self.stats.pings += self.mapper.push(chunk, trajectory)
+
+    def _show_rays(self, chunk, trajectory) -> None:
+        """The chunk's DVL beams and sonar ranges as rays from the newest pose (display)."""
+        pos, rpy = trajectory.position[-1:], trajectory.orientation[-1:]
+        t = float(trajectory.t[-1])
+        for kind, units, ranges, mount in _ranges(chunk):
+            if ranges.size == 0 or not self.view.subscribed(f"/undertow/rays/{kind}"):
+                continue
+            var = np.zeros((1, 3))
+            o, d, r, *_ = rays_from_pose(ranges, units, mount, np.repeat(pos, ranges.size, 0),
+                                         np.repeat(rpy, ranges.size, 0),
+                                         np.repeat(var, ranges.size, 0), 0.0, 0)  # fmt: skip
+            self.view.publish_rays(t, o, o + d * r[:, None], kind)
+
+    def _preview(self) -> None:
+        """The pose at the newest DVL report: the committed filter, on a copy, over the
+        records still waiting in the buffer, published to the view; latency measured. Between
+        fresh previews (every PREVIEW_RESYNC_S, and whenever a record came out of order) the
+        last preview's state is advanced by the records that came since (O(new records));
+        the preview is a display (not recorded), so this does not touch the results."""
+        arrivals, self._pending_dvl = self._pending_dvl, []
+        new, self._unpreviewed = self._unpreviewed, []
+        if not self.localizer.ready:
+            self._preview_t = None
+            return
+        first = min((r.t for r in new), default=math.inf)
+        last = max((r.t for r in new), default=-math.inf)
+        states, peek = None, self.localizer.peek
+        # resumed: only the records since, when fewer than a fresh preview would take
+        resume = self._preview_t is not None and first > self._preview_t
+        if new and resume and last < self._resync_at and len(new) <= len(self.buffer):
+            states = peek(records_to_log(new).replace(mounting=self.mounting), resume=True)
+            self._preview_t = max(self._preview_t, last)
+        else:
+            pending = [r for r in self.buffer.pending() if r.stream in FILTER_STREAMS]
+            self._preview_t = None
+            if pending:
+                states = peek(records_to_log(pending).replace(mounting=self.mounting))
+                self._preview_t = pending[-1].t
+                self._resync_at = self._preview_t + PREVIEW_RESYNC_S
+        if states is None or not len(states.t):
+            states = self.localizer.latest()
+        if states is None or not len(states.t):
+            return
+        if self.view is not None:
+            self.view.publish_pose(float(states.t[-1]), states.x[-1], states.P[-1])
+        done = time.perf_counter()
+        self.stats.latency_s.extend(done - a for a in arrivals)
+
+    def status(self) -> dict:
+        """Rates, link counters, filter health and map size now."""
+        links = {name: link.counters.as_dict() for name, link in self.links.items()}
+        for c in links.values():
+            c.pop("clock_offsets", None)
+        return {
+            "clock": self.clock(),
+            "records": dict(self.stats.records),
+            "late": self.stats.late,
+            "buffered": len(self.buffer),
+            "filter": "running" if self.localizer.ready else "waiting: "
+            + "; ".join(self.localizer.missing),
+            "states": self.stats.states,
+            "pings_mapped": self.stats.pings,
+            "links": links,
+        }  # fmt: skip
+
+    def _status(self) -> None:
+        status = self.status()
+        if self.recorder is not None:
+            self.recorder.write_status(status["clock"], status)
+        view = self.view
+        if view is not None and self.mapper is not None and self.stats.pings:
+            if view.subscribed("/undertow/map"):
+                view.publish_map(status["clock"], self.mapper.occupancy())
+        if view is not None and self._path and view.subscribed("/undertow/path"):
+            view.publish_path(status["clock"], np.asarray(self._path))
+        if self.status_callback is not None:
+            self.status_callback(status)
+
+    # -- the end -------------------------------------------------------------------------------
+    def finish(self) -> LiveResult:
+        """Links stopped, the buffer flushed, results written, the recording closed."""
+        for link in self.links.values():
+            link.stop(timeout=2.0)
+        for item in self._drain():  # what the links queued before they stopped
+            self._take(*item)
+        self._commit(math.inf)
+        localization = map_dir = None
+        if self.localizer.ready:
+            trajectory = self.localizer.trajectory()
+            self._record_final(trajectory, final_only=False)
+            trajectory.metadata["live"] = self.summary()
+            localization = save_trajectory(trajectory, self.out_dir / "localization",
+                                           self.overwrite)  # fmt: skip
+            map_dir = self._save_map(trajectory)
+            missing = trajectory.metadata.get("online", {}).get("started_without")
+            if missing:
+                self.notes.append(f"the filter started without {missing} (start timeout)")
+        else:
+            self.notes.append("the filter never started: " + "; ".join(self.localizer.missing))
+        recording = self.recorder.close() if self.recorder is not None else None
+        if self.view is not None:
+            self.view.close()
+        summary = self.summary()
+        _write_yaml(self.out_dir / "live.yaml", summary)
+        return LiveResult(self.out_dir, recording, localization, map_dir, summary,
+                          list(self.notes))  # fmt: skip
+
+    def _save_map(self, trajectory) -> Path | None:
+        if self.mapper is None:
+            return None
+        self._update_map(trajectory)
+        self.stats.pings += self.mapper.finish(trajectory)
+        occupancy = self.mapper.occupancy()
+        if not len(occupancy):
+            return None
+        config = self.mapping_config
+        return save_map(occupancy, config.model_dump(mode="json"), self.mapper.metadata(),
+                        self.out_dir / "map", self.overwrite,
+                        threshold=config.occupied_threshold)  # fmt: skip
+
+    def summary(self) -> dict:
+        return to_plain({
+            "settings": self.live.model_dump(),
+            "records": dict(self.stats.records),
+            "late": self.stats.late,
+            "states": self.stats.states,
+            "pings_mapped": self.stats.pings,
+            "filter_started_at": self.stats.started_filter_at,
+            "filter_span_s": self.stats.span_s,
+            "latency": self.stats.latency_summary(),
+            "links": {n: link.counters.as_dict() for n, link in self.links.items()},
+            "link_info": {n: link.info for n, link in self.links.items()},
+            "wave": self.sea.to_dict() if self.sea is not None else None,
+            "notes": list(self.notes),
+        })  # fmt: skip
+
+
+def _filter_params(settings: Settings, calibration) -> dict:
+    """The localizer fields of the settings, with what a calibration (file) supplies."""
+    params = settings.localizer_params()
+    if calibration is None:
+        return params
+    if not isinstance(calibration, Calibration):
+        calibration = Calibration.from_yaml(calibration)
+    config = LocalizerConfig(**params)
+    return {**calibration_fields(calibration, config), **params}
+
+
+def _ranges(chunk):
+    """(kind, units (n, 3) in the sensor frame, ranges (n,), mount) of a chunk's valid DVL
+    beams and sonar ranges."""
+    out = []
+    if chunk.dvl is not None and len(chunk.dvl):
+        d = chunk.dvl
+        r, u = d.beam_range.reshape(-1), d.beam_unit.reshape(-1, 3)
+        ok = d.beam_valid.reshape(-1) & np.isfinite(r) & np.all(np.isfinite(u), axis=1)
+        out.append(("dvl", u[ok], r[ok], chunk.mounting.dvl))
+    if chunk.sonar is not None and len(chunk.sonar):
+        s = chunk.sonar
+        ok = np.isfinite(s.range)
+        unit = np.tile([0.0, 0.0, 1.0], (int(ok.sum()), 1))  # the sonar frame's +z axis
+        out.append(("sonar", unit, s.range[ok], chunk.mounting.sonar))
+    return out
+
+
+def _warm_up(variant: str, mapping) -> None:
+    """Run the filter (and mapper) once on one second of a still vehicle, so the compiled code
+    is loaded (numba's cache) before the sensors start rather than on their first reports."""
+    t = np.arange(0.0, 1.0, 0.01)
+    records = [Record("imu", float(ti), {"angular_velocity": np.zeros(3)}) for ti in t]
+    beams = {"beam_range": np.full(4, 2.0), "beam_valid": np.ones(4, bool),
+             "beam_velocity": np.zeros(4), "altitude": 2.0}  # fmt: skip
+    records += [Record("dvl", float(ti), {"velocity": np.zeros(3), "valid": True, **beams})
+                for ti in t[::10]]  # fmt: skip
+    records += [Record("pressure", float(ti), {"pressure": 101325.0 + 9810.0}) for ti in t[::10]]
+    records += [Record("sonar", float(ti), {"range": 2.0}) for ti in t[::10]]
+    records.sort(key=lambda r: r.t)
+    with warnings.catch_warnings():  # what the filter says of this made-up log is no news
+        warnings.simplefilter("ignore")
+        localizer = OnlineLocalizer(variant=variant, expected={"imu", "dvl", "pressure"})
+        mapper = OnlineMapper(mapping) if mapping is not None else None
+        for part in (records[: len(records) // 2], records[len(records) // 2 :]):
+            chunk = records_to_log(part)
+            localizer.push(chunk)
+            localizer.peek(chunk)
+            if mapper is not None and localizer.ready:
+                mapper.push(chunk, localizer.trajectory())
+        if mapper is not None and localizer.ready:
+            mapper.finish(localizer.trajectory())
+
+
+def _live_mapping(settings: Settings):
+    """The mapping config of a live session: the adaptive kernel needs fixed bounds online."""
+    config = settings.mapping
+    if config.method == "adaptive" and config.variance_bounds is None:
+        config = config.model_copy(update={"variance_bounds": LIVE_VARIANCE_BOUNDS})
+    return config
+
+
+def _write_yaml(path: Path, doc: dict) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(yaml.safe_dump(json.loads(json.dumps(doc, default=str)), sort_keys=False))
+    tmp.replace(path)
+
+
+def check_live_settings(settings: Settings) -> None:
+    """A live section that names no link is an error before anything starts."""
+    live = settings.live
+    if not (live.dvl or live.sonar or live.mavlink):
+        raise ConfigError("live: no sensor link given (--dvl, --sonar and/or --mavlink)")
+
+
+__all__ = ["LiveResult", "LiveSession", "LiveStats", "check_live_settings"]

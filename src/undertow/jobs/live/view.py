@@ -1,0 +1,320 @@
+"""The live view: a Foxglove WebSocket server (Foxglove SDK, ``pip install foxglove-sdk``).
+
+Open Foxglove (app or https://app.foxglove.dev), "Open connection", Foxglove WebSocket,
+``ws://HOST:PORT`` (default ``ws://127.0.0.1:8765``), and add a 3D panel with ``world`` as its
+display frame. The server speaks the SDK's WebSocket protocol (subprotocol
+``foxglove.sdk.v1``). Messages are stamped with the estimate's time t (s); frames are undertow's:
+``world`` north-east-down, ``base_link`` forward-right-down (the 3D panel shows z down as
+"up" is +z: turn the view over, or read depth as -z).
+
+Topics (:data:`TOPICS`, topic -> schema name):
+
+- ``/undertow/pose`` (``foxglove.Odometry``): the filter's pose, frame ``world``, body
+  ``base_link``: position x[0:3], orientation the quaternion of (phi, theta, psi) = x[3:6],
+  ``pose_covariance`` P[0:6, 0:6] row-major (the Euler-angle block as is, see
+  :mod:`undertow.io.recorder`); body velocity x[6:9] and angular rate x[9:12] with
+  ``velocity_covariance`` P[6:12, 6:12] (the state layout of :mod:`undertow.estimation.model`);
+- ``/undertow/pose/uncertainty`` (``foxglove.SceneUpdate``): the 3-sigma ellipsoid of the
+  position, axes 2 * 3 sqrt(lambda_i) along the eigenvectors of P[0:3, 0:3];
+- ``/tf`` (``foxglove.FrameTransform``): ``world`` -> ``base_link`` (the same pose), so panels
+  can follow the robot;
+- ``/undertow/path`` (``foxglove.PosesInFrame``): the positions so far (orientation identity);
+- ``/undertow/rays/dvl``, ``/undertow/rays/sonar`` (``foxglove.SceneUpdate``): one line
+  segment per beam from its origin to its end point (world frame, m), DVL green, sonar orange;
+- ``/undertow/map`` (``foxglove.PointCloud``): the occupied cells' centres (mean occupancy above
+  the threshold, 0.5 by default), fields x, y, z (float32) and red, green, blue, alpha (uint8),
+  coloured by the cell's mean E[theta] or variance V[theta] (eq:mean_var) from blue (lowest of the
+  cloud) to red (highest);
+- ``/undertow/wave`` (JSON, schema ``undertow.Wave``): ``{"t": s, "amplitude_m": a,
+  "frequency_hz": f}``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+
+import numpy as np
+
+from ...errors import ConfigError
+from ...occupancy import OCCUPIED_THRESHOLD, OccupancyMap
+from ...rotations import matrix_to_rpy, rpy_to_quaternion
+
+POSE = "/undertow/pose"
+UNCERTAINTY = "/undertow/pose/uncertainty"
+TF = "/tf"
+PATH = "/undertow/path"
+RAYS = {"dvl": "/undertow/rays/dvl", "sonar": "/undertow/rays/sonar"}
+MAP = "/undertow/map"
+WAVE = "/undertow/wave"
+
+#: topic -> schema name of every channel the view advertises (module docstring)
+TOPICS: dict[str, str] = {
+    POSE: "foxglove.Odometry",
+    UNCERTAINTY: "foxglove.SceneUpdate",
+    TF: "foxglove.FrameTransform",
+    PATH: "foxglove.PosesInFrame",
+    RAYS["dvl"]: "foxglove.SceneUpdate",
+    RAYS["sonar"]: "foxglove.SceneUpdate",
+    MAP: "foxglove.PointCloud",
+    WAVE: "undertow.Wave",
+}
+WAVE_SCHEMA = {
+    "type": "object",
+    "title": "undertow.Wave",
+    "properties": {
+        "t": {"type": "number", "description": "time (s)"},
+        "amplitude_m": {"type": "number", "description": "wave amplitude a (m)"},
+        "frequency_hz": {"type": "number", "description": "wave frequency f (Hz)"},
+    },
+}
+RAY_COLORS = {"dvl": (0.2, 0.9, 0.3, 1.0), "sonar": (1.0, 0.6, 0.1, 1.0)}
+
+
+def _foxglove():
+    try:
+        import foxglove
+        from foxglove import channels, messages
+    except ImportError:
+        raise ConfigError(
+            "live view: the Foxglove SDK is not installed (pip install foxglove-sdk)"
+        ) from None
+    return foxglove, channels, messages
+
+
+def _stamp(fm, t: float):
+    sec = math.floor(t)
+    nsec = min(int(round((t - sec) * 1e9)), 999_999_999)
+    return fm.Timestamp(int(sec), nsec), int(sec) * 1_000_000_000 + nsec
+
+
+def _colors(values: np.ndarray) -> np.ndarray:
+    """RGBA uint8 (N, 4): blue (lowest value) to red (highest), linear in the value."""
+    v = np.asarray(values, dtype=np.float64)
+    lo, hi = (float(np.nanmin(v)), float(np.nanmax(v))) if v.size else (0.0, 1.0)
+    s = np.clip((v - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.full(v.shape, 0.5)
+    s = np.nan_to_num(s, nan=0.5)
+    rgba = np.empty((v.size, 4), np.uint8)
+    rgba[:, 0] = np.round(255 * s)
+    rgba[:, 1] = np.round(255 * (1 - np.abs(2 * s - 1)) * 0.6)
+    rgba[:, 2] = np.round(255 * (1 - s))
+    rgba[:, 3] = 255
+    return rgba
+
+
+class _Listener:
+    """Keeps the topics some client is subscribed to (callbacks from the server's thread)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.subscribers: dict[str, int] = {}
+
+    def on_subscribe(self, client, channel) -> None:
+        with self.lock:
+            self.subscribers[channel.topic] = self.subscribers.get(channel.topic, 0) + 1
+
+    def on_unsubscribe(self, client, channel) -> None:
+        with self.lock:
+            self.subscribers[channel.topic] = max(self.subscribers.get(channel.topic, 0) - 1, 0)
+
+
+class LiveView:
+    """The Foxglove WebSocket server and its channels (:data:`TOPICS`).
+
+    ``port`` 0 binds an ephemeral port; :attr:`port` is the bound one. A topic nobody is
+    subscribed to costs nothing: its message is not even built (a caller may also skip work,
+    e.g. building the occupancy map, when :meth:`subscribed` says no one looks)."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, name: str = "undertow"):
+        foxglove, ch, self._m = _foxglove()
+        self._listener = _Listener()
+        self._context = foxglove.Context()
+        try:
+            self._server = foxglove.start_server(
+                name=name, host=host, port=int(port), context=self._context,
+                server_listener=self._listener,
+            )  # fmt: skip
+        except Exception as exc:  # the SDK raises its own error types for a busy port
+            raise ConfigError(f"live view: cannot serve on {host}:{port} ({exc})") from None
+        self.host = host
+        ctx = self._context
+        self._channels = {
+            POSE: ch.OdometryChannel(POSE, context=ctx),
+            UNCERTAINTY: ch.SceneUpdateChannel(UNCERTAINTY, context=ctx),
+            TF: ch.FrameTransformChannel(TF, context=ctx),
+            PATH: ch.PosesInFrameChannel(PATH, context=ctx),
+            MAP: ch.PointCloudChannel(MAP, context=ctx),
+            WAVE: foxglove.Channel(
+                WAVE, message_encoding="json", context=ctx,
+                schema=foxglove.Schema(name="undertow.Wave", encoding="jsonschema",
+                                       data=json.dumps(WAVE_SCHEMA).encode()),
+            ),
+            **{topic: ch.SceneUpdateChannel(topic, context=ctx) for topic in RAYS.values()},
+        }  # fmt: skip
+        self._closed = False
+
+    @property
+    def port(self) -> int:
+        """The bound TCP port."""
+        return int(self._server.port)
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.host}:{self.port}"
+
+    def subscribed(self, topic: str) -> bool:
+        """Whether a client is subscribed to ``topic`` now."""
+        with self._listener.lock:
+            return self._listener.subscribers.get(topic, 0) > 0
+
+    def _log(self, topic: str, msg, ns: int) -> None:
+        if not self._closed:
+            self._channels[topic].log(msg, log_time=ns)
+
+    # -- publishers ---------------------------------------------------------------------------
+    def publish_pose(self, t: float, x, P) -> None:
+        """Odometry, uncertainty ellipsoid and the world -> base_link transform of (x, P)."""
+        wanted = [topic for topic in (POSE, TF, UNCERTAINTY) if self.subscribed(topic)]
+        if not wanted:
+            return
+        m = self._m
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        P = np.asarray(P, dtype=np.float64)
+        stamp, ns = _stamp(m, t)
+        q = rpy_to_quaternion(x[3:6])
+        quat = m.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+        pos = m.Vector3(x=float(x[0]), y=float(x[1]), z=float(x[2]))
+        vel = x[6:12] if x.size >= 12 else np.zeros(6)
+        vcov = P[6:12, 6:12] if x.size >= 12 else np.zeros((6, 6))
+        odom = m.Odometry(
+            timestamp=stamp, frame_id="world", body_frame_id="base_link",
+            pose=m.Pose(position=pos, orientation=quat),
+            linear_velocity=m.Vector3(x=float(vel[0]), y=float(vel[1]), z=float(vel[2])),
+            angular_velocity=m.Vector3(x=float(vel[3]), y=float(vel[4]), z=float(vel[5])),
+            pose_covariance=[float(v) for v in P[:6, :6].reshape(36)],
+            velocity_covariance=[float(v) for v in np.asarray(vcov).reshape(36)],
+        )  # fmt: skip
+        self._log(POSE, odom, ns)
+        tf = m.FrameTransform(
+            timestamp=stamp, parent_frame_id="world", child_frame_id="base_link",
+            translation=pos, rotation=quat,
+        )  # fmt: skip
+        self._log(TF, tf, ns)
+        if UNCERTAINTY in wanted:
+            self._log(UNCERTAINTY, self._ellipsoid(stamp, x[:3], P[:3, :3]), ns)
+
+    def _ellipsoid(self, stamp, centre, cov):
+        """3-sigma ellipsoid: diameters 2 * 3 sqrt(lambda_i) along the eigenvectors of cov."""
+        m = self._m
+        lam, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+        if np.linalg.det(vec) < 0:
+            vec[:, 2] = -vec[:, 2]
+        size = 6.0 * np.sqrt(np.clip(lam, 0.0, None))
+        q = [float(v) for v in rpy_to_quaternion(matrix_to_rpy(vec))]
+        sphere = m.SpherePrimitive(
+            pose=m.Pose(
+                position=m.Vector3(x=float(centre[0]), y=float(centre[1]), z=float(centre[2])),
+                orientation=m.Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]),
+            ),
+            size=m.Vector3(x=float(size[0]), y=float(size[1]), z=float(size[2])),
+            color=m.Color(r=0.3, g=0.6, b=1.0, a=0.35),
+        )
+        entity = m.SceneEntity(timestamp=stamp, frame_id="world", id="pose", spheres=[sphere])
+        return m.SceneUpdate(entities=[entity])
+
+    def publish_path(self, t: float, positions) -> None:
+        """The path: positions (N, 3) in ``world``."""
+        if not self.subscribed(PATH):
+            return
+        m = self._m
+        stamp, ns = _stamp(m, t)
+        p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        identity = m.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+        poses = [
+            m.Pose(position=m.Vector3(x=float(a), y=float(b), z=float(c)), orientation=identity)
+            for a, b, c in p
+        ]
+        self._log(PATH, m.PosesInFrame(timestamp=stamp, frame_id="world", poses=poses), ns)
+
+    def publish_rays(self, t: float, origins, ends, kind: str) -> None:
+        """Rays of ``kind`` ("dvl" or "sonar"): segments origins[i] -> ends[i] (N, 3) in world."""
+        if kind not in RAYS:
+            raise ConfigError(f"live view: ray kind '{kind}' is not one of {list(RAYS)}")
+        if not self.subscribed(RAYS[kind]):
+            return
+        m = self._m
+        stamp, ns = _stamp(m, t)
+        a = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+        b = np.asarray(ends, dtype=np.float64).reshape(-1, 3)
+        pairs = np.stack([a, b], axis=1).reshape(-1, 3)
+        ok = np.isfinite(pairs).all(axis=1).reshape(-1, 2).all(axis=1).repeat(2)
+        points = [m.Point3(x=float(u), y=float(v), z=float(w)) for u, v, w in pairs[ok]]
+        r, g, bl, al = RAY_COLORS[kind]
+        line = m.LinePrimitive(
+            type=m.LinePrimitiveLineType.LineList, thickness=0.01, points=points,
+            color=m.Color(r=r, g=g, b=bl, a=al),
+        )  # fmt: skip
+        entity = m.SceneEntity(timestamp=stamp, frame_id="world", id=kind, lines=[line])
+        self._log(RAYS[kind], m.SceneUpdate(entities=[entity]), ns)
+
+    def publish_map(
+        self,
+        t: float,
+        occupancy: OccupancyMap,
+        color_by: str = "mean",
+        threshold: float = OCCUPIED_THRESHOLD,
+    ) -> None:
+        """The occupied cells (mean > ``threshold``) as a point cloud coloured by ``color_by``
+        ("mean" or "variance")."""
+        if color_by not in ("mean", "variance"):
+            raise ConfigError(f"live view: color_by '{color_by}' is not 'mean' or 'variance'")
+        if not self.subscribed(MAP):
+            return
+        m = self._m
+        stamp, ns = _stamp(m, t)
+        cells = occupancy.occupied(threshold)
+        value = cells.mean if color_by == "mean" else cells.variance
+        data = np.zeros(len(cells), dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
+        data["xyz"] = cells.centres
+        data["rgba"] = _colors(value)
+        f32, u8 = m.PackedElementFieldNumericType.Float32, m.PackedElementFieldNumericType.Uint8
+        fields = [m.PackedElementField(name=n, offset=4 * i, type=f32) for i, n in enumerate("xyz")]
+        fields += [
+            m.PackedElementField(name=n, offset=12 + i, type=u8)
+            for i, n in enumerate(("red", "green", "blue", "alpha"))
+        ]
+        cloud = m.PointCloud(
+            timestamp=stamp, frame_id="world", point_stride=16, fields=fields,
+            data=data.tobytes(),
+            pose=m.Pose(position=m.Vector3(), orientation=m.Quaternion(w=1.0)),
+        )  # fmt: skip
+        self._log(MAP, cloud, ns)
+
+    def publish_wave(self, t: float, amplitude_m: float, frequency_hz: float) -> None:
+        """The wave estimate as JSON ``{"t", "amplitude_m", "frequency_hz"}`` (NaN as null)."""
+        if not self.subscribed(WAVE):
+            return
+        _, ns = _stamp(self._m, t)
+
+        def num(v):
+            v = float(v)
+            return v if math.isfinite(v) else None
+
+        msg = {"t": float(t), "amplitude_m": num(amplitude_m), "frequency_hz": num(frequency_hz)}
+        self._log(WAVE, json.dumps(msg), ns)
+
+    def close(self) -> None:
+        """Stop the server (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        for channel in self._channels.values():
+            channel.close()
+        self._server.stop()
+
+    def __enter__(self) -> LiveView:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,281 @@
+"""The virtual robot (``undertow serve``): a log or a simulated scenario played as live sensors.
+
+:func:`serve` reads a log (bag, A50 JSON log, ``.tlog``) or simulates a scenario (a built-in
+name or a scenario YAML file), then :meth:`ServeSession.start` serves it on this machine, in
+real time x ``rate``: the DVL and its dead reckoning as a Water Linked A50 (TCP JSON,
+``dvl_port``), the sonar as a Ping1D (UDP, ``ping_port``), IMU and pressure as an ArduSub
+autopilot (MAVLink to ``mavlink``), with optional :class:`~undertow.io.servers.player.Faults`.
+Sensor clocks and timing: :mod:`undertow.io.servers.player`. Everything binds 127.0.0.1 unless
+another ``host`` is given. Every message served is in :attr:`ServeSession.manifest`::
+
+    from undertow.jobs.serve import serve
+
+    with serve("calm", rate=10, dvl_port=0, ping_port=0) as session:   # 0: free ports
+        print(session.endpoints.live_options())
+        session.wait()
+    print(session.summary())
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError
+from ..io import detect_format
+from ..io.links.common import ScaledClock, replay_anchor
+from ..io.servers import Faults, Manifest, Player
+from ..io.servers.a50 import A50Reports, A50Server
+from ..io.servers.decode import served_log
+from ..io.servers.mavlink import DEFAULT_ADDRESS, MavlinkSender
+from ..io.servers.ping1d import Ping1DServer
+from ..log import Log
+from ..sim import list_scenarios, load_scenario, simulate
+from .common import load_log
+
+
+def load_source(source, duration: float | None = None, topics=None) -> Log:
+    """The log to serve: a Log (or a simulation result) as is, a log file read, or a scenario
+    (built-in name or YAML file) simulated; cut to its first ``duration`` s when given."""
+    log = source.log if hasattr(source, "log") and hasattr(source, "floor_cloud") else source
+    if not isinstance(log, Log):
+        text = str(source)
+        path = Path(text)
+        if path.suffix.lower() in (".yaml", ".yml") or (
+            text in list_scenarios() and not path.exists()
+        ):
+            log = simulate(load_scenario(text)).log
+        elif path.exists():
+            detect_format(path)  # one line for a file that is no log
+            log = load_log(path, topics)
+        else:
+            raise ConfigError(
+                f"{text}: no such log file and not a scenario (built-ins: "
+                f"{', '.join(list_scenarios())})"
+            )
+    if duration is not None:
+        if not (math.isfinite(duration) and duration > 0):
+            raise ConfigError(f"--duration: expected a positive number of seconds, got {duration}")
+        t0 = log.time_span[0]
+        log = log.replace(**{n: s.select(s.t < t0 + duration) for n, s in log.streams().items()})
+    return log
+
+
+@dataclass(frozen=True)
+class Endpoints:
+    """Where the virtual sensors are: ``dvl`` (tcp://HOST:PORT), ``sonar`` (udp://HOST:PORT),
+    ``mavlink`` (the address sent to) and ``mavlink_listen`` (what a receiver listens on);
+    None for a sensor not served."""
+
+    dvl: str | None = None
+    sonar: str | None = None
+    mavlink: str | None = None
+    mavlink_listen: str | None = None
+
+    def live_options(self) -> list[str]:
+        """The ``undertow live`` options that connect to these sensors."""
+        out = []
+        for option, value in (
+            ("--dvl", self.dvl),
+            ("--sonar", self.sonar),
+            ("--mavlink", self.mavlink_listen),
+        ):
+            if value:
+                out += [option, value]
+        return out
+
+
+def _listen_address(address: str) -> str | None:
+    kind, _, rest = address.partition(":")
+    return f"udpin:{rest}" if kind == "udpout" else None
+
+
+@dataclass(eq=False)
+class ServeSession:
+    """A served log: :meth:`start`, :meth:`wait`, :meth:`stop` (also a context manager).
+    ``endpoints`` are known once the servers are open (after :meth:`open`/:meth:`start`)."""
+
+    log: Log
+    player: Player
+    manifest: Manifest
+    faults: Faults
+    rate: float
+    loop: bool
+    a50: A50Server | None = None
+    ping: Ping1DServer | None = None
+    mavlink: MavlinkSender | None = None
+    endpoints: Endpoints = field(default_factory=Endpoints)
+    _open: bool = False
+
+    def open(self) -> ServeSession:
+        """Bind the servers (ports known, playback not started); closes them on failure."""
+        if self._open:
+            return self
+        try:
+            for server in (self.a50, self.ping, self.mavlink):
+                if server is not None:
+                    server.open()
+        except OSError as exc:
+            self.close()
+            raise ConfigError(f"serve: cannot open a server: {exc.strerror or exc}") from None
+        self._open = True
+        self.endpoints = Endpoints(
+            self.a50.address if self.a50 else None,
+            self.ping.address if self.ping else None,
+            self.mavlink.address if self.mavlink else None,
+            _listen_address(self.mavlink.address) if self.mavlink else None,
+        )
+        return self
+
+    def start(self) -> ServeSession:
+        self.open()
+        self.player.start()
+        return self
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait until the playback ends (never with ``loop``); True when it did. A failure of the
+        player (a bug) is raised here."""
+        done = self.player.done.wait(timeout)
+        if self.player.error is not None:
+            raise self.player.error
+        return done
+
+    @property
+    def done(self) -> bool:
+        return self.player.done.is_set()
+
+    def close(self) -> None:
+        for server in (self.a50, self.ping, self.mavlink):
+            if server is not None:
+                server.close()
+
+    def stop(self) -> dict:
+        """Stop playing, close the servers; the :meth:`summary`."""
+        self.player.stop()
+        self.close()
+        return self.summary()
+
+    def __enter__(self) -> ServeSession:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def clock(self) -> ScaledClock:
+        """An arrival clock for links reading this session: c(w) = A + rate (w - A) (A: the
+        hour's start), which equals the served sensor clock (epoch + playback time) with the
+        default epoch; ``undertow live --time-scale rate`` uses the same clock."""
+        if not self.player.clock.started.wait((self.player.wait_for_clients or 0.0) + 5.0):
+            raise ConfigError("serve: the playback has not started (call start() first)")
+        return ScaledClock(self.rate, start=replay_anchor(self.player.clock.wall0))
+
+    @property
+    def epoch(self) -> float | None:
+        return self.player.clock.epoch
+
+    def served_log(self, mavlink=None, faulty: bool = False) -> Log:
+        """What was served, as a Log in playback time
+        (:func:`~undertow.io.servers.decode.served_log`)."""
+        return served_log(self.manifest.select(), mavlink, faulty)
+
+    def summary(self) -> dict:
+        """Endpoints, timing and what was served (counts per message and fault)."""
+        clock = self.player.clock
+        return {
+            "source": self.log.source,
+            "endpoints": {k: v for k, v in self.endpoints.__dict__.items() if v},
+            "rate": self.rate,
+            "loop": self.loop,
+            "span_s": self.player.span,
+            "laps": self.player.laps,
+            "played_s": self.player.position - clock.t0,
+            "epoch": clock.epoch,
+            "t0": clock.t0,
+            "faults": self.faults.to_dict(),
+            "a50_commands": list(self.a50.commands) if self.a50 else [],
+            "a50_connections": self.a50.connections if self.a50 else 0,
+            "ping_requests": self.ping.requests if self.ping else 0,
+            **self.manifest.summary(),
+        }
+
+
+def _port(value, name: str) -> int | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or int(value) != value or not 0 <= int(value) < 65536:
+        raise ConfigError(f"{name}: expected a port number 0..65535 (0: any free), got {value}")
+    return int(value)
+
+
+def serve(
+    source,
+    rate: float = 1.0,
+    loop: bool = False,
+    host: str = "127.0.0.1",
+    dvl_port: int | None = 16171,
+    ping_port: int | None = 9090,
+    mavlink: str | None = DEFAULT_ADDRESS,
+    faults: Faults | None = None,
+    seed: int = 0,
+    *,
+    duration: float | None = None,
+    epoch: float | None = None,
+    distance_sensor: bool = False,
+    wait_for_clients: float | None = None,
+    topics=None,
+) -> ServeSession:
+    """A :class:`ServeSession` of ``source`` (see :func:`load_source`), not started.
+
+    ``dvl_port``/``ping_port`` None (or ``mavlink`` None) leaves that sensor out; a sensor whose
+    streams the log lacks is left out too. ``seed`` seeds the faults (numpy SeedSequence);
+    ``epoch``: the sensor clock's epoch (default: wall start - t0, module
+    :mod:`undertow.io.servers.player`); ``distance_sensor``: also send the sonar as MAVLink
+    DISTANCE_SENSOR; ``wait_for_clients``: wait up to that many seconds for an A50 client and a
+    Ping request before playing."""
+    if not isinstance(host, str) or not host.strip():
+        raise ConfigError(f"--host: expected an address to bind, got {host!r}")
+    if not (isinstance(rate, int | float) and math.isfinite(rate) and rate > 0):
+        raise ConfigError(f"--rate: expected a positive number, got {rate}")
+    if isinstance(seed, bool) or int(seed) != seed or seed < 0:
+        raise ConfigError(f"--seed: expected a non-negative integer, got {seed}")
+    dvl_port, ping_port = _port(dvl_port, "--dvl-port"), _port(ping_port, "--ping-port")
+    faults = faults or Faults()
+    log = load_source(source, duration, topics)
+    manifest = Manifest()
+    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(3)]
+    has = {n for n, s in log.streams().items() if len(s)}
+    a50 = (
+        A50Server(host, dvl_port)
+        if dvl_port is not None and has & {"dvl", "dead_reckoning"}
+        else None
+    )
+    ping = (
+        Ping1DServer(log, manifest, faults, rngs[1], host, ping_port)
+        if ping_port is not None and "sonar" in has
+        else None
+    )
+    sender = None
+    if mavlink and has & {"imu", "pressure"} | ({"sonar"} if distance_sensor else set()):
+        sender = MavlinkSender(log, manifest, faults, rngs[2], mavlink, distance_sensor)
+    sinks = [s for s in (ping, sender) if s is not None]
+    if a50 is not None:
+        sinks.insert(0, A50Reports(a50, log, manifest, faults, rngs[0]))
+    if not sinks:
+        raise ConfigError(
+            f"{log.source or 'log'}: nothing to serve: no DVL, dead reckoning, "
+            "sonar, IMU or pressure stream for the sensors asked"
+        )
+    player = Player(
+        log,
+        sinks,
+        rate=rate,
+        loop=loop,
+        faults=faults,
+        epoch=epoch,
+        on_drop=a50.set_down if a50 else None,
+        wait_for_clients=wait_for_clients,
+    )
+    return ServeSession(log, player, manifest, faults, float(rate), bool(loop), a50, ping, sender)
