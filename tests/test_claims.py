@@ -17,6 +17,7 @@ from undertow.study.claims import (
     CLAIMS,
     FIELD_CLAIMS,
     FIXED_RUNS,
+    MAP_SCENARIO_CLAIMS,
     TABLE1_CLAIMS,
     MissingQuantity,
     evaluate_seed,
@@ -34,9 +35,16 @@ from undertow.study.tables import build_tables, render_markdown
 FILTERS = (*VARIANTS, "proposed+scale", *FIELD_VARIANTS)
 SEAS = ("changing-sea-carriage", "changing-sea-survey")
 SEA_RUNS = ("baseline", "proposed", "proposed+auto", "adaptive-r", *FIXED_RUNS)
+MAP_SCENARIOS = ("mhl-basin", "field-survey")
+SURFACE_KEYS = (
+    "surface_rmse_m",
+    "surface_bias_m",
+    "coverage",
+    *(f"{m}_{t}" for m in ("fscore", "precision", "recall") for t in ("5cm", "10cm", "20cm")),
+)
 
 
-def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS) -> dict:
+def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS, maps=MAP_SCENARIOS) -> dict:
     """A seed result with every leaf :func:`run_seed` writes, random but positive."""
     rng = np.random.default_rng(seed)
 
@@ -53,7 +61,15 @@ def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS) -> dict:
     def evaluation():
         return {"c2c_mean_m": draw(0.05), "c2c_median_m": draw(0.05), "c2c_rmse_m": draw(0.05),
                 "coverage_mean_m": draw(0.1), "occupied_cells": int(rng.integers(1000, 9000)),
-                "ground_truth_in_footprint": 64064}  # fmt: skip
+                "ground_truth_in_footprint": 64064, **{k: draw(0.5) for k in SURFACE_KEYS},
+                "covered_columns": int(rng.integers(500, 900)),
+                "surveyed_columns": 800}  # fmt: skip
+
+    def map_scenario():
+        return {"duration_s": draw(600), "wave": {"amplitude_m": draw(0.1), "frequency_hz": draw()},
+                "floor": {"depth_std_m": draw(0.1), "rms_slope": draw(0.1)},
+                "localization": {v: trajectory() for v in ("baseline", "proposed")},
+                "mapping": {f"{m}/{v}": evaluation() for m, v in MAP_RUNS}}  # fmt: skip
 
     def table1_row():
         return {"amplitude_m": draw(0.1), "frequency_hz": draw(),  "depth_std_m": draw(0.01),
@@ -80,6 +96,7 @@ def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS) -> dict:
             }
             for s in seas
         },
+        "map_scenarios": {name: map_scenario() for name in maps},
     }
     result["claims"], result["claims_table1"] = evaluate_seed(result)
     return result
@@ -155,6 +172,26 @@ REFERENCE_SEA = {
     for s in SEAS
     for k, get in (("vx", lambda r: r["rmse"]["vx_m_s"]), ("nees", lambda r: r["nees_deviation"]))
 }
+_ACC = {"c2c_mean_m": min, "surface_rmse_m": min, "fscore_10cm": max}  # the better of two maps
+REFERENCE_MAPS = {
+    **{f"proposed_filter_improves_csm_map:{k}": lambda M, k=k, best=best: (
+        best(M["csm/proposed"][k], M["csm/baseline"][k]) == M["csm/proposed"][k]
+        and M["csm/proposed"][k] != M["csm/baseline"][k]) for k, best in _ACC.items()},
+    **{f"adaptive_bki_most_accurate:{k}": lambda M, k=k, best=best: all(
+        best(M["adaptive/proposed"][k], M[o][k]) == M["adaptive/proposed"][k]
+        and M["adaptive/proposed"][k] != M[o][k] for o in ("bki/proposed", "csm/proposed"))
+       for k, best in _ACC.items()},
+    **{f"adaptive_proposed_more_accurate_than_csm_baseline:{k}": lambda M, k=k, best=best: (
+        best(M["adaptive/proposed"][k], M["csm/baseline"][k]) == M["adaptive/proposed"][k]
+        and M["adaptive/proposed"][k] != M["csm/baseline"][k]) for k, best in _ACC.items()},
+    "bki_denser_than_csm:occupied_cells": lambda M: (
+        min(M["bki/proposed"]["occupied_cells"], M["adaptive/proposed"]["occupied_cells"])
+        > M["csm/proposed"]["occupied_cells"]),
+    "adaptive_fewer_cells_than_bki:occupied_cells": lambda M: (
+        M["adaptive/proposed"]["occupied_cells"] < M["bki/proposed"]["occupied_cells"]),
+    "adaptive_proposed_denser_than_csm_baseline:occupied_cells": lambda M: (
+        M["adaptive/proposed"]["occupied_cells"] > M["csm/baseline"]["occupied_cells"]),
+}  # fmt: skip
 REFERENCE_TABLE1 = {
     "shorter_waves_more_dvl_noise": lambda t: (
         t["wave-a0.10-f1.00"]["dvl_std_m_s"]["vx"] > t["wave-a0.10-f0.75"]["dvl_std_m_s"]["vx"]
@@ -184,6 +221,43 @@ def test_verdicts_are_the_hand_written_predicates(seed):
     assert sorted(c.id for c in CHANGING_SEA_CLAIMS) == sorted(REFERENCE_SEA)
     for key, pred in REFERENCE_SEA.items():
         assert result["claims_table1"][key] == pred(result["changing_sea"]), key
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_mapping_scenario_verdicts_are_the_hand_written_predicates(seed):
+    """Each Table IV claim on every mapping scenario, by C2C, surface RMSE (lower is better)
+    and F-score at 10 cm (higher is better)."""
+    result = fake_result(seed)
+    assert sorted(c.id for c in MAP_SCENARIO_CLAIMS) == sorted(REFERENCE_MAPS)
+    for key, pred in REFERENCE_MAPS.items():
+        for name in MAP_SCENARIOS:
+            expected = pred(result["map_scenarios"][name]["mapping"])
+            assert result["claims"][key][name] == expected, (key, name)
+    assert all(name not in result["claims"][key] for key in REFERENCE for name in MAP_SCENARIOS)
+
+
+def test_mapping_scenario_claims_are_explained_from_the_measured_values():
+    """The verdicts count the seeds; each explanation carries the compared values and, for the
+    filter claims, the filters' lateral errors and the depth error they make on that floor."""
+    results = [fake_result(s) for s in (11, 12)]
+    tables = build_tables(results)
+    markdown = render_markdown(tables)
+    assert "## Table IV on a rough floor: field-survey (beyond the paper)" in markdown
+    for claim in MAP_SCENARIO_CLAIMS:
+        entry = tables["map_scenario_claims"][claim.id]
+        for name in MAP_SCENARIOS:
+            assert entry[name]["n"] == 2
+            assert entry[name]["holds"] == sum(r["claims"][claim.id][name] for r in results)
+            why = entry["why"][name]
+            for q in (*claim.left, *claim.right):
+                assert q.format(sum(q.read(r, name, claim.id) for r in results) / 2) in why
+            if claim.id.startswith("proposed_filter"):
+                scen = [r["map_scenarios"][name] for r in results]
+                y = sum(s["localization"]["baseline"]["rmse"]["y_m"] for s in scen) / 2
+                slope = sum(s["floor"]["rms_slope"] for s in scen) / 2
+                assert f"baseline {y:.4f} m" in why and f"{slope * y * 1e3:.2f} mm" in why
+    notes = " ".join(report_notes(tables))
+    assert "seed-scenarios" in notes
 
 
 def test_a_missing_quantity_is_an_error_naming_the_claim_and_the_path():

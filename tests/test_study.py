@@ -9,10 +9,14 @@ from undertow.study.claims import CLAIMS
 from undertow.study.pipeline import StudySettings, run_seed
 from undertow.study.runner import run_study
 
-pytestmark = pytest.mark.slow  # the study runs whole seeds (and a process cluster)
+# the study runs whole seeds (and a process cluster); one xdist worker builds its fixture once
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("study")]
 
 SMALL = StudySettings(
-    conditions=("wave-a0.10-f0.75",), rock_survey=None, changing_sea=("changing-sea-carriage",)
+    conditions=("wave-a0.10-f0.75",),
+    rock_survey=None,
+    changing_sea=("changing-sea-carriage",),
+    map_scenarios=("rock-survey",),  # the shortest free-vehicle run stands in for field-survey
 )
 
 
@@ -36,8 +40,10 @@ def test_writes_tables_runs_figures_and_report(study):
     assert (out / "runs" / cond / "sim" / "log" / "metadata.yaml").is_file()
     assert (out / "runs" / cond / "localization" / "proposed" / "trajectory.tum").is_file()
     assert (out / "runs" / cond / "maps" / "adaptive_proposed" / "map.ply").is_file()
-    assert len(study.figures) == 8 and all(p.is_file() for _, p in study.figures)
-    assert "waves_changing-sea-carriage.png" in [p.name for _, p in study.figures]
+    assert len(study.figures) == 10 and all(p.is_file() for _, p in study.figures)
+    names = [p.name for _, p in study.figures]
+    assert "waves_changing-sea-carriage.png" in names
+    assert {"surface_error_rock-survey.png", "map_slice_rock-survey.png"} <= set(names)
     HTMLParser().feed((out / "report.html").read_text())
 
 
@@ -95,6 +101,26 @@ def test_a_failing_first_seed_is_reported_and_the_next_one_makes_the_runs(tmp_pa
     assert not (tmp_path / "seeds" / "seed_0.json").exists()
 
 
+def test_the_mapping_scenario_table_has_every_metric_with_intervals(study):
+    """Table IV on a mapping scenario: C2C, cells and the surface metrics of the four maps, each
+    a mean over the two seeds with its 95 % interval, and every map claim counted."""
+    tables = json.loads((study.out_dir / "tables.json").read_text())
+    seeds = [json.loads((study.out_dir / f"seeds/seed_{s}.json").read_text()) for s in (0, 1)]
+    runs = tables["map_scenarios"]["rock-survey"]["mapping"]
+    for key in ("csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed"):
+        for metric in ("c2c_mean_m", "occupied_cells", "surface_rmse_m", "surface_bias_m",
+                       "coverage", "fscore_5cm", "fscore_10cm", "fscore_20cm"):  # fmt: skip
+            leaf = runs[key][metric]
+            values = [s["map_scenarios"]["rock-survey"]["mapping"][key][metric] for s in seeds]
+            assert leaf["n"] == 2 and leaf["mean"] == pytest.approx(sum(values) / 2)
+            assert leaf["ci95_low"] <= leaf["mean"] <= leaf["ci95_high"]
+        assert 0 <= runs[key]["coverage"]["mean"] <= 1
+    for entry in tables["map_scenario_claims"].values():
+        assert entry["rock-survey"]["n"] == 2
+    assert "## Table IV on a rough floor: rock-survey" in study.markdown
+    assert "| surface RMSE (m) |" in study.markdown
+
+
 def test_the_table_iv_headline_claim_is_counted_from_the_seeds_and_explained(study):
     """The paper's headline (adaptive BKI + proposed filter vs CSM + baseline filter, accuracy
     and density): the claims table counts the seeds where it holds, recomputed here from each
@@ -120,3 +146,23 @@ def test_the_table_iv_headline_claim_is_counted_from_the_seeds_and_explained(stu
             assert f"C2C of {key} {mean:.4f} m" in line
     else:
         assert why == []
+
+
+def test_the_surveyed_area_is_where_the_beams_hit_the_true_floor():
+    """The beams placed with the true pose (the map metrics' surveyed area) end on the
+    simulator's floor, up to the sensors' range noise; the truth is the simulator's own floor."""
+    import numpy as np
+
+    from undertow.mapping.samples import build_samples
+    from undertow.sim import load_scenario, simulate
+    from undertow.study.maps import floor_truth, surveyed_area, true_pose_trajectory
+
+    sim = simulate(load_scenario("mhl-basin"), seed=0)
+    samples = build_samples(sim.log, true_pose_trajectory(sim.log.ground_truth),
+                            free_resolution=10.0)  # fmt: skip
+    hits = samples.points[samples.label == 1]
+    truth = floor_truth(sim)
+    assert callable(truth)
+    gap = np.abs(hits[:, 2] - truth(hits[:, 0], hits[:, 1]))
+    assert np.median(gap) < 0.01 and np.percentile(gap, 90) < 0.03
+    assert np.array_equal(surveyed_area(sim.log), hits[:, :2])

@@ -97,6 +97,10 @@ def reproduce(
         ),
     ] = None,
     rock_survey: Annotated[bool, typer.Option(help="Also run the rock survey.")] = True,
+    map_scenarios: Annotated[
+        bool,
+        typer.Option(help="Also Table IV on the mapping scenarios (mhl-basin, field-survey)."),
+    ] = True,
     quiet: QuietOption = False,
 ) -> None:
     """The paper's experiments end to end: simulate, characterize, localize (4 variants), map
@@ -107,7 +111,8 @@ def reproduce(
     from ..jobs import study
 
     _run_study(study.reproduce, out_dir, quiet, seeds=seeds, first_seed=first_seed,
-               scheduler=scheduler, rock_survey=rock_survey)  # fmt: skip
+               scheduler=scheduler, rock_survey=rock_survey,
+               map_scenarios=map_scenarios)  # fmt: skip
 
 
 @app.command()

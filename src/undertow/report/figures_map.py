@@ -1,8 +1,10 @@
 """Map figures (paper Figs. 4, 5 and 6): map points coloured by their distance to the
-ground-truth cloud, a vertical slice comparing mappers, and the rock survey over the true rock.
+ground-truth cloud, a vertical slice comparing mappers, the rock survey over the true rock, and
+the top view of a map's implied seafloor coloured by its depth error.
 
 Distances are the C2C distances of :mod:`undertow.evaluation.cloud` (nearest ground-truth
-point); colours run blue (close) to red (far), clipped at the 95th percentile.
+point); colours run blue (close) to red (far), clipped at the 95th percentile. The surface error
+is e = d - z_true of :mod:`undertow.evaluation.surface` (z down: e > 0 the map is too deep).
 """
 
 from __future__ import annotations
@@ -13,6 +15,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import DataError
+from ..evaluation.surface import truth_heightfield
+from ..mapping.surface import Surface
 from ..occupancy import OccupancyMap
 from .figures import DISTANCE_CMAP, cloud, new_figure, save_figure, subsample
 
@@ -181,4 +185,46 @@ def plot_rock_map(path, occupancy_map: OccupancyMap, rock, floor_depth: float,
     side.grid(alpha=0.3)
     side.legend(loc="lower right", fontsize=8)
     fig.suptitle("Rock survey map against the true rock (paper Fig. 5)")
+    return save_figure(fig, path)
+
+
+def _surface_error(surface: Surface, height) -> np.ndarray:
+    """e = d - z_true at every cell centre (NaN where the map or the truth has no depth)."""
+    x, y = surface.centres()
+    with np.errstate(invalid="ignore"):
+        return surface.depth - np.asarray(height(x, y), dtype=float)
+
+
+def plot_surface_error(path, surfaces: dict[str, Surface], truth, title: str = "") -> Path:
+    """Top view (x-y) of each map's implied seafloor (:func:`undertow.mapping.surface.
+    map_surface`), one row per map, every column coloured by its depth error e = d - z_true
+    (red: too deep, blue: too shallow; a shared scale clipped at the 95th percentile of |e|),
+    with the RMSE and bias of e in each row's title. ``truth``: a heightfield z(x, y) or the
+    ground-truth cloud (N, 3)."""
+    if not surfaces:
+        raise DataError("plot_surface_error: no maps given")
+    height = truth_heightfield(truth)
+    errors = {name: _surface_error(s, height) for name, s in surfaces.items()}
+    finite = np.concatenate([e[np.isfinite(e)] for e in errors.values()])
+    vmax = max(float(np.percentile(np.abs(finite), 95)), 1e-3) if finite.size else 0.1
+    fig, axes = new_figure(11, 1.0 + 2.4 * len(surfaces), nrows=len(surfaces), sharex=True,
+                           sharey=True)  # fmt: skip
+    axes = np.atleast_1d(axes)
+    mesh = None
+    for ax, (name, s) in zip(axes, surfaces.items(), strict=True):
+        e = errors[name]
+        ny, nx = s.shape
+        xe = s.x0 + s.resolution * (np.arange(nx + 1) - 0.5)
+        ye = s.y0 + s.resolution * (np.arange(ny + 1) - 0.5)
+        mesh = ax.pcolormesh(xe, ye, np.ma.masked_invalid(e), cmap="RdBu_r", vmin=-vmax,
+                             vmax=vmax, shading="flat", rasterized=True)  # fmt: skip
+        ok = e[np.isfinite(e)]
+        stats = (f"RMSE {np.sqrt(np.mean(ok**2)):.3f} m, bias {np.mean(ok):+.3f} m, "
+                 f"{ok.size} columns") if ok.size else "no data"  # fmt: skip
+        ax.set(ylabel="y (m)", title=f"{name}: {stats}")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("x (m)")
+    fig.colorbar(mesh, ax=axes, label="surface error d - z_true (m, + too deep)", extend="both",
+                 shrink=0.9)  # fmt: skip
+    fig.suptitle(title or "Map surface coloured by its depth error (top view)")
     return save_figure(fig, path)

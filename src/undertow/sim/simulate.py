@@ -2,7 +2,8 @@
 
 Randomness: one numpy Generator per sensor, children of SeedSequence(seed) in the fixed order
 of ``RNG_STREAMS`` (SeedSequence.spawn). A child depends only on (seed, its index), so a new
-sensor appended to ``RNG_STREAMS`` leaves every other stream's noise unchanged.
+sensor appended to ``RNG_STREAMS`` (the multibeam was) leaves every other stream's noise
+unchanged. The multibeam is simulated only when the scenario has a ``multibeam`` section.
 """
 
 from __future__ import annotations
@@ -20,15 +21,17 @@ from ..rotations import wrap_angle
 from .motion import CarriageMotion, SurveyMotion, WaypointMotion, kinematics
 from .scenario.checks import floor_cloud_count
 from .scenario.model import Scenario
+from .seabed import scenario_heightfield
 from .seastate import build_wave, wave_track
 from .sensors.dvl import simulate_dead_reckoning, simulate_dvl
 from .sensors.env import simulate_barometer, simulate_sonar, simulate_wave_probe
 from .sensors.imu import sample_times, simulate_imu
+from .sensors.multibeam import simulate_multibeam
 from .tank import Tank
 from .wavefield import WaveField
 from .waves import LinearWave
 
-RNG_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe")
+RNG_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe", "multibeam")
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,10 +47,13 @@ class SimulationResult:
 
 
 def build_tank(s: Scenario) -> Tank:
+    """The scenario's tank: the original flat one in closed form, else its heightfield floor
+    (sim/seabed.py), walls as set."""
     r = s.tank.rock
     return Tank(
         s.tank.length_m, s.tank.width_m, s.water.depth_m, r.center_x_m, r.center_y_m,
         r.length_m, r.width_m, r.height_m, r.edge_radius_m,
+        walls=s.tank.walls, heightfield=scenario_heightfield(s),
     )  # fmt: skip
 
 
@@ -101,6 +107,11 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
     )
     sonar = simulate_sonar(motion, tank, s.sonar, mounting.sonar, T, rngs["sonar"])
     probe = simulate_wave_probe(wave, s.wave_probe, T, rngs["wave_probe"])
+    multibeam = None
+    if s.multibeam is not None:
+        multibeam = simulate_multibeam(
+            motion, tank, s.multibeam, mounting.multibeam, T, rngs["multibeam"]
+        )
 
     t_gt = sample_times(T, s.ground_truth.rate_hz)
     kin = kinematics(motion, t_gt)
@@ -110,8 +121,9 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
 
     log = Log(
         imu=imu, dvl=dvl, dead_reckoning=dr, pressure=pressure, sonar=sonar, wave_probe=probe,
-        ground_truth=gt, mounting=mounting, source=f"simulator:{s.name}",
-        metadata={"scenario": s.name, "seed": s.seed, **wave_metadata(s, wave, T)},
+        ground_truth=gt, multibeam=multibeam, mounting=mounting, source=f"simulator:{s.name}",
+        metadata={"scenario": s.name, "seed": s.seed, **wave_metadata(s, wave, T),
+                  "dvl_geometry": s.dvl.geometry().to_dict()},
     )  # fmt: skip
     cloud = floor_cloud(s, tank, kin.position)
     return SimulationResult(log=log, floor_cloud=cloud, scenario=s, gyro_bias=gyro_bias)

@@ -2,6 +2,8 @@
 
 - :mod:`.paper`: the paper's own numbers and words (Tables I-IV, the statements it makes);
 - :mod:`.claims`: the paper's claims as typed records (quantities, comparison, explanation);
+- :mod:`.maps`: Table IV's four maps and every map metric (C2C, cells, the bathymetric surface
+  error, accuracy / completeness / F-score), on the wave conditions and the mapping scenarios;
 - :mod:`.pipeline`: one seed end to end (simulate, characterize, calibrate, localize, map,
   evaluate) -> plain numbers and the claims' verdicts;
 - :mod:`.stats`: aggregation over seeds (Student-t intervals, claim fractions);

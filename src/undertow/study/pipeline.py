@@ -14,7 +14,11 @@ For a seed s, with every simulator parameter from the built-in scenarios (never 
    condition estimated from the run's own sensors (``--wave auto``, no probe), and
    ``adaptive-r`` the peer baseline that adapts R from the innovations instead;
 5. map with CSM on the baseline trajectory and CSM, BKI (l = 0.15 m) and adaptive BKI on the
-   proposed one (Table IV); evaluate against the ground truth.
+   proposed one (Table IV); evaluate against the ground truth with the paper's metrics (C2C,
+   cells) and the surface metrics (:mod:`undertow.study.maps`);
+5b. (beyond the paper) the same four maps on the mapping scenarios (``map_scenarios``: the
+   basin with walls, beach and a rough floor, and a field survey over a rough seabed), whose
+   floors let a lateral pose error show in the map.
 
 6. (beyond the paper) the changing-sea scenarios: the sea state changes during the run; the
    proposed filter with the true schedule, with ``--wave auto``, with each fixed condition,
@@ -38,21 +42,29 @@ from ..evaluation.cloud import evaluate_map
 from ..evaluation.trajectory import trajectory_rmse
 from ..mapping.config import MappingConfig
 from ..mapping.run import map_log
-from ..sim import load_scenario, simulate
+from ..sim import list_scenarios, load_scenario, simulate
 from ..wavetrack import WaveTrack
 from . import paper
 from .claims import evaluate_seed
+from .maps import MAP_RUNS, evaluate_runs, map_scenario
 
 WAVE_CONDITIONS = ("wave-a0.10-f1.00", "wave-a0.10-f0.75", "wave-a0.05-f0.75")
 VARIANTS = ("baseline", "be", "an", "proposed")
 #: Beyond the paper, for the field: the proposed filter with the wave condition estimated from
 #: the log (no probe) and the innovation-adaptive peer baseline.
 FIELD_VARIANTS = ("proposed+auto", "adaptive-r")
-MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("adaptive", "proposed"))
 #: The states whose filter standard deviation is averaged along the trajectory (index in x).
 MEAN_STD_STATES = {"x_m": 0, "y_m": 1, "yaw_rad": 5, "vx_m_s": 6}
 #: The rock survey's maps are evaluated over the rock's footprint plus this margin.
 ROCK_MARGIN_M = 0.5
+#: The mapping scenarios the study evaluates Table IV on (those that exist; beyond the paper).
+MAP_SCENARIOS = ("mhl-basin", "field-survey")
+
+
+def default_map_scenarios() -> tuple[str, ...]:
+    """:data:`MAP_SCENARIOS` that the installed scenarios hold."""
+    known = set(list_scenarios())
+    return tuple(name for name in MAP_SCENARIOS if name in known)
 
 
 @dataclass(frozen=True)
@@ -64,6 +76,7 @@ class StudySettings:
     rock_survey: str | None = "rock-survey"
     changing_sea: tuple[str, ...] = ("changing-sea-carriage", "changing-sea-survey")
     bki_length_scale: float = paper.BKI_LENGTH_SCALE_M
+    map_scenarios: tuple[str, ...] = field(default_factory=default_map_scenarios)
 
 
 @dataclass
@@ -127,6 +140,18 @@ def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
         name: _changing_sea(name, seed, calibration, char.profile, fixed, art)
         for name in settings.changing_sea
     }
+    results["map_scenarios"] = {
+        name: map_scenario(
+            name,
+            seed,
+            calibration,
+            char.profile,
+            settings.bki_length_scale,
+            art,
+            _trajectory_metrics,
+        )  # fmt: skip
+        for name in settings.map_scenarios
+    }
     results["claims"], results["claims_table1"] = evaluate_seed(results)
     return results, art
 
@@ -143,16 +168,8 @@ def _trajectory_metrics(traj, ground_truth) -> dict:
 
 
 def _mapping(name: str, log, art: Artifacts, settings: StudySettings) -> dict:
-    out = {}
-    cloud = art.simulations[name].floor_cloud
-    for method, variant in MAP_RUNS:
-        cfg = MappingConfig(method=method, length_scale=settings.bki_length_scale)
-        result = map_log(log, art.trajectories[(name, variant)], cfg)
-        key = f"{method}/{variant}"
-        art.maps[(name, key)] = result.map
-        evaluation = evaluate_map(result.map.points(0.5), cloud, resolution=result.map.resolution)
-        out[key] = to_plain(evaluation.to_dict())
-    return out
+    trajectories = {v: art.trajectories[(name, v)] for v in {v for _, v in MAP_RUNS}}
+    return evaluate_runs(name, art.simulations[name], trajectories, settings.bki_length_scale, art)
 
 
 def _rock_survey(name: str, seed: int, calibration, profile, art: Artifacts) -> dict:

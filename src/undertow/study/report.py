@@ -30,6 +30,7 @@ def build_report(
     cond = tables["conditions"][0]
     figures = condition_figures(out / "figures", cond, art, settings)
     figures += rock_survey_figures(out / "figures", tables, art)
+    figures += map_scenario_figures(out / "figures", tables, art, settings)
     figures += wave_estimate_figures(out / "figures", art)
     sim = art.simulations[cond]
     report = write_report(
@@ -89,7 +90,8 @@ def rock_survey_figures(figdir: Path, tables: dict, art: Artifacts) -> Figures:
     """Paper Fig. 5 (the adaptive BKI map over the rock), when the rock survey ran."""
     from ..report import figures_map
 
-    survey = next((name for name, _ in art.maps if name not in tables["conditions"]), None)
+    other = {*tables["conditions"], *(tables.get("map_scenario_names") or [])}
+    survey = next((name for name, _ in art.maps if name not in other), None)
     if survey is None:
         return []
     sim = art.simulations[survey]
@@ -106,6 +108,62 @@ def rock_survey_figures(figdir: Path, tables: dict, art: Artifacts) -> Figures:
         "(paper Fig. 5)."
     )
     return [(caption, path)]
+
+
+def map_scenario_figures(figdir: Path, tables: dict, art: Artifacts,
+                         settings: StudySettings) -> Figures:  # fmt: skip
+    """Per mapping scenario: the four Table IV maps' implied seafloor coloured by depth error
+    (top view), and a slice like the paper's Fig. 6 (adaptive BKI, BKI, CSM on the baseline)
+    across the floor along one pass."""
+    from ..mapping.surface import map_surface
+    from ..report import figures_map
+    from .maps import MAP_RUNS, THRESHOLD, floor_truth
+
+    out = []
+    for name in tables.get("map_scenario_names") or []:
+        sim = art.simulations[name]
+        maps = {f"{m}/{v}": art.maps[(name, f"{m}/{v}")] for m, v in MAP_RUNS}
+        surfaces = {key: map_surface(occ, THRESHOLD) for key, occ in maps.items()}
+        top = figures_map.plot_surface_error(
+            figdir / f"surface_error_{name}.png", surfaces, floor_truth(sim),
+            title=f"{name}: map surfaces coloured by depth error (top view)",
+        )  # fmt: skip
+        out.append((f"{name}: each Table IV map's implied seafloor (expected first occupied "
+                    "depth per column), coloured by its error against the true floor; red too "
+                    "deep, blue too shallow.", top))  # fmt: skip
+        lateral, x_range = _busiest_row(maps["csm/proposed"], SLICE_LENGTH_M)
+        half = 0.5 * maps["adaptive/proposed"].resolution
+        bki_label = f"BKI (l = {settings.bki_length_scale:g} m)"
+        slice_maps = {"adaptive BKI": maps["adaptive/proposed"], bki_label: maps["bki/proposed"],
+                      "CSM, baseline filter": maps["csm/baseline"]}  # fmt: skip
+        path = figures_map.plot_map_slice(figdir / f"map_slice_{name}.png", slice_maps,
+                                          sim.floor_cloud, (lateral - half, lateral + half),
+                                          x_range)  # fmt: skip
+        out.append(
+            (
+                f"{name}: map slice across the rough floor at y = {lateral:.2f} m, adaptive "
+                "BKI vs BKI vs CSM on the baseline filter (as the paper's Fig. 6).",
+                path,
+            )
+        )
+    return out  # fmt: skip
+
+
+#: The length (m) of the mapping scenarios' slice figure along x.
+SLICE_LENGTH_M = 12.0
+
+
+def _busiest_row(occupancy, length: float) -> tuple[float, tuple[float, float]]:
+    """The y (cell centre) of the map row with the most occupied cells (a survey line), and an
+    x range of ``length`` centred on that row's occupied cells."""
+    occ = occupancy.occupied()
+    if not len(occ):
+        return 0.0, (0.0, length)
+    rows, counts = np.unique(occ.cells[:, 1], return_counts=True)
+    row = rows[np.argmax(counts)]
+    x = occ.centres[occ.cells[:, 1] == row, 0]
+    mid = float(np.median(x))
+    return float((row + 0.5) * occupancy.resolution), (mid - length / 2, mid + length / 2)
 
 
 def wave_estimate_figures(figdir: Path, art: Artifacts) -> Figures:
@@ -157,13 +215,18 @@ def report_notes(tables: dict) -> list[str]:
                 f"{_verdict(f['holds'], f['n'])} ({f['holds']}/{f['n']} seeds). Measured: "
                 f"{entry['why']}."
             )
-    for entry in [*tables["claims"].values(), *tables.get("field_claims", {}).values()]:
-        counts = {c: entry[c] for c in tables["conditions"] if entry[c]["n"]}
+    scenarios = tables.get("map_scenario_names") or []
+    entries = [(e, tables["conditions"]) for e in tables["claims"].values()]
+    entries += [(e, tables["conditions"]) for e in tables.get("field_claims", {}).values()]
+    entries += [(e, scenarios) for e in (tables.get("map_scenario_claims") or {}).values()]
+    for entry, columns in entries:
+        counts = {c: entry[c] for c in columns if entry[c]["n"]}
         holds = sum(f["holds"] for f in counts.values())
         total = sum(f["n"] for f in counts.values())
+        where = "seed-scenarios" if columns is scenarios else "seed-conditions"
         note = (
             f"{entry['claim']} ({entry['test']}): {_verdict(holds, total)} ({holds}/{total} "
-            f"seed-conditions). The paper: {entry['statement']}"
+            f"{where}). The paper: {entry['statement']}"
         )
         if entry["by_construction"]:
             note += f" By construction of the simulator: {entry['by_construction']}."

@@ -12,6 +12,7 @@ from .claims import (
     CHANGING_SEA_CLAIMS,
     CLAIMS,
     FIELD_CLAIMS,
+    MAP_SCENARIO_CLAIMS,
     TABLE1_CLAIMS,
     Claim,
     sea_applies,
@@ -30,6 +31,7 @@ def build_tables(results: list[dict]) -> dict:
     """Aggregated tables (JSON-serializable): table1..table4, claims, seeds."""
     agg = aggregate(results)
     conditions = list(results[0]["localization"])
+    scenarios = list(results[0].get("map_scenarios") or {})
     run = list(results[0]["table1"])
     return {
         "seeds": [r["seed"] for r in results],
@@ -44,6 +46,11 @@ def build_tables(results: list[dict]) -> dict:
         "field_claims": {c.id: _claim(c, results, conditions) for c in FIELD_CLAIMS},
         "changing_sea": agg.get("changing_sea"),
         "changing_sea_claims": {c.id: _sea_claim(c, results) for c in CHANGING_SEA_CLAIMS},
+        "map_scenario_names": scenarios,
+        "map_scenarios": agg.get("map_scenarios") if scenarios else None,
+        "map_scenario_claims": {
+            c.id: _claim(c, results, scenarios) for c in (MAP_SCENARIO_CLAIMS if scenarios else ())
+        },
         "paper": {
             "table1": paper.TABLE_I,
             "table2_3": paper.TABLE_II_III,
@@ -98,6 +105,11 @@ def cell(stat: dict | None, digits: int = 3) -> str:
     if stat.get("n", 1) > 1 and stat.get("ci95_low") is not None:
         return f"{mean} [{stat['ci95_low']:.{digits}f}, {stat['ci95_high']:.{digits}f}]"
     return mean
+
+
+def _mean(stat: dict | None, digits: int = 3) -> str:
+    """The mean of an aggregated leaf, without its interval ('-' if absent)."""
+    return _num(stat.get("mean") if stat else None, digits)
 
 
 def _num(value, digits: int = 3) -> str:
@@ -161,11 +173,29 @@ def _nees_cells(loc: dict, variants) -> list[str]:
     return out
 
 
+#: The surface metrics' columns of Table IV: (result key, header, digits).
+SURFACE_COLUMNS = (
+    ("surface_rmse_m", "surface RMSE (m)", 4),
+    ("surface_bias_m", "surface bias (m)", 4),
+    ("coverage", "coverage", 3),
+    ("fscore_5cm", "F 5 cm", 3),
+    ("fscore_10cm", "F 10 cm", 3),
+    ("fscore_20cm", "F 20 cm", 3),
+)
+
+
 def table4_markdown(t: dict, condition: str) -> str:
+    """Table IV in a wave condition: the paper's metrics next to its values, then the surface
+    metrics (:mod:`undertow.evaluation.surface`)."""
+    return mapping_markdown(t["mapping"][condition])
+
+
+def mapping_markdown(runs: dict) -> str:
+    """Table IV rows from the aggregated metrics of the four maps (``runs[method/variant]``)."""
     rows = []
     for method, variant in MAP_RUNS:
         key = f"{method}/{variant}"
-        sim, ref = t["mapping"][condition][key], paper.TABLE_IV[key]
+        sim, ref = runs[key], paper.TABLE_IV[key]
         rows.append(
             [
                 method.upper() if method != "adaptive" else "Adaptive BKI",
@@ -173,13 +203,35 @@ def table4_markdown(t: dict, condition: str) -> str:
                 _num(ref["c2c_mean_m"]), cell(sim["c2c_mean_m"], 4),
                 str(ref["occupied_cells"]), cell(sim["occupied_cells"], 0),
                 cell(sim["coverage_mean_m"], 4),
+                *(cell(sim.get(k), d) for k, _, d in SURFACE_COLUMNS),
             ]
         )  # fmt: skip
     header = [
         "mapping", "filter", "C2C paper (m)", "C2C sim (m)", "cells paper", "cells sim",
-        "coverage sim (m, GT->map)",
+        "coverage sim (m, GT->map)", *(h for _, h, _ in SURFACE_COLUMNS),
     ]  # fmt: skip
     return _md(header, rows)
+
+
+def map_scenario_markdown(t: dict, name: str) -> str:
+    """A mapping scenario: its run and floor, the filters' lateral errors, Table IV."""
+    r = t["map_scenarios"][name]
+    loc = r["localization"]
+    facts = (
+        f"Run of {_mean(r['duration_s'], 0)} s in waves of measured amplitude "
+        f"{_mean(r['wave']['amplitude_m'], 3)} m and frequency "
+        f"{_mean(r['wave']['frequency_hz'], 2)} Hz, over a floor of depth std "
+        f"{_mean(r['floor']['depth_std_m'], 3)} m and RMS slope "
+        f"{_mean(r['floor']['rms_slope'], 3)} in the surveyed area (means over the seeds). "
+        "Filter RMSE: "
+        + "; ".join(
+            f"{v} y {cell(loc[v]['rmse']['y_m'], 4)} m, yaw {cell(loc[v]['rmse']['yaw_rad'], 4)}"
+            " rad"
+            for v in ("baseline", "proposed")
+        )
+        + "."
+    )
+    return facts + "\n\n" + mapping_markdown(r["mapping"])
 
 
 def rock_survey_markdown(r: dict) -> str:
@@ -250,13 +302,15 @@ def changing_sea_markdown(t: dict, scenario: str) -> str:
     return _md(header, rows) + "\n\n" + est
 
 
-def claims_markdown(t: dict, key: str = "claims") -> str:
+def claims_markdown(t: dict, key: str = "claims", conditions: list[str] | None = None) -> str:
     """Claim | holds in k/n seeds per condition | by construction; then, where a claim does not
-    hold in every seed of a condition, why (from the measured values)."""
+    hold in every seed of a condition, why (from the measured values). ``conditions``: the
+    columns (default: the wave conditions)."""
+    conditions = t["conditions"] if conditions is None else conditions
     rows, why_not = [], []
     for entry in t.get(key, {}).values():
         row = [_titled(entry)]
-        for c in t["conditions"]:
+        for c in conditions:
             f = entry[c]
             row.append(f"{f['holds']}/{f['n']}" if f["n"] else "n/a")
             if f["holds"] < f["n"]:
@@ -264,7 +318,7 @@ def claims_markdown(t: dict, key: str = "claims") -> str:
                 why_not.append(f"- {entry['claim']}, {c} ({counts}): {entry['why'][c]}")
         row.append(entry["by_construction"] or "")
         rows.append(row)
-    header = ["claim", *(f"holds in (seeds) {c}" for c in t["conditions"]), "by construction"]
+    header = ["claim", *(f"holds in (seeds) {c}" for c in conditions), "by construction"]
     table = _md(header, rows)
     if not why_not:
         return table
@@ -316,7 +370,19 @@ def render_markdown(t: dict) -> str:
             "for the whole run; `adaptive-r` and the baseline.",
             changing_sea_markdown(t, scenario),
         ]
+    for name in t.get("map_scenario_names") or []:
+        parts += [
+            f"## Table IV on a rough floor: {name} (beyond the paper)",
+            map_scenario_markdown(t, name),
+        ]
     parts += ["## The paper's claims in simulation", claims_markdown(t)]
+    if t.get("map_scenario_claims"):
+        parts += [
+            "## The paper's mapping claims on the mapping scenarios",
+            "Each accuracy claim read by the paper's C2C, by the surface RMSE and by the F-score "
+            "at 10 cm (the map's implied seafloor against the true floor).",
+            claims_markdown(t, "map_scenario_claims", t["map_scenario_names"]),
+        ]
     if t.get("field_claims"):
         parts += ["## Beyond the paper: claims for the field", claims_markdown(t, "field_claims"),
                   table1_claims_markdown(t, "changing_sea_claims", "a changing sea")]  # fmt: skip

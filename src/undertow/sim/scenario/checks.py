@@ -23,7 +23,10 @@ pydantic ``ValidationError`` located at the offending field (so the one-line err
 - the robot in the water: its highest point (body origin or a sensor above it) below the wave
   trough (depth > a), its lowest sensor above the floor (the rock's top where the path crosses
   the rock), the free vehicle's heave included;
-- the floor scan's point budget (``floor_cloud.max_points``) for the area the path covers.
+- the floor scan's point budget (``floor_cloud.max_points``) for the area the path covers;
+- a heightfield floor (sim/seabed.py): its file readable, its rocks inside the tank with their
+  tops under water, and the robot's lowest sensor above the floor's shallowest point under the
+  path (widened by the lever arms and a node).
 """
 
 from __future__ import annotations
@@ -34,12 +37,15 @@ import numpy as np
 from pydantic import ValidationError
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
+from ...errors import ConfigError
+from ..seabed import scenario_heightfield, uses_heightfield
 from ..seastate import build_wave, schedule_track, segments
 from ..wavefield import solve_wavenumbers
 from ..waves import LinearWave
 
 BREAKING_STEEPNESS = 1.0 / 7.0  # H / lambda above which a wave breaks (Michell's limit)
 RAMP_PERIODS = 2.0  # a ramp that changes the sea lasts at least this many wave periods
+MAX_FLOOR_NODES = 2.0e7  # heightfield nodes (8 bytes each): ~160 MB
 LOCAL_FREQUENCY_ERROR = 0.1  # |dk/dt| D / omega allowed during a ramp (slowly varying)
 
 
@@ -137,14 +143,49 @@ def check_scenario(s) -> None:
     else:
         _check_schedule(s)
     _check_tank_objects(s)
+    heightfield = _check_floor(s)
     if s.motion.kind == "waypoints":
         _check_waypoints(s.motion.waypoints)
     path = path_extent(s)
     _check_path_in_tank(s, path)
     if s.wave.schedule is not None:
         _check_slowly_varying(s, path)
-    _check_in_water(s, path)
+    _check_in_water(s, path, heightfield)
     _check_floor_cloud(s, path)
+
+
+def _check_floor(s):
+    """The scenario's heightfield (None for the original flat tank), its rocks in place."""
+    L, W = s.tank.length_m, s.tank.width_m
+    for i, rock in enumerate(s.floor.rocks):
+        for field, c, lo, hi in (("center_x_m", rock.center_x_m, 0.0, L),
+                                 ("center_y_m", rock.center_y_m, -W / 2, W / 2)):  # fmt: skip
+            if not lo <= c <= hi:
+                raise _fail(
+                    ("floor", "rocks", i, field),
+                    c,
+                    f"{c} m: the rock's centre must lie in the tank ({lo:g} to {hi:g} m)",
+                )
+    res = s.floor.resolution_m
+    nodes = (L / res + 1) * (W / res + 1)
+    if uses_heightfield(s) and nodes > MAX_FLOOR_NODES:
+        raise _fail(("floor", "resolution_m"), res,
+                    f"{res} m over the {L:g} m x {W:g} m tank gives {nodes:.3g} heightfield nodes,"
+                    f" more than {MAX_FLOOR_NODES:.0e} (~{MAX_FLOOR_NODES * 8e-6:.0f} MB);"
+                    " coarsen it or shrink the tank")  # fmt: skip
+    try:
+        hf = scenario_heightfield(s)
+    except ConfigError as exc:
+        raise _fail(("floor", "file"), s.floor.file, str(exc)) from None
+    if hf is None:
+        return None
+    for i, rock in enumerate(s.floor.rocks):
+        top = float(hf.sample(rock.center_x_m, rock.center_y_m))
+        if top <= 0.0:
+            raise _fail(("floor", "rocks", i, "height_m"), rock.height_m,
+                        f"{rock.height_m} m: the rock's top at {top:.3f} m depth must stay"
+                        " under water")  # fmt: skip
+    return hf
 
 
 def _check_ranges(s) -> None:
@@ -386,7 +427,18 @@ def _rock_under(s, path: PathExtent, reach: float) -> bool:
     )
 
 
-def _check_in_water(s, path: PathExtent) -> None:
+def _floor_under(hf, path: PathExtent, reach: float) -> float:
+    """Shallowest heightfield depth over the path's box widened by ``reach`` and a node."""
+    xs, ys = hf.nodes()
+    pad_x, pad_y = reach + hf.dx, reach + hf.dy
+    i = (xs >= path.x_min - pad_x) & (xs <= path.x_max + pad_x)
+    j = (ys >= path.y_min - pad_y) & (ys <= path.y_max + pad_y)
+    if not i.any() or not j.any():
+        return float(hf.sample(0.5 * (path.x_min + path.x_max), 0.5 * (path.y_min + path.y_max)))
+    return float(hf.z[np.ix_(i, j)].min())
+
+
+def _check_in_water(s, path: PathExtent, hf=None) -> None:
     arms = _lever_arms(s)
     a, h = float(wave_conditions(s)[0].max()), s.water.depth_m
     top = path.depth + float(arms[:, 2].min()) - path.heave
@@ -401,9 +453,13 @@ def _check_in_water(s, path: PathExtent) -> None:
             f" depth must be below {surface}",
         )
     reach = float(np.max(np.hypot(*arms[:, :2].T)))
-    floor = h - (s.tank.rock.height_m if _rock_under(s, path, reach) else 0.0)
-    if bottom >= floor:
+    if hf is None:
+        floor = h - (s.tank.rock.height_m if _rock_under(s, path, reach) else 0.0)
         where = " (the rock's top, under the path)" if floor < h else ""
+    else:
+        floor = _floor_under(hf, path, reach)
+        where = " (the floor's shallowest point under the path)"
+    if bottom >= floor:
         raise _fail(
             loc,
             path.depth,

@@ -4,16 +4,19 @@ A scenario is a YAML file; any field left out takes the default below, and ``bas
 from a built-in scenario (deep merge) so a user file can change a single field. The built-ins
 live in ``undertow/data/scenarios/*.yaml``. Sensor models are in ``sensors.py`` (this package);
 the cross-field checks that reject physically impossible scenarios (robot out of the water or
-below the floor, a run leaving the tank, a breaking wave, ...) in ``checks.py``.
+below the floor, a run leaving the tank, a breaking wave, ...) in ``checks.py``. The seabed
+(``floor``: flat, procedural or from a bathymetry file) is built by ``sim/seabed.py``; a relative
+``floor.file`` is relative to the scenario file that names it.
 """
 
 from __future__ import annotations
 
 from importlib import resources
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic_core import PydanticCustomError
 
 from ..._util.validate import read_yaml, validate
 from ...errors import ConfigError
@@ -26,6 +29,7 @@ from .sensors import (
     GroundTruthModel,
     ImuModel,
     MountingModel,
+    MultibeamModel,
     SonarModel,
     WaveProbeModel,
 )
@@ -33,6 +37,11 @@ from .sensors import (
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _invalid(message: str) -> PydanticCustomError:
+    """A validation error whose message is shown as is (no "Value error, " prefix)."""
+    return PydanticCustomError("invalid_floor", "{message}", {"message": message})
 
 
 class WaterModel(_Model):
@@ -96,10 +105,181 @@ class RockModel(_Model):
     edge_radius_m: float = Field(0.05, ge=0, description="fillet radius of the top edges")
 
 
+class BeachModel(_Model):
+    """Plane wave-absorbing beach at the x = 0 end (the waves run toward -x), from the floor at
+    x = length_m up to the still-water line at x = 0 (sim/seabed.py)."""
+
+    length_m: float = Field(
+        0.0, ge=0, description="0 = no beach; basins' plane beaches slope ~1:4-1:10 (Hughes 1993)"
+    )
+
+
 class TankModel(_Model):
+    """The basin (or, without walls, the field's domain: the area the floor is defined over)."""
+
     length_m: float = Field(110.0, gt=0, description="UMich MHL towing tank, 360 ft")
     width_m: float = Field(6.7, gt=0, description="UMich MHL towing tank, 22 ft")
     rock: RockModel = RockModel()
+    walls: bool = Field(
+        True, description="side and end walls at the domain's edges (false: open water, the"
+        " floor's edge values continue outside)"
+    )  # fmt: skip
+    beach: BeachModel = BeachModel()
+
+
+class SlopeModel(_Model):
+    """Plane through the still-water depth h at the reference point, deepening toward
+    ``downslope_deg`` (sim/seabed.py). Shelf and coastal slopes 0.1-5 deg, below sand's angle of
+    repose ~32 deg (Soulsby 1997, "Dynamics of Marine Sands")."""
+
+    gradient_deg: float = Field(0.0, ge=0, lt=30, description="slope angle alpha; 0.1-5 deg")
+    downslope_deg: float = Field(0.0, description="direction the floor deepens, from +x to +y")
+    reference_x_m: float | None = Field(None, description="where z = h; default domain centre")
+    reference_y_m: float | None = Field(None, description="where z = h; default domain centre")
+
+
+class RipplesModel(_Model):
+    """Sinusoidal sand ripples; wave ripples: wavelength 0.1-1 m, height 0.01-0.15 m, steepness
+    height / wavelength <= 0.2 (Soulsby 1997 sec. 7.2; Nielsen 1992, "Coastal Bottom Boundary
+    Layers and Sediment Transport")."""
+
+    wavelength_m: float = Field(0.5, gt=0, description="lambda_r, 0.1-1 m")
+    height_m: float = Field(0.0, ge=0, description="crest to trough eta_r, 0.01-0.15 m; 0 = none")
+    crest_deg: float = Field(90.0, description="direction the crest lines run, from +x to +y")
+    phase_deg: float = Field(0.0, description="phi_r; 0 = a crest through the origin")
+
+    @model_validator(mode="after")
+    def _steepness(self) -> RipplesModel:
+        if self.height_m > 0.2 * self.wavelength_m:
+            raise _invalid(
+                f"height_m {self.height_m} m over wavelength_m {self.wavelength_m} m is steeper"
+                " than sand ripples stand (height / wavelength <= 0.2, Soulsby 1997)"
+            )
+        return self
+
+
+class RoughnessModel(_Model):
+    """Seeded Gaussian random field, spectrum W(K) ~ K^-gamma between the two wavelengths,
+    RMS height rms_m (Jackson & Richardson 2007, "High-Frequency Seafloor Acoustics": measured
+    gamma ~ 2.5-3.5, RMS ~ 0.005-0.05 m)."""
+
+    rms_m: float = Field(0.0, ge=0, description="RMS height sigma, 0.005-0.05 m; 0 = none")
+    spectral_slope: float = Field(3.0, gt=0, le=5, description="gamma of W(K) ~ K^-gamma, 2-4")
+    min_wavelength_m: float = Field(0.1, gt=0, description="shortest wavelength (>= 2 nodes)")
+    max_wavelength_m: float = Field(5.0, gt=0, description="longest wavelength (<= the domain)")
+
+    @model_validator(mode="after")
+    def _band(self) -> RoughnessModel:
+        if self.min_wavelength_m >= self.max_wavelength_m:
+            raise _invalid(
+                f"min_wavelength_m {self.min_wavelength_m} m must be below max_wavelength_m"
+                f" {self.max_wavelength_m} m"
+            )
+        return self
+
+
+class BoxRockModel(_Model):
+    """A box with rounded top edges resting on the floor (like the tank's rock platform)."""
+
+    kind: Literal["box"] = "box"
+    center_x_m: float
+    center_y_m: float
+    length_m: float = Field(gt=0)
+    width_m: float = Field(gt=0)
+    height_m: float = Field(gt=0, description="above the floor under its centre")
+    edge_radius_m: float = Field(0.05, ge=0, description="fillet of the top edges")
+    yaw_deg: float = Field(0.0, description="length axis from +x toward +y")
+
+    @model_validator(mode="after")
+    def _fillet(self) -> BoxRockModel:
+        if 2 * self.edge_radius_m > min(self.length_m, self.width_m, 2 * self.height_m):
+            raise _invalid(
+                f"edge_radius_m {self.edge_radius_m} m: the fillet must fit the rock (at most"
+                " half its length and width, and its height)"
+            )
+        return self
+
+
+class BoulderModel(_Model):
+    """An ellipsoidal boulder: the upper half of an ellipsoid of these full axes resting on the
+    floor; boulders are clasts over 0.256 m (Wentworth 1922)."""
+
+    kind: Literal["boulder"] = "boulder"
+    center_x_m: float
+    center_y_m: float
+    length_m: float = Field(gt=0, description="full axis along yaw, 0.25-4 m")
+    width_m: float = Field(gt=0, description="full axis across yaw, 0.25-4 m")
+    height_m: float = Field(gt=0, description="above the floor (the vertical semi-axis)")
+    yaw_deg: float = Field(0.0, description="length axis from +x toward +y")
+
+
+RockSpec = Annotated[BoxRockModel | BoulderModel, Field(discriminator="kind")]
+_PROCEDURAL_KEYS = ("slope", "ripples", "roughness")
+
+
+class FloorModel(_Model):
+    """The seabed (sim/seabed.py): ``flat`` (the original tank's floor at water.depth_m with the
+    rock platform), ``procedural`` (plane, ripples, roughness, rocks) or ``file`` (a GeoTIFF,
+    XYZ or PLY bathymetry placed by offset_m and rotation_deg). Every form but the original
+    flat tank is a heightfield of node spacing resolution_m over the tank (tank.length_m x
+    tank.width_m), the tank's rock platform included. ``kind`` may be left out: ``file`` when
+    ``file`` is set, ``procedural`` when a procedural field is."""
+
+    kind: Literal["flat", "procedural", "file"] = "flat"
+    resolution_m: float = Field(
+        0.025, gt=0, le=1.0, description="heightfield node spacing; a quarter of a 0.1 m map cell"
+    )
+    seed: int = Field(
+        0, ge=0, description="roughness seed: the seabed, fixed while the run's seed varies"
+    )
+    slope: SlopeModel = SlopeModel()
+    ripples: RipplesModel = RipplesModel()
+    roughness: RoughnessModel = RoughnessModel()
+    rocks: list[RockSpec] = Field([], description="boxes and boulders on the floor")
+    file: str | None = Field(None, description="GeoTIFF (.tif), XYZ text or PLY bathymetry")
+    values: Literal["elevation", "depth"] = Field(
+        "elevation", description="file values: elevation (positive up) or depth (positive down)"
+    )
+    offset_m: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="file frame origin in the scenario (x, y) and z: depth ="
+        " z - elevation or z + depth"
+    )  # fmt: skip
+    rotation_deg: float = Field(0.0, description="file frame rotation about z, x toward y")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _infer_kind(cls, data):
+        if isinstance(data, dict) and "kind" not in data:
+            if data.get("file") is not None:
+                data = {**data, "kind": "file"}
+            elif any(k in data for k in (*_PROCEDURAL_KEYS, "rocks")):
+                data = {**data, "kind": "procedural"}
+        return data
+
+    @model_validator(mode="after")
+    def _consistent(self) -> FloorModel:
+        if self.kind == "file" and self.file is None:
+            raise _invalid("kind file needs floor.file (a GeoTIFF, XYZ or PLY bathymetry)")
+        if self.kind != "file" and self.file is not None:
+            raise _invalid(f"floor.file is set but kind is {self.kind!r}; use kind: file")
+        shaped = (self.slope, self.ripples, self.roughness) != (
+            SlopeModel(),
+            RipplesModel(),
+            RoughnessModel(),
+        )
+        if self.kind == "flat" and (self.rocks or shaped):
+            raise _invalid("slope, ripples, roughness and rocks need kind: procedural")
+        if self.kind == "file" and shaped:
+            raise _invalid(
+                "slope, ripples and roughness need kind: procedural (a file floor takes rocks only)"
+            )
+        rg = self.roughness
+        if rg.rms_m > 0 and rg.min_wavelength_m < 2 * self.resolution_m:
+            raise _invalid(
+                f"roughness.min_wavelength_m {rg.min_wavelength_m} m is below two nodes of"
+                f" resolution_m {self.resolution_m} m (the grid cannot hold it)"
+            )
+        return self
 
 
 class MountLoadModel(_Model):
@@ -196,6 +376,10 @@ class Scenario(_Model):
     wave_probe: WaveProbeModel = WaveProbeModel()
     ground_truth: GroundTruthModel = GroundTruthModel()
     floor_cloud: FloorCloudModel = FloorCloudModel()
+    floor: FloorModel = FloorModel()
+    multibeam: MultibeamModel | None = Field(
+        None, description="a multibeam echosounder (none unless given)"
+    )
 
     @model_validator(mode="after")
     def _physically_possible(self) -> Scenario:
@@ -261,6 +445,7 @@ def _raw(name_or_path: str | Path, depth: int = 0) -> tuple[dict, str]:
     else:
         names = ", ".join(list_scenarios())
         raise ConfigError(f"unknown scenario {text!r}: not a file; built-ins are: {names}")
+    _resolve_floor_file(data, builtin.parent if label.startswith("built-in") else Path(text).parent)
     base = data.pop("base", None)
     if base is not None:
         if not isinstance(base, str):
@@ -276,8 +461,30 @@ def _raw(name_or_path: str | Path, depth: int = 0) -> tuple[dict, str]:
             if message.startswith(f"{label}: "):
                 raise
             raise ConfigError(f"{label}: field base: {message}") from None
+        if _floor_kind(data.get("floor")) not in (None, _floor_kind(parent.get("floor"))):
+            parent = {k: v for k, v in parent.items() if k != "floor"}  # a new floor replaces it
         data = _deep_merge(parent, data)
     return data, label
+
+
+def _floor_kind(floor) -> str | None:
+    """The kind a ``floor`` mapping sets or implies (FloorModel's inference), None if neither."""
+    if not isinstance(floor, dict):
+        return None
+    if floor.get("kind") is not None:
+        return floor["kind"]
+    if floor.get("file") is not None:
+        return "file"
+    return "procedural" if any(k in floor for k in (*_PROCEDURAL_KEYS, "rocks")) else None
+
+
+def _resolve_floor_file(data: dict, folder) -> None:
+    """A relative ``floor.file`` is relative to the scenario file that names it (in place)."""
+    floor = data.get("floor")
+    if isinstance(floor, dict) and isinstance(floor.get("file"), str):
+        path = Path(floor["file"]).expanduser()
+        if not path.is_absolute():
+            floor["file"] = str(Path(str(folder)) / path)
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:

@@ -3,9 +3,12 @@ datasheets and documentation cited in each field. None of them is fitted to the 
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from typing import Literal
 
-from ...log import Mounting, SensorMount
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from ...log import DVL_PRESETS, DvlGeometry, Mounting, SensorMount
 
 Vec3 = tuple[float, float, float]
 
@@ -35,8 +38,23 @@ class ImuModel(_Model):
 
 
 class DvlModel(_Model):
+    """The DVL. ``model`` picks a beam-geometry preset (``log.DVL_PRESETS``: Water Linked A50,
+    Nortek DVL1000, Teledyne RDI Pathfinder, from their datasheets); ``beam_tilt_deg``,
+    ``beam_azimuths_deg`` and ``beam_width_deg`` left out take the preset's values, given they
+    override it. Four beams: the log's DVL stream and both ROS DVL messages carry four."""
+
+    model: Literal["a50", "dvl1000", "pathfinder"] = Field(
+        "a50", description="beam geometry preset (datasheet values)"
+    )
     rate_hz: float = Field(8.0, gt=0, description="A50 spec: 10 Hz at 0.3-3 m, 5-6 at 1.5-14 m")
-    beam_tilt_deg: float = Field(22.5, gt=0, lt=90, description="A50 beam tilt (Water Linked spec)")
+    beam_tilt_deg: float = Field(22.5, gt=0, lt=90, description="beam tilt from vertical; preset")
+    beam_azimuths_deg: tuple[float, float, float, float] = Field(
+        DVL_PRESETS["a50"].azimuths_deg,
+        description="beam azimuths about +z from forward toward starboard, beam-id order; preset",
+    )
+    beam_width_deg: float | None = Field(
+        None, gt=0, lt=90, description="one-way -3 dB beam width; recorded, not ray-cast"
+    )
     beam_velocity_sigma: float = Field(
         2.0e-3, ge=0, description="m/s per beam; A50 ~1 % of 0.2 m/s, order of magnitude"
     )
@@ -61,6 +79,22 @@ class DvlModel(_Model):
     wave_range_noise_coefficient: float = Field(
         1.0, ge=0, description="extra range sigma = coeff x vertical orbital displacement RMS"
     )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _preset(cls, data):
+        """Geometry fields not given take the preset's values."""
+        if isinstance(data, dict) and data.get("model") in DVL_PRESETS:
+            preset = DVL_PRESETS[data["model"]]
+            data = {"beam_tilt_deg": preset.tilt_deg,
+                    "beam_azimuths_deg": preset.azimuths_deg, **data}  # fmt: skip
+        return data
+
+    def geometry(self) -> DvlGeometry:
+        """The beam geometry this DVL uses (preset name, tilt, azimuths, beam width)."""
+        return DvlGeometry(
+            self.model, self.beam_tilt_deg, self.beam_azimuths_deg, self.beam_width_deg
+        )
 
 
 class DeadReckoningModel(_Model):
@@ -95,6 +129,36 @@ class SonarModel(_Model):
     )
 
 
+class MultibeamModel(_Model):
+    """A multibeam echosounder: ``beams`` equiangular beams across track over ``swath_deg``,
+    one ping every 1 / ``rate_hz`` s (defaults in the range of 400 kHz shallow-water heads:
+    R2Sonic 2020, Norbit WBMS, Kongsberg M3 datasheets: 256 beams, 130-160 deg swath, up to
+    ~60 Hz ping rate).
+
+    Beam j of a ping: across-track angle theta_j = -swath/2 + j swath/(B - 1), unit vector
+    u_j = (0, sin theta_j, cos theta_j) in the sensor frame (x along track, y starboard, z down).
+    Range noise: the IHO S-44 (6th ed., 2020) total vertical uncertainty form
+    sigma_d = sqrt(a^2 + (b d)^2) at depth d below the head, with d = r cos theta the vertical
+    extent of the beam, projected on the beam: sigma_r(r, theta) = sqrt(a^2 + (b r cos theta)^2)
+    / cos theta. a and b are one-sigma here (S-44 states them at 95 %, 1.96 sigma); defaults: a
+    the order of the R2Sonic 2020's 1.25 cm range resolution, b = 0.2 % of depth (assumed, well
+    inside S-44 Special Order's b = 0.0075 at 95 %).
+    """
+
+    rate_hz: float = Field(20.0, gt=0, le=100, description="ping rate; 20-60 Hz in shallow water")
+    beams: int = Field(256, ge=2, le=1024, description="beams per ping (R2Sonic 2020: 256)")
+    swath_deg: float = Field(140.0, gt=0, lt=180, description="total across-track swath")
+    range_sigma_a_m: float = Field(0.0125, ge=0, description="a of sigma_d, m (one sigma)")
+    range_sigma_b: float = Field(0.002, ge=0, description="b of sigma_d, per metre of depth")
+    min_range: float = Field(0.2, ge=0, description="blanking distance, m")
+    max_range: float = Field(75.0, gt=0, description="R2Sonic 2020 max range ~ 75 m at 400 kHz")
+
+    def across_angles(self):
+        """theta_j (rad, B values, port to starboard)."""
+        half = np.deg2rad(self.swath_deg) / 2.0
+        return np.linspace(-half, half, self.beams)
+
+
 class WaveProbeModel(_Model):
     rate_hz: float = Field(100.0, gt=0)
     x_m: float = Field(80.0, description="fixed probe x, ahead of the run (toward the paddle)")
@@ -126,6 +190,7 @@ class MountingModel(_Model):
     )
     sonar: SensorMountModel = SensorMountModel(translation=(0.164, 0.106, 0.306))
     barometer: SensorMountModel = SensorMountModel()
+    multibeam: SensorMountModel = SensorMountModel(translation=(0.25, 0.0, 0.3))
 
     def to_mounting(self) -> Mounting:
         return Mounting(
@@ -136,6 +201,7 @@ class MountingModel(_Model):
                     ("dvl", self.dvl),
                     ("sonar", self.sonar),
                     ("barometer", self.barometer),
+                    ("multibeam", self.multibeam),
                 )
             }
         )

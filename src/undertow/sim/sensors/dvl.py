@@ -1,14 +1,17 @@
-"""DVL model (Water Linked A50 bottom track): four beams, ray-cast ranges, least squares velocity.
+"""DVL model (bottom track): four beams, ray-cast ranges, least squares velocity.
 
-Beams b_i (DVL frame, ``log.a50_beam_units``), world directions R_wd b_i with
+Beams b_i (DVL frame) from the scenario's geometry (``DvlModel.geometry()``: a preset of
+``log.DVL_PRESETS``, the Water Linked A50 by default, or tilt and azimuths given), world
+directions R_wd b_i with
 R_wd = R_wb R_bd (Mounting.dvl). Per report at t_n, with v_d = R_wd^T v the DVL-point velocity
 over the fixed floor in the DVL frame:
 
     r_i   = ray cast from the DVL origin along R_wd b_i onto the floor (tank.py) + n_r
     m_i   = (c_set / c_true) b_i . v_d + n_b,   n_b ~ N(0, sigma_b^2)      (radial velocity)
     v_hat = (B^T B)^{-1} B^T m   over the valid beams (>= 3), B rows b_i,
-            Cov = sigma_b^2 (B^T B)^{-1}  ->  sigma_x = sigma_b / (sqrt2 sin 22.5),
-                                              sigma_z = sigma_b / (2 cos 22.5)  with 4 beams
+            Cov = sigma_b^2 (B^T B)^{-1}  ->  sigma_x = sigma_b / (sqrt2 sin tilt),
+                                              sigma_z = sigma_b / (2 cos tilt)  with 4 beams
+                                              at azimuths 90 deg apart
     v_meas = v_hat + R_wd^T (g_a e_beta + g_c e_perp + g_v e_z),  g_j ~ N(0, (kappa_j U(d)/sqrt2)^2)
     altitude = mean over valid beams of r_i b_i,z
 
@@ -32,7 +35,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...log import DeadReckoning, Dvl, SensorMount, a50_beam_units
+from ...log import DeadReckoning, Dvl, SensorMount
 from ...rotations import rpy_to_matrix, wrap_angle
 from ..motion import kinematics
 from ..scenario.sensors import DeadReckoningModel, DvlModel
@@ -75,7 +78,7 @@ def simulate_dvl(
     n = t.size
     kin = kinematics(motion, t, mount.translation)
     R_wd = kin.R @ mount.rotation_matrix()
-    B = a50_beam_units(config.beam_tilt_deg)
+    B = config.geometry().units()
     dirs = np.einsum("nij,kj->nki", R_wd, B)
     origins = np.repeat(kin.position, 4, axis=0)
     true_range = tank.cast_rays(origins, dirs.reshape(-1, 3), config.max_range).reshape(n, 4)

@@ -1,0 +1,200 @@
+"""The seafloor surface an occupancy map implies: one depth (and its spread) per (x, y) column.
+
+For a column of the map's grid, let k = 1..K run over the cells the map holds in it, from the
+shallowest down (z down), with centre depths z_k and mean occupancies
+p_k = E[theta_k] = alpha_k / (alpha_k + beta_k) (the paper's ``eq:mean_var``). Reading the column
+from the surface down, the first occupied cell is k with probability
+
+    P_k = p_k prod_{j<k} (1 - p_j),
+
+and the seafloor depth the map implies is that distribution's mean, with the first occupied
+depth taken uniform within its cell (height r, the grid resolution):
+
+    d = sum_k z_k P_k / sum_k P_k,
+    s^2 = sum_k (z_k - d)^2 P_k / sum_k P_k + r^2 / 12.
+
+Normalizing by sum_k P_k = 1 - prod_k (1 - p_k) conditions on the column holding a surface at
+all. Cells the map does not hold carry no evidence and do not stop the column (p = 0). Every
+cell the map holds counts by its mean alone, whatever its evidence, as the paper's occupied
+cells do (BKI kernel tails with little mass count in full: a map's artefact is the map's). A
+column with no cell above the occupancy threshold holds no data (NaN). The depth is not
+quantized to cell centres: it moves continuously with the cells' occupancies (a floor between
+two cells shares its occupancy between them). Between columns, :meth:`Surface.at` interpolates
+bilinearly.
+
+:func:`surface_from_points` grids a point set (a ground-truth scan, an XYZ file) into the same
+:class:`Surface` form: per cell, the shallowest point (the first surface seen from above).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DataError
+from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
+
+
+@dataclass(frozen=True, eq=False)
+class Surface:
+    """A depth grid: cell (row j, column i) has its centre at (x0 + i res, y0 + j res).
+
+    ``depth`` (ny, nx) m, z down, NaN where there is no data; ``std`` (ny, nx) m, the depth's
+    standard deviation (NaN where no data); ``coverage`` (ny, nx) bool, where there is data."""
+
+    x0: float
+    y0: float
+    resolution: float
+    depth: np.ndarray
+    std: np.ndarray
+    coverage: np.ndarray
+
+    def __post_init__(self) -> None:
+        depth = np.asarray(self.depth, dtype=float)
+        if depth.ndim != 2:
+            raise DataError(f"Surface.depth: shape {depth.shape}, expected (ny, nx)")
+        std = np.broadcast_to(np.asarray(self.std, dtype=float), depth.shape).copy()
+        coverage = np.broadcast_to(np.asarray(self.coverage, dtype=bool), depth.shape).copy()
+        if not (self.resolution > 0 and np.isfinite(self.resolution)):
+            raise DataError(f"Surface.resolution: {self.resolution}, expected a positive number")
+        object.__setattr__(self, "depth", depth)
+        object.__setattr__(self, "std", std)
+        object.__setattr__(self, "coverage", coverage & np.isfinite(depth))
+        object.__setattr__(self, "resolution", float(self.resolution))
+        object.__setattr__(self, "x0", float(self.x0))
+        object.__setattr__(self, "y0", float(self.y0))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.depth.shape
+
+    def centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(x, y) of every cell centre, each (ny, nx)."""
+        ny, nx = self.shape
+        xs = self.x0 + self.resolution * np.arange(nx)
+        ys = self.y0 + self.resolution * np.arange(ny)
+        return np.meshgrid(xs, ys, indexing="xy")
+
+    def points(self) -> np.ndarray:
+        """(K, 3) cell centres with data, at their depth."""
+        x, y = self.centres()
+        c = self.coverage
+        return np.stack([x[c], y[c], self.depth[c]], axis=1)
+
+    def at(self, x, y) -> np.ndarray:
+        """Depth at (x, y) (any broadcastable shapes): bilinear between the four nearest cell
+        centres, z = sum_c w_c z_c / sum_c w_c over the corners c with data (w_c the bilinear
+        weights), so a point inside a covered cell near an uncovered one still gets a depth.
+        NaN where the cell containing (x, y) has no data or lies outside the grid."""
+        x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+        ny, nx = self.shape
+        if nx == 0 or ny == 0:
+            return np.full(x.shape, np.nan)
+        fx = (x - self.x0) / self.resolution
+        fy = (y - self.y0) / self.resolution
+        near_i, near_j = np.rint(fx), np.rint(fy)
+        inside = (near_i >= 0) & (near_i < nx) & (near_j >= 0) & (near_j < ny)
+        ni = np.clip(near_i, 0, nx - 1).astype(np.int64)
+        nj = np.clip(near_j, 0, ny - 1).astype(np.int64)
+        inside &= self.coverage[nj, ni]
+        i0 = np.clip(np.floor(fx), 0, max(nx - 2, 0)).astype(np.int64)
+        j0 = np.clip(np.floor(fy), 0, max(ny - 2, 0)).astype(np.int64)
+        wx = np.clip(fx - i0, 0.0, 1.0)
+        wy = np.clip(fy - j0, 0.0, 1.0)
+        i1, j1 = np.minimum(i0 + 1, nx - 1), np.minimum(j0 + 1, ny - 1)
+        total = np.zeros(x.shape)
+        weight = np.zeros(x.shape)
+        for jj, ii, w in ((j0, i0, (1 - wx) * (1 - wy)), (j0, i1, wx * (1 - wy)),
+                          (j1, i0, (1 - wx) * wy), (j1, i1, wx * wy)):  # fmt: skip
+            z = self.depth[jj, ii]
+            ok = np.isfinite(z)
+            total += np.where(ok, w * np.where(ok, z, 0.0), 0.0)
+            weight += np.where(ok, w, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out = total / weight
+        return np.where(inside & (weight > 0), out, np.nan)
+
+
+def _columns(cells: np.ndarray):
+    """Order of cells by (i, j, k), and each cell's column's first position in that order."""
+    order = np.lexsort((cells[:, 2], cells[:, 1], cells[:, 0]))
+    ij = cells[order, :2]
+    new = np.ones(len(order), bool)
+    new[1:] = np.any(ij[1:] != ij[:-1], axis=1)
+    starts = np.flatnonzero(new)
+    return order, starts
+
+
+def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, *,
+                occupied_only: bool = False) -> Surface:  # fmt: skip
+    """The seafloor surface ``occupancy`` implies (equations in the module doc): per column the
+    expected first occupied depth d and its spread s; no data where no cell's mean exceeds
+    ``threshold``. The grid is the map's (cell i has centre (i + 1/2) res), over the bounding box
+    of the map's columns. ``occupied_only``: only the occupied cells (mean > threshold, the
+    paper's map points) enter the expectation; cells below the threshold then neither stop a
+    column nor pull its depth up."""
+    if occupied_only:
+        occupancy = occupancy.occupied(threshold)
+    res = float(occupancy.resolution)
+    if len(occupancy) == 0:
+        empty = np.zeros((0, 0))
+        return Surface(0.0, 0.0, res, empty, empty, empty.astype(bool))
+    order, starts = _columns(occupancy.cells)
+    cells = occupancy.cells[order]
+    p = np.clip(occupancy.mean[order], 0.0, 1.0)
+    z = (cells[:, 2] + 0.5) * res
+    # log prod_{j<k} (1 - p_j) within each column: an exclusive cumulative sum restarted per column
+    log_free = np.log1p(-np.minimum(p, 1.0 - 1e-15))
+    cum = np.cumsum(log_free)
+    before = cum - log_free
+    lengths = np.diff(np.append(starts, len(p)))
+    before -= np.repeat(before[starts], lengths)
+    weight = p * np.exp(before)
+    total = np.add.reduceat(weight, starts)
+    mean_z = np.add.reduceat(weight * z, starts) / np.where(total > 0, total, 1.0)
+    spread = np.add.reduceat(weight * (z - np.repeat(mean_z, lengths)) ** 2, starts)
+    var = spread / np.where(total > 0, total, 1.0) + res * res / 12.0
+    covered = np.maximum.reduceat(p, starts) > threshold
+    ij = cells[starts, :2]
+    lo = ij.min(axis=0)
+    nx, ny = (ij.max(axis=0) - lo + 1).tolist()
+    depth = np.full((ny, nx), np.nan)
+    std = np.full((ny, nx), np.nan)
+    col, row = (ij - lo).T
+    depth[row[covered], col[covered]] = mean_z[covered]
+    std[row[covered], col[covered]] = np.sqrt(var[covered])
+    x0, y0 = ((lo + 0.5) * res).tolist()
+    return Surface(x0, y0, res, depth, std, np.isfinite(depth))
+
+
+def surface_from_points(points, resolution: float, origin: tuple[float, float] | None = None,
+                        ) -> Surface:  # fmt: skip
+    """Grid a point set (N, 3) into a :class:`Surface` of cell size ``resolution``: per cell the
+    shallowest point's depth (the first surface seen from above), ``std`` the spread (standard
+    deviation) of the cell's depths. ``origin`` is the centre of cell (0, 0) (default: the
+    points' smallest x and y, so a regular grid of that spacing maps one point per cell and
+    :meth:`Surface.at` interpolates it bilinearly)."""
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) == 0:
+        raise DataError(f"surface_from_points: shape {pts.shape}, expected (N, 3) with N > 0")
+    if not np.all(np.isfinite(pts)):
+        raise DataError("surface_from_points: non-finite coordinates")
+    if not resolution > 0:
+        raise DataError(f"surface_from_points: resolution {resolution}, expected > 0")
+    x0, y0 = pts[:, :2].min(axis=0) if origin is None else (float(origin[0]), float(origin[1]))
+    ij = np.rint((pts[:, :2] - (x0, y0)) / resolution).astype(np.int64)
+    lo = ij.min(axis=0)
+    ij -= lo
+    nx, ny = (ij.max(axis=0) + 1).tolist()
+    flat = ij[:, 1] * nx + ij[:, 0]
+    depth = np.full(ny * nx, np.inf)
+    np.minimum.at(depth, flat, pts[:, 2])
+    count = np.bincount(flat, minlength=ny * nx)
+    mean = np.bincount(flat, pts[:, 2], minlength=ny * nx) / np.maximum(count, 1)
+    sq = np.bincount(flat, (pts[:, 2] - mean[flat]) ** 2, minlength=ny * nx)
+    std = np.sqrt(sq / np.maximum(count, 1))
+    has = count > 0
+    depth[~has], std[~has] = np.nan, np.nan
+    return Surface(x0 + lo[0] * resolution, y0 + lo[1] * resolution, resolution,
+                   depth.reshape(ny, nx), std.reshape(ny, nx), has.reshape(ny, nx))  # fmt: skip

@@ -1,0 +1,154 @@
+"""Table IV's maps and every map metric, on the wave conditions and on the mapping scenarios.
+
+Per map: the paper's C2C and occupied cells (:mod:`undertow.evaluation.cloud`), and the
+grid-independent surface metrics (:mod:`undertow.evaluation.surface`): the bathymetric surface
+error (RMSE, bias, coverage) and accuracy, completeness and F-score at tau = 0.05, 0.10, 0.20 m.
+
+The surveyed area is where the log's beams hit the floor with the TRUE pose (the ground truth
+put through the mapping stage's own ray geometry), so it does not depend on the filter or the
+mapper. The true floor is the simulator's heightfield where it exposes one, else its
+ground-truth cloud.
+
+A mapping scenario (beyond the paper's carriage runs: ``mhl-basin``, ``field-survey``) is
+localized as a user would (wave from its own probe, the study's noise profile and calibration)
+with the baseline and proposed filters, then mapped with the four Table IV runs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._util.plain import to_plain
+from ..estimation.characterize import estimate_waves
+from ..estimation.localizer import localize
+from ..evaluation.cloud import evaluate_map
+from ..evaluation.surface import cloud_spacing, evaluate_surface
+from ..mapping.config import MappingConfig
+from ..mapping.run import map_log
+from ..mapping.samples import build_samples
+from ..mapping.surface import map_surface, surface_from_points
+from ..sim import load_scenario, simulate
+from ..trajectory import STATE_NAMES, Trajectory
+
+MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("adaptive", "proposed"))
+#: The map threshold the paper evaluates at.
+THRESHOLD = 0.5
+#: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
+AREA_POSE_RATE_HZ = 50.0
+#: Attributes of a simulation result that may hold the true floor as a heightfield z(x, y).
+HEIGHTFIELD_ATTRIBUTES = ("heightfield", "floor_depth", "seabed")
+
+
+def floor_truth(sim):
+    """The true floor of a simulation as a heightfield z(x, y): an attribute of the result
+    named in :data:`HEIGHTFIELD_ATTRIBUTES` (a callable, or an object with ``sample``), else
+    the floor the simulator's tank casts its rays on (:func:`undertow.sim.simulate.build_tank`
+    of the scenario: ``Tank.floor_depth``, walls excluded), else the ground-truth cloud."""
+    for name in HEIGHTFIELD_ATTRIBUTES:
+        value = getattr(sim, name, None)
+        if callable(value):
+            return value
+        if value is not None and callable(getattr(value, "sample", None)):
+            return value.sample
+    scenario = getattr(sim, "scenario", None)
+    if scenario is not None:
+        from ..sim.simulate import build_tank
+
+        tank = build_tank(scenario)
+        if callable(getattr(tank, "floor_depth", None)):
+            return tank.floor_depth
+    return sim.floor_cloud
+
+
+def true_pose_trajectory(ground_truth, rate_hz: float = AREA_POSE_RATE_HZ) -> Trajectory:
+    """The ground truth's pose as a zero-covariance :class:`Trajectory` at about ``rate_hz``."""
+    t = ground_truth.t
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    step = max(1, int(round(1.0 / (rate_hz * dt))))
+    idx = np.unique(np.r_[np.arange(0, len(t), step), len(t) - 1])
+    x = np.zeros((len(idx), len(STATE_NAMES)))
+    x[:, :3] = ground_truth.position[idx]
+    x[:, 3:6] = np.unwrap(ground_truth.orientation[idx], axis=0)
+    P = np.zeros((len(idx), len(STATE_NAMES), len(STATE_NAMES)))
+    return Trajectory(t[idx], x, P, variant="ground truth")
+
+
+def surveyed_area(log) -> np.ndarray:
+    """(K, 2) x-y of every beam hit (DVL and sonar ranges) placed with the true pose."""
+    trajectory = true_pose_trajectory(log.ground_truth)
+    samples = build_samples(log, trajectory, free_resolution=10.0)
+    return samples.points[samples.label == 1, :2]
+
+
+def map_metrics(occupancy, truth, cloud, area) -> dict:
+    """C2C, cells and coverage (the paper's, against ``cloud``) and the surface metrics (against
+    ``truth``, over ``area``) of one map, plain numbers."""
+    out = evaluate_map(occupancy.points(THRESHOLD), cloud, resolution=occupancy.resolution)
+    surface = evaluate_surface(map_surface(occupancy, THRESHOLD), truth, area=area)
+    return to_plain({**out.to_dict(), **surface.to_dict()})
+
+
+def floor_relief(truth, area: np.ndarray, resolution: float) -> dict:
+    """How much the true floor varies over the surveyed area: the standard deviation of its
+    depth and its RMS slope |grad z| (central differences over one grid cell), at the surveyed
+    points."""
+    fn = truth if callable(truth) else surface_from_points(truth, cloud_spacing(truth)).at
+    x, y = area[:, 0], area[:, 1]
+    h = resolution / 2
+    z = np.asarray(fn(x, y), float)
+    gx = (np.asarray(fn(x + h, y), float) - np.asarray(fn(x - h, y), float)) / (2 * h)
+    gy = (np.asarray(fn(x, y + h), float) - np.asarray(fn(x, y - h), float)) / (2 * h)
+    slope = np.hypot(gx, gy)
+    return to_plain({
+        "depth_std_m": float(np.nanstd(z)) if np.isfinite(z).any() else None,
+        "rms_slope": float(np.sqrt(np.nanmean(slope**2))) if np.isfinite(slope).any() else None,
+    })  # fmt: skip
+
+
+def evaluate_runs(name: str, sim, trajectories: dict, bki_length_scale: float, art,
+                  area: np.ndarray | None = None) -> dict:  # fmt: skip
+    """Map ``sim``'s log with the four Table IV runs (trajectories by filter variant) and
+    evaluate each map over ``area`` (default: :func:`surveyed_area`); the maps go to
+    ``art.maps[(name, "method/variant")]``."""
+    log = sim.log
+    truth, cloud = floor_truth(sim), sim.floor_cloud
+    area = surveyed_area(log) if area is None else area
+    out = {}
+    for method, variant in MAP_RUNS:
+        cfg = MappingConfig(method=method, length_scale=bki_length_scale)
+        result = map_log(log, trajectories[variant], cfg)
+        key = f"{method}/{variant}"
+        art.maps[(name, key)] = result.map
+        out[key] = map_metrics(result.map, truth, cloud, area)
+    return out
+
+
+def map_scenario(name: str, seed: int, calibration, profile, bki_length_scale: float, art,
+                 trajectory_metrics) -> dict:  # fmt: skip
+    """One mapping scenario: simulate, localize (baseline, proposed) with the wave from its own
+    probe, map with the four Table IV runs and evaluate; also how rough its floor is."""
+    sim = simulate(load_scenario(name), seed=seed)
+    art.simulations[name] = sim
+    measured = estimate_waves(sim.log.wave_probe)
+    wave = "calm" if measured.calm else (measured.amplitude_m, measured.frequency_hz)
+    trajectories, localization = {}, {}
+    for variant in ("baseline", "proposed"):
+        traj = localize(sim.log, variant, profile=profile, wave=wave, calibration=calibration,
+                        dvl_scale_factor=1.0, extrapolate=True)  # fmt: skip
+        art.trajectories[(name, variant)] = trajectories[variant] = traj
+        localization[variant] = trajectory_metrics(traj, sim.log.ground_truth)
+    area = surveyed_area(sim.log)
+    mapping = evaluate_runs(name, sim, trajectories, bki_length_scale, art, area)
+    return {
+        "duration_s": float(sim.log.ground_truth.t[-1] - sim.log.ground_truth.t[0]),
+        "wave": {"amplitude_m": measured.amplitude_m, "frequency_hz": measured.frequency_hz},
+        "floor": floor_relief(floor_truth(sim), area, paper_resolution()),
+        "localization": localization,
+        "mapping": mapping,
+    }
+
+
+def paper_resolution() -> float:
+    from . import paper
+
+    return paper.GRID_RESOLUTION_M
