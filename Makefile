@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e ".[test,dask]"
+	$(BIN)/pip install -q -e ".[test,dask,view,export]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -16,12 +16,13 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/undertow demo --out results
 
+# both cores (pytest-xdist); tests of one xdist_group (the study) stay on one worker
 test: $(STAMP)
-	$(BIN)/pytest
+	$(BIN)/pytest -n 2 --dist loadgroup
 
 # the inner loop: everything but the tests marked slow (under a minute on 2 cores)
 test-fast: $(STAMP)
-	$(BIN)/pytest -m "not slow"
+	$(BIN)/pytest -n 2 --dist loadgroup -m "not slow"
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples

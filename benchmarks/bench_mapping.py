@@ -11,8 +11,23 @@ A ping is one DVL report (4 beams) plus one sonar range, 1.5-2 m above an undula
 with free samples every ``free_resolution`` along each beam. The rays come from a synthetic
 lawnmower survey built here (no simulator needed); ranges are exact ray/floor intersections.
 
+Multibeam (``per_ping.multibeam``): pings of a 256-beam fan (120 deg swath across track) at
+the same altitude over a seabed heightfield, each beam a hit plus free samples, built from the
+rays (no log) and integrated one call per ping; OctoMap inserts the same end points. Threads
+(``per_ping.threads``): the adaptive figures with numba limited to 1 and to 2 threads.
+
+Km-scale (``km_survey``): a lawnmower of 256-beam pings (>= 10^7 rays) over a 1 km x 1 km seabed
+heightfield 10 m below, mapped at 1 m (length scales and free spacing scaled with the cell),
+once in one worker process (one mapper, pings streamed in batches) and once tiled
+(:mod:`undertow.mapping.tiled`) on a LocalCluster of 2 single-threaded workers, each tile task
+generating the pings that reach its tile; wall time, peak RSS per worker, per-tile cost, the
+merge (reading the tile directory back as one map) and the extrapolation to 16 workers.
+
     .venv/bin/python benchmarks/bench_mapping.py [--pings 20000] [--survey-pings 100000]
                                                  [--survey-area 100] [--no-survey]
+                                                 [--km-rays 10000000] [--km-area 1000]
+                                                 [--km-tile 250] [--no-km]
+    .venv/bin/python benchmarks/bench_mapping.py --smoke      # small sizes, a minute
 """
 
 from __future__ import annotations
@@ -24,14 +39,17 @@ import resource
 import sys
 import time
 import tracemalloc
+from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # OctoMap on one core, like our kernels
 
 import numpy as np  # noqa: E402
 
 from undertow.log import Dvl, Log, Mounting, SonarRange  # noqa: E402
+from undertow.mapping.config import MappingConfig  # noqa: E402
 from undertow.mapping.mappers import make_mapper  # noqa: E402
 from undertow.mapping.samples import Samples, build_samples  # noqa: E402
+from undertow.mapping.tiled import Tiling  # noqa: E402
 from undertow.rotations import rpy_to_matrix  # noqa: E402
 from undertow.trajectory import Trajectory  # noqa: E402
 
@@ -205,12 +223,367 @@ def bench_survey(n_pings: int, area: float, batch: int = 10_000) -> dict:
     }  # fmt: skip
 
 
+# --- multibeam fans over a seabed heightfield ------------------------------------------------
+
+BEAMS, SWATH_DEG = 256, 120.0
+
+
+def seabed(x, y, depth, relief=1.0):
+    """A synthetic seabed (depth, m, z down): long swells, a 37 m ripple field and small bumps,
+    heights times ``relief`` (at most 2.65 m); slopes stay under 0.3 so the range fixed point
+    below contracts."""
+    return depth + relief * (
+        2.0 * np.sin(2 * np.pi * x / 230.0) * np.cos(2 * np.pi * y / 170.0)
+        + 0.5 * np.sin(2 * np.pi * (x + y) / 37.0)
+        + 0.15 * np.sin(2 * np.pi * x / 9.0) * np.cos(2 * np.pi * y / 7.0))  # fmt: skip
+
+
+def fan_geometry(area: float, altitude: float, n_pings: int) -> dict:
+    """A lawnmower of fans over area x area m: lines along x, spaced 0.7 of the flat swath."""
+    half = altitude * np.tan(np.radians(SWATH_DEG / 2))
+    n_lines = max(int(np.ceil(area / (1.4 * half))), 1)
+    return {"area": area, "altitude": altitude, "n_pings": n_pings, "n_lines": n_lines,
+            "per_line": int(np.ceil(n_pings / n_lines)), "spacing": area / n_lines,
+            "half_swath": half}  # fmt: skip
+
+
+def ping_variance(k, g: dict) -> np.ndarray:
+    """Pose variance per ping (m^2): drift growing along each line, a small z variance."""
+    u = (k % g["per_line"]) / g["per_line"]
+    var = np.empty((k.size, 3))
+    var[:, 0] = var[:, 1] = 1e-4 + 1e-3 * u
+    var[:, 2] = 1e-4 + 1e-4 * (0.5 + 0.5 * np.sin(0.7 * k))
+    return var
+
+
+def _fan(k: np.ndarray, g: dict):
+    """Origins (P, 3) and unit directions (P, B, 3) of pings k: the fan across track, heading
+    along the line, a small roll/pitch wobble."""
+    line, j = k // g["per_line"], k % g["per_line"]
+    u = (j + 0.5) / g["per_line"] * g["area"]
+    o = np.stack([np.where(line % 2 == 0, u, g["area"] - u), (line + 0.5) * g["spacing"],
+                  np.full(k.size, 5.0)], axis=1)  # fmt: skip
+    rpy = np.stack([0.03 * np.sin(0.31 * k), 0.02 * np.cos(0.23 * k),
+                    np.where(line % 2 == 0, 0.0, np.pi)], axis=1)  # fmt: skip
+    a = np.radians(np.linspace(-SWATH_DEG / 2, SWATH_DEG / 2, BEAMS))
+    beam = np.stack([np.zeros(BEAMS), np.sin(a), np.cos(a)], axis=1)  # z down
+    return o, np.einsum("nij,bj->nbi", rpy_to_matrix(rpy), beam)
+
+
+def _seabed_params(g: dict):
+    """(depth, relief, largest range factor): the seabed is within 2.65 relief m of depth."""
+    depth, relief = g["altitude"] + 5.0, min(1.0, 0.25 * g["altitude"])  # ROV: 0.44 m at most
+    return depth, relief, (g["altitude"] + 2.65 * relief) / g["altitude"]
+
+
+def _ranges(o: np.ndarray, v: np.ndarray, g: dict) -> np.ndarray:
+    """Exact ray/seabed ranges (N,) of rays o + r v (N, 3): the fixed point
+    r = (seabed(o + r v) - o_z) / v_z, contracting by < 0.5 (mm after 10 steps)."""
+    depth, relief, _ = _seabed_params(g)
+    r = np.full(len(v), g["altitude"]) / v[:, 2]
+    for _ in range(10):
+        p = o + r[:, None] * v
+        r = (seabed(p[:, 0], p[:, 1], depth, relief) - o[:, 2]) / v[:, 2]
+    if not np.all(r > 0):
+        raise RuntimeError("the synthetic seabed rose above the sonar")
+    return r
+
+
+def fan_rays(k: np.ndarray, g: dict):
+    """Origins (P, 3), unit directions (P, B, 3), exact ranges (P, B) of pings k."""
+    o, v = _fan(k, g)
+    r = _ranges(np.repeat(o, BEAMS, axis=0), v.reshape(-1, 3), g)
+    return o, v, r.reshape(v.shape[:2])
+
+
+def _meets(origin, end, box) -> np.ndarray:
+    """Rays whose segment's x-y bounding box meets ``box`` (x0, y0, x1, y1)."""
+    lo, hi = np.minimum(origin[:, :2], end[:, :2]), np.maximum(origin[:, :2], end[:, :2])
+    return np.all((hi >= box[:2]) & (lo <= box[2:]), axis=1)
+
+
+def fan_samples(k: np.ndarray, g: dict, f: float, sigma0: float = 0.9, box=None) -> Samples:
+    """Training samples of pings k (one hit per beam, free samples every f from the origin),
+    through the same numba expansion as ``samples_from_config``; with ``box`` (x0, y0, x1, y1)
+    only the rays whose segment's x-y bounding box meets it (found first with the longest
+    range the seabed allows, then with the exact one)."""
+    from undertow.mapping.kernels import _expand_rays
+
+    o, v = _fan(k, g)
+    origin, v = np.repeat(o, BEAMS, axis=0), v.reshape(-1, 3)
+    var = np.repeat(ping_variance(k, g), BEAMS, axis=0)
+    if box is not None:
+        far = origin + (_seabed_params(g)[2] * g["altitude"] / v[:, 2])[:, None] * v
+        keep = _meets(origin, far, box)
+        origin, v, var = origin[keep], v[keep], var[keep]
+    r = _ranges(origin, v, g)
+    if box is not None:
+        keep = _meets(origin, origin + r[:, None] * v, box)
+        origin, v, r, var = origin[keep], v[keep], r[keep], var[keep]
+    n = r.size
+    n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
+    arrays = _expand_rays(np.ascontiguousarray(origin), np.ascontiguousarray(v), r,
+                          np.ascontiguousarray(var), np.full(n, sigma0), np.zeros(n, np.int8),
+                          n_free, float(f))  # fmt: skip
+    return Samples(*arrays)
+
+
+def bench_multibeam(n_pings: int = 2000, altitude: float = ALTITUDE, repeats: int = 3) -> dict:
+    """One 256-beam fan per call (build the samples from the rays + integrate) vs OctoMap
+    inserting the same end points, res 0.1 m, free samples every 0.1 m."""
+    g = fan_geometry(30.0, altitude, n_pings)
+    k = np.arange(n_pings)
+    fan_samples(k[:1], g, 0.1)  # compile / cache load
+    _mapper("adaptive").integrate(fan_samples(k[:1], g, 0.1))
+    o, v, r = fan_rays(k, g)
+    ms = ms_batch = float("inf")
+    for _ in range(repeats):
+        mapper = _mapper("adaptive")
+        t0 = time.perf_counter()
+        for i in range(n_pings):
+            mapper.integrate(fan_samples(k[i : i + 1], g, 0.1))
+        ms = min(ms, (time.perf_counter() - t0) * 1e3 / n_pings)
+        mapper = _mapper("adaptive")
+        t0 = time.perf_counter()
+        mapper.integrate(fan_samples(k, g, 0.1))
+        ms_batch = min(ms_batch, (time.perf_counter() - t0) * 1e3 / n_pings)
+    samples = len(fan_samples(k, g, 0.1)) / n_pings
+    out = {"beams": BEAMS, "swath_deg": SWATH_DEG, "altitude_m": altitude, "pings": n_pings,
+           "samples_per_ping": samples, "adaptive_build_plus_integrate_ms_per_ping": ms,
+           "adaptive_whole_set_ms_per_ping": ms_batch}  # fmt: skip
+    try:
+        import octomap
+    except ImportError:
+        return {**out, "octomap": {"skipped": "pip install octomap-python"}}
+    ends = o[:, None, :] + r[..., None] * v
+    octo = float("inf")
+    for _ in range(repeats):
+        tree = octomap.OcTree(0.1)
+        t0 = time.perf_counter()
+        for i in range(n_pings):
+            tree.insertPointCloud(ends[i], o[i])
+        octo = min(octo, (time.perf_counter() - t0) * 1e3 / n_pings)
+    return {**out, "octomap_insert_ms_per_ping": octo, "adaptive_over_octomap": ms / octo,
+            "target_ms": 2.0, "met": ms < 2.0}  # fmt: skip
+
+
+def bench_threads(n_pings: int, area: float, repeats: int = 3) -> dict:
+    """The per-ping adaptive figure (build + integrate, whole log) with numba limited to 1 and
+    2 threads (the scatter kernel is serial: both should match), and OctoMap's, same run."""
+    import numba
+
+    log, traj, rays = survey_batch(0, n_pings, n_pings, area)
+    out = {}
+    for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+        numba.set_num_threads(threads)
+        best = float("inf")
+        for _ in range(repeats):
+            mapper = _mapper("adaptive")
+            t0 = time.perf_counter()
+            mapper.integrate(build_samples(log, traj, free_resolution=0.1))
+            best = min(best, (time.perf_counter() - t0) * 1e3 / n_pings)
+        out[f"adaptive_ms_per_ping_{threads}_thread"] = best
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    octo = _bench_octomap(rays, n_pings, repeats).get("insert_ms_per_ping")
+    out["octomap_insert_ms_per_ping"] = octo
+    out["octomap_threads"] = "1 (the octomap-python wheel is built without OpenMP)"
+    if octo:
+        best = min(v for k, v in out.items() if k.startswith("adaptive_ms"))
+        out["octomap_over_adaptive_best"] = octo / best
+        out["target_2x_met"] = octo / best >= 2.0
+    return out
+
+
+# --- km-scale survey: one worker vs tiles on two ----------------------------------------------
+
+KM_RES, KM_ALTITUDE, KM_BATCH_PINGS = 1.0, 10.0, 1000
+
+
+def km_config(bounds) -> MappingConfig:
+    """The adaptive BKI at 1 m: the paper's length scales and free spacing scaled by 10."""
+    return MappingConfig(resolution=KM_RES, l_min=(1.0, 1.0, 0.5), l_max=(1.8, 1.8, 0.8),
+                         free_resolution=KM_RES,
+                         variance_bounds=tuple(tuple(map(float, b)) for b in bounds))  # fmt: skip
+
+
+def tile_pings(tile, g: dict, tiling: Tiling) -> np.ndarray:
+    """Pings whose fan can reach the tile (the ping within a halo + 2 m of roll/pitch of the
+    tile on x, its line's swath + margin overlapping the tile on y) and the tile's box grown
+    by that reach (x0, y0, x1, y1), m."""
+    k = np.arange(g["n_pings"])
+    size, reach = tiling.size_m, tiling.halo + 2 * tiling.resolution + 2.0
+    x0, y0 = tile[0] * size - reach, tile[1] * size - reach
+    x1, y1 = x0 + size + 2 * reach, y0 + size + 2 * reach
+    line, j = k // g["per_line"], k % g["per_line"]
+    u = (j + 0.5) / g["per_line"] * g["area"]
+    x = np.where(line % 2 == 0, u, g["area"] - u)
+    y, half = (line + 0.5) * g["spacing"], 1.6 * g["half_swath"]  # deeper seabed: wider fan
+    keep = (x >= x0) & (x <= x1) & (y + half >= y0) & (y - half <= y1)
+    return k[keep], np.array([x0, y0, x1, y1])
+
+
+def km_tile_task(tile, g: dict, tiling: Tiling | None, config: MappingConfig):
+    """One Dask task: generate, in batches, the rays of the pings that reach ``tile`` whose
+    segment meets the tile grown by the halo, integrate all their samples (those outside the
+    halo only touch cells the tile does not own, which it drops), return the cells it owns and
+    the costs (``tiling`` None: the whole survey in one mapper, every cell kept)."""
+    from undertow.mapping.mappers import mapper_from_config
+    from undertow.mapping.tiled import TileResult
+
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    mapper = mapper_from_config(config)
+    gen = integ = 0.0
+    if tiling is None:
+        pings, box = np.arange(g["n_pings"]), None
+    else:
+        pings, box = tile_pings(tile, g, tiling)
+    for a in range(0, pings.size, KM_BATCH_PINGS):
+        t1 = time.perf_counter()
+        samples = fan_samples(pings[a : a + KM_BATCH_PINGS], g, config.free_resolution, box=box)
+        t2 = time.perf_counter()
+        mapper.integrate(samples)
+        gen, integ = gen + t2 - t1, integ + time.perf_counter() - t2
+    cells, alpha, beta = mapper.grid.cells()
+    if tiling is not None:
+        own = np.all(tiling.tiles_of_cells(cells) == np.asarray(tile), axis=1)
+        cells, alpha, beta = cells[own], alpha[own], beta[own]
+    result = TileResult(tile, cells, alpha, beta, mapper.n_samples, time.perf_counter() - t0,
+                        mapper.grid.nbytes)  # fmt: skip
+    rss_mib = _peak_rss_mib()
+    stats = {"pings": int(pings.size), "samples": mapper.n_samples, "generate_s": gen,
+             "integrate_s": integ, "total_s": result.seconds, "grid_bytes": mapper.grid.nbytes,
+             "cpu_s": time.process_time() - cpu0, "worker_pid": os.getpid(),
+             "worker_ru_maxrss_mib": rss_mib}  # fmt: skip
+    return result, stats
+
+
+def _peak_rss_mib() -> float:
+    """This process's peak resident memory (VmHWM; unlike ru_maxrss it does not carry the
+    parent's peak across fork + exec), MiB."""
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+def lpt_makespan(costs, workers: int) -> float:
+    """Wall time of running tasks of ``costs`` on ``workers`` (longest first, each to the
+    least-loaded worker: Graham's LPT rule, within 4/3 of the optimum)."""
+    load = np.zeros(workers)
+    for c in sorted(costs, reverse=True):
+        load[np.argmin(load)] += c
+    return float(load.max())
+
+
+def km_tiles(g: dict, tiling: Tiling) -> list:
+    """Every tile the survey's rays can reach (the fans stick out of the area at its edges)."""
+    reach = 1.6 * g["half_swath"] + tiling.halo + 2 * tiling.resolution + 2.0
+    lo, hi = -reach, g["area"] + reach
+    first, last = int(np.floor(lo / tiling.size_m)), int(np.floor(hi / tiling.size_m))
+    return [(i, j) for i in range(first, last + 1) for j in range(first, last + 1)]
+
+
+def _run_km(g: dict, tiling: Tiling | None, config, workers: int, tile_dir) -> dict:
+    """All tiles of ``tiling`` the survey reaches (None: one task, the whole survey) on a
+    LocalCluster of ``workers`` single-threaded processes."""
+    from undertow.mapping.tiled import run_tiles, write_tile
+
+    tiles = [(0, 0)] if tiling is None else km_tiles(g, tiling)
+    jobs = {tile: (g, tiling, config) for tile in tiles}
+    per_tile, sums = {}, np.zeros(3)
+
+    def collect(item) -> None:
+        result, stats = item
+        per_tile[f"{result.tile[0]}_{result.tile[1]}"] = stats
+        sums[:] += (len(result.cells), result.alpha_mass.sum(), result.beta_mass.sum())
+        if tile_dir is not None:
+            write_tile(tile_dir, result)
+
+    run = run_tiles(km_tile_task, jobs, collect, scheduler="local", n_workers=workers)
+    if run.failures:
+        raise RuntimeError(f"km survey tiles failed: {run.failures}")
+    seconds = [t["total_s"] for t in per_tile.values()]
+    cpu: dict = {}
+    for t in per_tile.values():
+        cpu[t["worker_pid"]] = cpu.get(t["worker_pid"], 0.0) + t["cpu_s"]
+    return {"workers": run.workers, "tiles": len(jobs), "wall_s": run.wall_s,
+            "cpu_s_per_worker": sorted(cpu.values()),
+            "sum_tile_s": float(np.sum(seconds)), "max_tile_s": float(np.max(seconds)),
+            "peak_worker_rss_mib": max(t["worker_ru_maxrss_mib"] for t in per_tile.values()),
+            "max_tile_grid_bytes": max(t["grid_bytes"] for t in per_tile.values()),
+            "samples": int(sum(t["samples"] for t in per_tile.values())),
+            "generate_s": float(sum(t["generate_s"] for t in per_tile.values())),
+            "integrate_s": float(sum(t["integrate_s"] for t in per_tile.values())),
+            "cells": int(sums[0]), "alpha_mass": sums[1], "beta_mass": sums[2],
+            "per_tile": per_tile if len(per_tile) <= 64 else "omitted"}  # fmt: skip
+
+
+def bench_km(rays: int = 10_000_000, area: float = 1000.0, tile_m: float = 250.0) -> dict:
+    """Single worker (one tile covering the survey) vs tiles of ``tile_m`` on 2 workers."""
+    import tempfile
+
+    from undertow.mapping.tiled import read_tiles, write_index
+
+    g = fan_geometry(area, KM_ALTITUDE, int(np.ceil(rays / BEAMS)))
+    var = ping_variance(np.arange(g["n_pings"]), g)
+    config = km_config((var.min(axis=0), var.max(axis=0)))  # session bounds, before tiling
+    single = _run_km(g, None, config, 1, None)  # one mapper over the whole survey
+    tiling = Tiling.for_config(config, tile_m)
+    with tempfile.TemporaryDirectory() as tmp:
+        tiled = _run_km(g, tiling, config, 2, Path(tmp))
+        write_index(tmp, config, tiling, {})
+        t0 = time.perf_counter()
+        merged = read_tiles(tmp)
+        merge_s = time.perf_counter() - t0
+        merged_cells = len(merged)
+        del merged
+    cpu = (
+        [t["cpu_s"] for t in tiled["per_tile"].values()]
+        if isinstance(tiled["per_tile"], dict)
+        else [tiled["sum_tile_s"] / tiled["tiles"]] * tiled["tiles"]
+    )
+    startup = max(single["wall_s"] - single["sum_tile_s"], 0.0)
+    t16 = lpt_makespan(cpu, 16)
+    return {
+        "rays": g["n_pings"] * BEAMS, "pings": g["n_pings"], "area_m": [area, area],
+        "lines": g["n_lines"], "altitude_m": KM_ALTITUDE, "resolution_m": KM_RES,
+        "tile_m": tiling.size_m, "halo_m": tiling.halo,
+        "single_worker": single, "tiled_2_workers": tiled,
+        "speedup": single["wall_s"] / tiled["wall_s"], "speedup_target": 1.6,
+        "speedup_cpu_bound": sum(single["cpu_s_per_worker"]) / max(tiled["cpu_s_per_worker"]),
+        "load_average_after": os.getloadavg(),
+        "same_map": {"cells": [single["cells"], tiled["cells"], merged_cells],
+                     "alpha_mass_rel_diff": abs(tiled["alpha_mass"] / single["alpha_mass"] - 1),
+                     "beta_mass_rel_diff": abs(tiled["beta_mass"] / single["beta_mass"] - 1)},
+        "merge_read_back_s": merge_s,
+        "extrapolation_16_workers": {
+            "formula": "longest-processing-time schedule of the measured per-tile CPU seconds "
+            "on 16 workers + cluster start (single run: wall - task) + merge (read back)",
+            "tile_cpu_s_sum": float(np.sum(cpu)), "tile_cpu_s_max": float(np.max(cpu)),
+            "tile_work_s": t16, "startup_s": startup, "merge_s": merge_s,
+            "wall_s": t16 + startup + merge_s,
+            "single_cpu_s": single["cpu_s_per_worker"][0],
+        },
+    }  # fmt: skip
+
+
 def main(pings: int = 20_000, area: float = 30.0, survey_pings: int = 1_000_000,
-         survey_area: float = 100.0, survey: bool = True) -> dict:  # fmt: skip
+         survey_area: float = 100.0, survey: bool = True, km_rays: int = 10_000_000,
+         km_area: float = 1000.0, km_tile: float = 250.0, km: bool = True,
+         multibeam_pings: int = 2000) -> dict:  # fmt: skip
     result = {"per_ping": bench_per_ping(pings, area), "cpu_count": os.cpu_count()}
+    result["per_ping"]["multibeam"] = bench_multibeam(multibeam_pings)
+    result["per_ping"]["threads"] = bench_threads(pings, area)
     if survey:
         result["survey"] = bench_survey(survey_pings, survey_area)
+    if km:
+        result["km_survey"] = bench_km(km_rays, km_area, km_tile)
     return result
+
+
+SMOKE = {"pings": 2000, "survey_pings": 20_000, "km_rays": 300_000, "km_area": 150.0,
+         "km_tile": 50.0, "multibeam_pings": 200}  # fmt: skip
 
 
 if __name__ == "__main__":
@@ -220,7 +593,16 @@ if __name__ == "__main__":
     ap.add_argument("--survey-pings", type=int, default=1_000_000)
     ap.add_argument("--survey-area", type=float, default=100.0)
     ap.add_argument("--no-survey", action="store_true")
-    a = ap.parse_args()
-    res = main(a.pings, a.area, a.survey_pings, a.survey_area, not a.no_survey)
+    ap.add_argument("--km-rays", type=int, default=10_000_000)
+    ap.add_argument("--km-area", type=float, default=1000.0)
+    ap.add_argument("--km-tile", type=float, default=250.0)
+    ap.add_argument("--no-km", action="store_true")
+    ap.add_argument("--multibeam-pings", type=int, default=2000)
+    ap.add_argument("--smoke", action="store_true", help="small sizes (about a minute)")
+    a = vars(ap.parse_args())
+    if a.pop("smoke"):
+        a.update(SMOKE)
+    a["survey"], a["km"] = not a.pop("no_survey"), not a.pop("no_km")
+    res = main(**a)
     json.dump(res, sys.stdout, indent=2)
     print()

@@ -241,7 +241,7 @@ def test_smoothing_a_decimated_run_is_refused_before_filtering():
 def test_calibration_applies_only_what_was_estimated_and_says_so():
     from undertow.estimation import LocalizerConfig
     from undertow.estimation.calibration import Calibration
-    from undertow.estimation.localizer import _calibration_fields
+    from undertow.estimation.localizer import calibration_fields
 
     cal = Calibration(
         dr_bias_drift_rad_s=(0.0, 0.0, 1e-4),
@@ -250,10 +250,10 @@ def test_calibration_applies_only_what_was_estimated_and_says_so():
         left_at_default={"gyro_bias_rad_s": "the log has no imu stream"},
     )
     with pytest.warns(RuntimeWarning, match=r"gyro_bias_rad_s \(the log has no imu"):
-        fields = _calibration_fields(cal, LocalizerConfig(variant="proposed"))
+        fields = calibration_fields(cal, LocalizerConfig(variant="proposed"))
     assert fields == {"dvl_scale_factor": 1.02, "dr_bias_drift_rad_s": (0.0, 0.0, 1e-4)}
     # baseline uses no bias parameter: nothing to say
-    assert _calibration_fields(cal, LocalizerConfig(variant="baseline")) == {
+    assert calibration_fields(cal, LocalizerConfig(variant="baseline")) == {
         "dvl_scale_factor": 1.02
     }
 

@@ -65,7 +65,7 @@ class _Stream:
                 f"({t[i]:.6f} -> {t[i + 1]:.6f})"
             )
         n = t.size
-        for name, tail in self._shapes.items():
+        for name, tail in self._tails().items():
             value = getattr(self, name)
             if value is None:
                 continue
@@ -76,6 +76,11 @@ class _Stream:
                     "(one row per time)"
                 )
             object.__setattr__(self, name, arr)
+
+    def _tails(self) -> dict[str, tuple]:
+        """Expected shape after the time axis, per array field (``_shapes`` unless a stream
+        sizes a dimension from its data)."""
+        return self._shapes
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -167,6 +172,18 @@ class Dvl(_Stream):
     def invalid_count(self) -> int:
         finite = np.all(np.isfinite(self.velocity), axis=1)
         return int(np.sum(~(self.valid & finite)))
+
+    def with_geometry(self, geometry: DvlGeometry) -> Dvl:
+        """A copy whose beam vectors are ``geometry.units()`` in every row (for logs whose
+        messages carry none, e.g. a Nortek or Teledyne head recorded through A50-style
+        messages); DataError when the beam counts differ."""
+        units = geometry.units()
+        if units.shape != self.beam_unit.shape[1:]:
+            raise DataError(
+                f"dvl: geometry {geometry.name} has {geometry.beams} beams, the stream "
+                f"{self.beam_unit.shape[1]}"
+            )
+        return dataclasses.replace(self, beam_unit=np.broadcast_to(units, self.beam_unit.shape))
 
     @classmethod
     def from_velocity(
@@ -261,6 +278,72 @@ class SonarRange(_Stream):
     def invalid_count(self) -> int:
         r = self.range
         return int(np.sum(~(np.isfinite(r) & (r >= self.min_range) & (r <= self.max_range))))
+
+
+@dataclass(frozen=True, eq=False)
+class Multibeam(_Stream):
+    """Multibeam echosounder: per ping, B beam detections in the sensor frame.
+
+    ``points`` (N, B, 3) m: the detection of beam j of ping n in the sensor frame (x forward
+    along track, y starboard, z down: the acoustic axis at nadir), NaN where the beam has no
+    detection; every ping has the same B (pings with fewer detections are padded with NaN).
+    ``intensity`` (N, B) backscatter (NaN if absent). Derived: slant range r = |p|, unit
+    u = p / r, across-track angle theta = atan2(p_y, p_z) (0 at nadir, positive to starboard).
+    ``min_range``/``max_range``: the sensor's limits (m).
+    """
+
+    kind: ClassVar[str] = "multibeam"
+    _shapes: ClassVar[dict[str, tuple]] = {"points": (None, 3), "intensity": (None,)}
+    t: np.ndarray
+    points: np.ndarray
+    intensity: np.ndarray | None = None
+    min_range: float = 0.1
+    max_range: float = 200.0
+
+    def __post_init__(self) -> None:
+        pts = _as_array(self.points, np.float64, "points", self.kind)
+        if pts.ndim == 2 and pts.shape[0] == 0:
+            pts = pts.reshape(0, 0, 3)
+        if pts.ndim != 3 or pts.shape[2] != 3:
+            raise DataError(f"{self.kind}.points: shape {pts.shape}, expected (N, B, 3)")
+        object.__setattr__(self, "points", pts)
+        super().__post_init__()
+
+    def _tails(self) -> dict[str, tuple]:
+        beams = self.points.shape[1]  # the beam count of this log
+        return {"points": (beams, 3), "intensity": (beams,)}
+
+    @property
+    def beams(self) -> int:
+        """B, the beams per ping."""
+        return int(self.points.shape[1])
+
+    @property
+    def range(self) -> np.ndarray:
+        """Slant range r = |p| (N, B), NaN without a detection."""
+        return np.linalg.norm(self.points, axis=2)
+
+    @property
+    def beam_unit(self) -> np.ndarray:
+        """Unit vectors u = p / |p| (N, B, 3) in the sensor frame, NaN without a detection."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.points / self.range[..., None]
+
+    @property
+    def across_angle(self) -> np.ndarray:
+        """Across-track beam angle theta = atan2(p_y, p_z) (rad, N x B)."""
+        return np.arctan2(self.points[..., 1], self.points[..., 2])
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(N, B): the beam has a finite detection inside [min_range, max_range]."""
+        r = self.range
+        with np.errstate(invalid="ignore"):
+            return np.isfinite(r) & (r >= self.min_range) & (r <= self.max_range)
+
+    def invalid_count(self) -> int:
+        """Pings without a single valid detection."""
+        return int(np.sum(~self.valid.any(axis=1))) if self.beams else len(self)
 
 
 @dataclass(frozen=True, eq=False)
@@ -361,6 +444,10 @@ class GroundTruth(_Stream):
         return world_to_body(rpy, vel)
 
 
+#: Azimuths (deg, about +z from +x toward +y) of the A50's beams for protocol ids 0..3.
+A50_AZIMUTHS_DEG = (135.0, -135.0, -45.0, 45.0)
+
+
 def a50_beam_units(tilt_deg: float = 22.5) -> np.ndarray:
     """Unit vectors of the A50's four beams in the DVL frame, rows for protocol ids 0..3.
 
@@ -368,11 +455,110 @@ def a50_beam_units(tilt_deg: float = 22.5) -> np.ndarray:
     about +z from +x (Water Linked DVL documentation, "Axes": x forward, y right, z down; protocol
     ids 0..3 are transducers 1..4): horizontal part 0.383, vertical 0.924 for the 22.5 deg tilt.
     """
+    return dvl_beam_units(tilt_deg, A50_AZIMUTHS_DEG)
+
+
+def dvl_beam_units(tilt_deg: float, azimuths_deg) -> np.ndarray:
+    """Unit vectors (B, 3) of a Janus DVL's beams in the DVL frame (x forward, y right, z down):
+
+        b_i = (sin(tilt) cos(az_i), sin(tilt) sin(az_i), cos(tilt)),
+
+    tilt the angle of every beam from the +z axis, az_i its azimuth about +z from +x toward +y.
+    """
     tilt = np.deg2rad(tilt_deg)
-    az = np.deg2rad([135.0, -135.0, -45.0, 45.0])
+    az = np.deg2rad(np.asarray(azimuths_deg, dtype=np.float64))
+    n = az.size
     return np.stack(
-        [np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.full(4, np.cos(tilt))], axis=1
+        [np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.full(n, np.cos(tilt))], axis=1
     )
+
+
+@dataclass(frozen=True)
+class DvlGeometry:
+    """A DVL's beam geometry: ``tilt_deg`` of every beam from the DVL's +z axis, one azimuth
+    per beam (deg about +z from +x toward +y, in the order of the sensor's beam ids) and the
+    one-way beam width (deg, full -3 dB angle; None if not given). The beam
+    vectors are :func:`dvl_beam_units` (tilt, azimuths)."""
+
+    name: str
+    tilt_deg: float
+    azimuths_deg: tuple[float, ...]
+    beam_width_deg: float | None = None
+
+    def __post_init__(self) -> None:
+        from .errors import ConfigError
+
+        az = tuple(float(a) for a in self.azimuths_deg)
+        object.__setattr__(self, "azimuths_deg", az)
+        if not 0.0 < float(self.tilt_deg) < 90.0 or not math.isfinite(float(self.tilt_deg)):
+            raise ConfigError(f"dvl geometry {self.name}: tilt_deg {self.tilt_deg} not in (0, 90)")
+        if len(az) < 3 or not all(math.isfinite(a) for a in az):
+            raise ConfigError(
+                f"dvl geometry {self.name}: need at least 3 finite beam azimuths, got {list(az)}"
+            )
+
+    @property
+    def beams(self) -> int:
+        return len(self.azimuths_deg)
+
+    def units(self) -> np.ndarray:
+        """The beam unit vectors (B, 3), rows in beam-id order."""
+        return dvl_beam_units(self.tilt_deg, self.azimuths_deg)
+
+    def to_dict(self) -> dict:
+        out = {
+            "name": self.name,
+            "tilt_deg": float(self.tilt_deg),
+            "azimuths_deg": [float(a) for a in self.azimuths_deg],
+        }
+        if self.beam_width_deg is not None:
+            out["beam_width_deg"] = float(self.beam_width_deg)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> DvlGeometry:
+        """From :meth:`to_dict`'s fields; a missing or malformed one raises ConfigError."""
+        from .errors import ConfigError
+
+        try:
+            width = data.get("beam_width_deg")
+            return cls(
+                name=str(data.get("name", "custom")),
+                tilt_deg=float(data["tilt_deg"]),
+                azimuths_deg=tuple(float(a) for a in data["azimuths_deg"]),
+                beam_width_deg=None if width is None else float(width),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ConfigError(f"dvl_geometry: malformed ({type(exc).__name__}: {exc})") from None
+
+
+#: DVL presets (manufacturer datasheets; all four-beam Janus heads):
+#:
+#: - ``a50``: Water Linked DVL A50 datasheet and documentation ("Axes"): 4 beams at 22.5 deg
+#:   from the vertical, transducers 1..4 at azimuths +135, -135, -45, +45 deg from forward.
+#: - ``dvl1000``: Nortek DVL1000 datasheet: 4 beams at 25 deg; Nortek's X-configuration head
+#:   puts the beams 45 deg off the instrument's x axis (azimuths +45, -45, -135, +135 deg here,
+#:   beams 1..4).
+#: - ``pathfinder``: Teledyne RDI Pathfinder DVL datasheet: 4 beams at 30 deg, Janus; beam
+#:   numbering of Teledyne RDI's "ADCP Coordinate Transformation" (P/N 951-6079-00) mounted
+#:   beam 3 forward: beam 1 to starboard (+90 deg), 2 to port (-90), 3 forward (0), 4 aft (180).
+#:
+#: Beam widths are left None (not modelled): the ray caster casts one ray per beam axis.
+DVL_PRESETS: dict[str, DvlGeometry] = {
+    "a50": DvlGeometry("a50", 22.5, A50_AZIMUTHS_DEG),
+    "dvl1000": DvlGeometry("dvl1000", 25.0, (45.0, -45.0, -135.0, 135.0)),
+    "pathfinder": DvlGeometry("pathfinder", 30.0, (90.0, -90.0, 0.0, 180.0)),
+}
+
+
+def dvl_preset(name: str) -> DvlGeometry:
+    """The preset geometry ``name`` (:data:`DVL_PRESETS`); unknown names raise ConfigError."""
+    from .errors import ConfigError
+
+    try:
+        return DVL_PRESETS[name]
+    except KeyError:
+        raise ConfigError(f"dvl model {name!r}: unknown (use {', '.join(DVL_PRESETS)})") from None
 
 
 @dataclass(frozen=True)
@@ -398,18 +584,25 @@ def _bluerov2_sonar() -> SensorMount:
     return SensorMount((0.164, 0.106, 0.306), (0.0, 0.0, 0.0))
 
 
+def _bluerov2_multibeam() -> SensorMount:
+    return SensorMount((0.25, 0.0, 0.3), (0.0, 0.0, 0.0))
+
+
 @dataclass(frozen=True)
 class Mounting:
     """Sensor mounting on the body (defaults: a public BlueROV2 URDF of the paper's lab: DVL at
     (0.164, 0.004, 0.284) m turned 0.05 rad about z, Ping sonar at (0.164, 0.106, 0.306) m).
 
-    The sonar frame's +z is its acoustic axis (looking down when the rotation is zero).
+    The sonar frame's +z is its acoustic axis (looking down when the rotation is zero). The
+    multibeam (a head under the bow at (0.25, 0, 0.3) m, assumed) has x along track, y
+    starboard, z down: its swath lies in the body's y-z plane when the rotation is zero.
     """
 
     imu: SensorMount = field(default_factory=SensorMount)
     dvl: SensorMount = field(default_factory=_bluerov2_dvl)
     sonar: SensorMount = field(default_factory=_bluerov2_sonar)
     barometer: SensorMount = field(default_factory=SensorMount)
+    multibeam: SensorMount = field(default_factory=_bluerov2_multibeam)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -444,7 +637,16 @@ class Mounting:
         return Mounting(**{k: SensorMount(**v) for k, v in mounts.items()})
 
 
-STREAM_NAMES = ("imu", "dvl", "dead_reckoning", "pressure", "sonar", "wave_probe", "ground_truth")
+STREAM_NAMES = (
+    "imu",
+    "dvl",
+    "dead_reckoning",
+    "pressure",
+    "sonar",
+    "wave_probe",
+    "ground_truth",
+    "multibeam",
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -465,6 +667,7 @@ class Log:
     mounting: Mounting = field(default_factory=Mounting)
     source: str = ""
     metadata: dict = field(default_factory=dict)
+    multibeam: Multibeam | None = None
 
     def streams(self) -> dict[str, _Stream]:
         """The streams present, by name, in :data:`STREAM_NAMES` order."""

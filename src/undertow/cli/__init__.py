@@ -4,7 +4,7 @@ Known user errors (UndertowError) become one line on stderr and exit code 1; any
 a bug and keeps its traceback. Commands live in one module per stage and register on import.
 """
 
-from . import data, localization, mapping, study, waves  # noqa: F401  (registers the commands)
+from . import data, export, live, localization, mapping, serve, study, waves  # noqa: F401  (registers)
 from ._app import app
 
 

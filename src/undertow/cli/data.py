@@ -119,4 +119,4 @@ def simulate(
             on_start=lambda label: progress.add_task(label, total=None),
         )
     if not quiet:
-        err.print(f"wrote {out_dir}/{', '.join(RUN_FILES)}")
+        err.print(f"wrote {out_dir}/{', '.join(RUN_FILES)}", soft_wrap=True, highlight=False)

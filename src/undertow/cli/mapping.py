@@ -46,6 +46,22 @@ def map_command(
             "updates) share one normalization; default: min and max over this log's samples."
         ),
     ] = None,
+    tiles: Annotated[
+        float | None,
+        typer.Option(
+            metavar="SIZE_M",
+            help="Map in square x-y tiles of SIZE_M metres, each an independent Dask task "
+            "(halo of the kernel support; the merged map equals the untiled one); the tiles "
+            "are also written to OUT/tiles.",
+        ),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            help="With --tiles: local (a cluster of worker processes, default) | threads | sync "
+            "| tcp://host:8786 (a running Dask scheduler)."
+        ),
+    ] = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
     overwrite: OverwriteOption = False,
@@ -67,14 +83,17 @@ def map_command(
     with _progress(quiet) as progress:
         progress.add_task(f"mapping ({method})" if method else "mapping", total=None)
         result = map_file(log_path, trajectory, config, topics=topics, prior=prior,
-                          out_dir=out_dir, overwrite=overwrite, **given)  # fmt: skip
+                          out_dir=out_dir, overwrite=overwrite, tiles=tiles,
+                          scheduler=scheduler, **given)  # fmt: skip
     _print_warnings(result.warnings)
     if not quiet:
         normalization = result.metadata["mapper"].get("normalization")
         how = f", {normalization} normalization" if normalization else ""
+        tiled = result.metadata.get("tiling")
+        where = f", tiles/ ({tiled['tiles']} tiles on {tiled['scheduler']})" if tiled else ""
         err.print(
             f"wrote {out_dir}/map.npz, map.ply ({result.metadata['occupied_cells']} occupied "
-            f"cells{how}), config.yaml"
+            f"cells{how}), config.yaml{where}"
         )
 
 

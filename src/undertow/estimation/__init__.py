@@ -5,6 +5,7 @@ from .calibration import Calibration, calibrate
 from .config import LocalizerConfig
 from .localizer import Localizer, localize
 from .noise import NoiseProfile
+from .online import OnlineLocalizer
 from .smoother import smooth
 from .waves import SeaStateEstimate, WaveWindow, estimate_sea_state
 
@@ -13,6 +14,7 @@ __all__ = [
     "Localizer",
     "LocalizerConfig",
     "NoiseProfile",
+    "OnlineLocalizer",
     "SeaStateEstimate",
     "WaveWindow",
     "calibrate",

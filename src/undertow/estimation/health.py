@@ -32,7 +32,7 @@ from . import model
 
 # a sensor more than this fraction of whose measurements did not update the filter is reported
 TROUBLE_FRACTION = 0.5
-_HALF_WINDOW = 5  # neighbours each side of the depth-rate check's median
+HALF_WINDOW = 5  # neighbours each side of the depth-rate check's median
 
 
 def _warn(message: str) -> None:
@@ -43,69 +43,102 @@ def _first(t: np.ndarray, bad: np.ndarray) -> str:
     return f"first at t = {float(t[np.flatnonzero(bad)[0]]):.3f} s"
 
 
-def dvl_inside(t, velocity, ok, max_speed, rejected: dict) -> np.ndarray:
-    """``ok`` without the reports faster than ``max_speed`` (m/s; None: no check)."""
+def dvl_inside(t, velocity, ok, max_speed, rejected: dict, warn: bool = True) -> np.ndarray:
+    """``ok`` without the reports faster than ``max_speed`` (m/s; None: no check); ``warn``:
+    one warning when any is rejected."""
     bad = np.zeros(len(t), bool)
     if max_speed is not None:
         with np.errstate(invalid="ignore", over="ignore"):
             bad = ok & ~(np.linalg.norm(np.where(ok[:, None], velocity, 0.0), axis=1) <= max_speed)
     rejected["rejected_dvl_speed"] = int(bad.sum())
-    if bad.any():
+    if warn and bad.any():
         _warn(f"dvl: {int(bad.sum())} of {len(t)} reports faster than {max_speed:g} m/s (the "
               f"rated maximum, dvl_max_speed_m_s) rejected, {_first(t, bad)}")  # fmt: skip
     return ok & ~bad
 
 
-def imu_inside(t, rate, ok, max_rate, rejected: dict) -> np.ndarray:
-    """``ok`` without the samples with an axis beyond ``max_rate`` (rad/s; None: no check)."""
+def imu_inside(t, rate, ok, max_rate, rejected: dict, warn: bool = True) -> np.ndarray:
+    """``ok`` without the samples with an axis beyond ``max_rate`` (rad/s; None: no check);
+    ``warn``: one warning when any is rejected."""
     bad = np.zeros(len(t), bool)
     if max_rate is not None:
         bad = ok & ~np.all(np.abs(np.where(ok[:, None], rate, 0.0)) <= max_rate, axis=1)
     rejected["rejected_imu_range"] = int(bad.sum())
-    if bad.any():
+    if warn and bad.any():
         _warn(f"imu: {int(bad.sum())} of {len(t)} angular velocities beyond {max_rate:g} rad/s "
               f"(the gyro's range, gyro_max_rate_rad_s) rejected, {_first(t, bad)}")  # fmt: skip
     return ok & ~bad
 
 
-def pressure_inside(t, depth, ok, cfg, rejected: dict) -> np.ndarray:
-    """``ok`` without the depths outside [min_depth_m, max_depth_m] and those implying a
-    vertical speed above max_vertical_speed_m_s (see the module docstring)."""
-    lo = -np.inf if cfg.min_depth_m is None else cfg.min_depth_m
-    hi = np.inf if cfg.max_depth_m is None else cfg.max_depth_m
+def pressure_inside(t, depth, ok, cfg, rejected: dict, warn: bool = True,
+                    jumps: bool = True) -> np.ndarray:  # fmt: skip
+    """``ok`` without the depths outside [min_depth_m, max_depth_m] and (``jumps``) those
+    implying a vertical speed above max_vertical_speed_m_s (see the module docstring; without
+    ``jumps`` the caller applies :func:`depth_jumps` to the depths kept); ``warn``: one warning
+    when any is rejected."""
+    lo, hi = depth_envelope(cfg)
     out_of_range = ok & ~((depth >= lo) & (depth <= hi))
     inside = ok & ~out_of_range
-    jumps = np.zeros(len(t), bool)
-    if cfg.max_vertical_speed_m_s is not None:
+    jumped = np.zeros(len(t), bool)
+    if jumps and cfg.max_vertical_speed_m_s is not None:
         idx = np.flatnonzero(inside)
-        jumps[idx] = _depth_jumps(t[idx], depth[idx], cfg.max_vertical_speed_m_s,
-                                  cfg.depth_jump_tolerance_m)  # fmt: skip
+        jumped[idx] = depth_jumps(t[idx], depth[idx], cfg)
     rejected["rejected_pressure_depth"] = int(out_of_range.sum())
-    rejected["rejected_pressure_rate"] = int(jumps.sum())
-    bad = out_of_range | jumps
-    if bad.any():
+    if jumps:
+        rejected["rejected_pressure_rate"] = int(jumped.sum())
+    bad = out_of_range | jumped
+    if warn and bad.any():
         _warn(
             f"pressure: {int(bad.sum())} of {len(t)} samples rejected ("
             f"{int(out_of_range.sum())} with a depth outside [{lo:g}, {hi:g}] m "
-            f"(min_depth_m, max_depth_m), {int(jumps.sum())} implying a vertical speed above "
+            f"(min_depth_m, max_depth_m), {int(jumped.sum())} implying a vertical speed above "
             f"{cfg.max_vertical_speed_m_s} m/s (max_vertical_speed_m_s)), {_first(t, bad)}"
         )
-    return inside & ~jumps
+    return inside & ~jumped
+
+
+def depth_envelope(cfg) -> tuple[float, float]:
+    """(lowest, deepest) plausible depth (m) of the config (min_depth_m, max_depth_m)."""
+    lo = -np.inf if cfg.min_depth_m is None else cfg.min_depth_m
+    hi = np.inf if cfg.max_depth_m is None else cfg.max_depth_m
+    return lo, hi
+
+
+def depth_jumps(t, d, cfg) -> np.ndarray:
+    """The depths d (inside the envelope) implying a vertical speed above
+    ``cfg.max_vertical_speed_m_s`` (None: none); :func:`_depth_jumps`. Sample i depends on
+    samples i - HALF_WINDOW .. i + HALF_WINDOW only (the window is cut at the ends)."""
+    if cfg.max_vertical_speed_m_s is None:
+        return np.zeros(len(t), bool)
+    return _depth_jumps(t, d, cfg.max_vertical_speed_m_s, cfg.depth_jump_tolerance_m)
 
 
 def _depth_jumps(t, d, v_max: float, tol: float) -> np.ndarray:
-    """Samples farther from the median of the window around them (2 x _HALF_WINDOW + 1
+    """Samples farther from the median of the window around them (2 x HALF_WINDOW + 1
     samples) than v_max x the window's largest time offset + tol."""
-    n, h = d.size, _HALF_WINDOW
+    n, h = d.size, HALF_WINDOW
     if n < 3:
         return np.zeros(n, bool)
     pad_d = np.concatenate([np.full(h, np.nan), d, np.full(h, np.nan)])
     pad_t = np.concatenate([np.full(h, t[0]), t, np.full(h, t[-1])])
     windows = np.lib.stride_tricks.sliding_window_view(pad_d, 2 * h + 1)
-    median = np.nanmedian(windows, axis=1)
+    median = _window_median(windows)
     times = np.lib.stride_tricks.sliding_window_view(pad_t, 2 * h + 1)
     span = np.max(np.abs(times - t[:, None]), axis=1)
     return np.abs(d - median) > v_max * span + tol
+
+
+def _window_median(windows: np.ndarray) -> np.ndarray:
+    """Median of each row ignoring NaN (the pads): the middle value of the n finite ones
+    sorted, (s[n/2 - 1] + s[n/2]) / 2 for even n, as numpy.nanmedian computes it for rows this
+    short (through numpy.ma.median), in a few vectorized steps (the online filter calls this
+    for every new depth)."""
+    s = np.sort(windows, axis=1)  # NaN last
+    n = np.sum(~np.isnan(windows), axis=1)
+    hi = n // 2
+    lo = np.where(n % 2 == 1, hi, hi - 1)
+    rows = np.arange(windows.shape[0])
+    return (s[rows, lo] + s[rows, hi]) / 2.0
 
 
 def check_mounting(mounting: Mounting) -> None:

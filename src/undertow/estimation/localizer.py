@@ -212,7 +212,7 @@ def localize(
     config = check_options(smooth, params)
     if calibration is not None and not isinstance(calibration, Calibration):
         calibration = Calibration.from_yaml(calibration)
-    filled = {} if calibration is None else _calibration_fields(calibration, config)
+    filled = {} if calibration is None else calibration_fields(calibration, config)
     if log.ground_truth is not None and len(log.ground_truth):
         filled["initial_position"] = tuple(float(v) for v in log.ground_truth.position[0])
     if "water_density_kg_m3" in log.metadata:
@@ -240,7 +240,7 @@ def check_options(smooth: bool, params: dict) -> LocalizerConfig:
     return config
 
 
-def _calibration_fields(calibration: Calibration, config: LocalizerConfig) -> dict:
+def calibration_fields(calibration: Calibration, config: LocalizerConfig) -> dict:
     """The config fields ``calibration`` supplies to ``config``'s variant: those it estimated
     (all of them in a file that does not say). One warning names those the variant would use
     but that were left at their default, so a run is never quietly 'calibrated' with defaults."""
@@ -436,7 +436,9 @@ def _diag(std, n: int, cfg: LocalizerConfig) -> np.ndarray:
     return np.tile(np.diag(np.maximum(np.asarray(std, float), cfg.std_floor) ** 2), (n, 1, 1))
 
 
-def _imu_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
+def _imu_rows(
+    log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict, warn: bool = True
+):
     """IMU angular velocity z (rad/s, IMU frame), R = diag(imu_gyro_std_rad_s^2). None
     without an IMU."""
     imu = log.imu
@@ -445,11 +447,13 @@ def _imu_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rej
     w = imu.angular_velocity
     ok = _finite_rows(w)
     rejected["rejected_imu"] = int(np.sum(~ok))
-    ok = imu_inside(imu.t, w, ok, cfg.gyro_max_rate_rad_s, rejected)
+    ok = imu_inside(imu.t, w, ok, cfg.gyro_max_rate_rad_s, rejected, warn)
     return imu.t, model.IMU, w, _diag(cfg.imu_gyro_std_rad_s, len(imu), cfg), ok
 
 
-def _dvl_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
+def _dvl_rows(
+    log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict, warn: bool = True
+):
     """DVL velocity z = v_measured / scale (m/s, DVL frame) with the log's covariance (scaled
     by 1 / scale^2, symmetrized) or diag(dvl_velocity_std_m_s^2), its diagonal floored at
     dvl_std_floor_m_s^2, plus gamma_DVL^2 (at the row's time, for a track) for the variants with
@@ -467,11 +471,13 @@ def _dvl_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rej
     finite = _finite_rows(v)
     rejected["rejected_dvl_invalid"] = int(np.sum(~dvl.valid))
     rejected["rejected_dvl_nonfinite"] = int(np.sum(dvl.valid & ~finite))
-    ok = dvl_inside(dvl.t, dvl.velocity, finite & dvl.valid, cfg.dvl_max_speed_m_s, rejected)
+    ok = dvl_inside(dvl.t, dvl.velocity, finite & dvl.valid, cfg.dvl_max_speed_m_s, rejected, warn)
     return dvl.t, model.DVL, v, R, ok
 
 
-def _dr_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
+def _dr_rows(
+    log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict, warn: bool = True
+):
     """DR orientation z (rad; reported for the DVL frame, R_dr = R_body R_mount, it is moved to
     the body: R_body = R_dr R_mount^T), R = diag(dr_orientation_std_rad^2) plus gamma_DR^2 for
     the variants with wave noise. None when the log has no DR."""
@@ -490,15 +496,24 @@ def _dr_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, reje
     return dr.t, model.DR, rpy, R, ok
 
 
-def _pressure_rows(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict):
-    """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2. None without pressure."""
+def _pressure_rows(
+    log: Log,
+    cfg: LocalizerConfig,
+    noise: WaveNoise | TrackNoise,
+    rejected: dict,
+    warn: bool = True,
+    jumps: bool = True,
+):
+    """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2. None without pressure.
+    ``jumps`` False: the depth-rate check (:func:`~undertow.estimation.health.depth_jumps`) is
+    left to the caller (the online filter, which sees the depths in pieces)."""
     p = log.pressure
     if p is None or not len(p):
         return None
     d = p.depth(cfg.water_density_kg_m3, cfg.surface_pressure_pa)[:, None]
     ok = _finite_rows(d)
     rejected["rejected_pressure"] = int(np.sum(~ok))
-    ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected)
+    ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected, warn, jumps)
     return p.t, model.BARO, d, _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1], ok
 
 

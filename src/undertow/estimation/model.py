@@ -147,6 +147,52 @@ class SensorModel(NamedTuple):
     adapt_alpha: float = 1.0
 
 
+class FilterState(NamedTuple):
+    """Everything the filter loop carries from one measurement to the next, advanced in place:
+    the estimate (x, P), the Cholesky factor L of P (valid when ``clock[2]``), ``clock`` =
+    (t_cur: the time (x, P) are predicted to, t_last: the last row's time, factored, emit_due:
+    the state at t_last is not yet recorded), adaptive-r's running R per kind (``Ra``) and
+    whether it started (``adapted``), the counters (COUNT_NAMES) and NIS sums (NIS_FIELDS)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    L: np.ndarray
+    clock: np.ndarray
+    Ra: np.ndarray
+    adapted: np.ndarray
+    counts: np.ndarray
+    nis: np.ndarray
+
+    def copy(self) -> FilterState:
+        return FilterState(*(a.copy() for a in self))
+
+
+@njit(cache=True)
+def start_state(t0, x0, P0, process, Ra):
+    """The :class:`FilterState` at t0: (x0, P0), the held bias states frozen, no output yet;
+    ``Ra`` (4, 3, 3) receives adaptive-r's running R."""
+    x = x0.copy()
+    P = P0.copy()
+    first, last = held_range(process.freeze_bias, process.hold_dr_bias, process.hold_gyro_bias)
+    if last > first:
+        _freeze_bias(x, P, first, last)
+    clock = np.array([t0, np.nan, 0.0, 0.0])
+    return FilterState(x, P, np.zeros((N_STATE, N_STATE)), clock, Ra,
+                       np.zeros(4, dtype=np.bool_), np.zeros(len(COUNT_NAMES), dtype=np.int64),
+                       np.zeros((4, len(NIS_FIELDS))))  # fmt: skip
+
+
+def resume_filter(meas, state: FilterState, process, sensors, flush: bool):
+    """Filter the rows ``meas`` (:data:`MEASUREMENT`, time-sorted, none before the state's last
+    row) from ``state``, advanced in place. Returns (out_t, out_x, out_P): the states recorded,
+    one per distinct time; the last row's state is recorded only with ``flush`` (else when the
+    next call's first row has a later time), so rows fed in any pieces give the outputs and
+    final state of one :func:`_run_filter` over them all, bit for bit."""
+    t, kind, z, R = _columns(meas)
+    n_out = _distinct_times(t) + 1 if t.size else 1
+    return _filter_from(t, kind, z, R, state, process, sensors, None, n_out, flush)
+
+
 def pack_measurements(t, kind, z, R) -> np.ndarray:
     """The structured :data:`MEASUREMENT` array of (t (N,), kind (N,), z (N, 3), R (N, 3, 3))."""
     meas = np.empty(len(t), MEASUREMENT)
@@ -346,24 +392,38 @@ def _run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None):
     ``sensors.adapt_r`` (the nominal R of the first row of a kind never adapted; zeros for a
     kind without rows).
 
-    The records are unpacked here into explicit arguments of :func:`_filter`: numba keeps
-    arguments in registers through the loop, while it reloads arrays taken out of a tuple in
-    the loop (about 10 % more time per step in benchmarks/bench_ukf.py).
+    The loop's whole state is a :class:`FilterState` (:func:`start_state`), advanced in place,
+    so a caller may also feed the rows in pieces (:func:`resume_filter`, the online filter)
+    with the same arithmetic in the same order.
+
+    The records are unpacked (:func:`_filter_from`) into explicit arguments of :func:`_filter`:
+    numba keeps arguments in registers through the loop, while it reloads arrays taken out of
+    a tuple in the loop (about 10 % more time per step in benchmarks/bench_ukf.py).
     """
     t, kind, z, R = _columns(meas)
     if out_times is None:
         n_out = _distinct_times(t)
     else:
         n_out = out_times.size
-    wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias, hold_dr, hold_gyro = process
-    first, last = held_range(freeze_bias, hold_dr, hold_gyro)
     if r_adapted is None:
         Ra = np.zeros((4, 3, 3))
     else:
         Ra = r_adapted
-    return _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
+    state = start_state(t0, x0, P0, process, Ra)
+    out = _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, True)
+    return out[0], out[1], out[2], state.counts, state.nis
+
+
+@njit(cache=True, nogil=True)  # the link threads run while the filter loops
+def _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, flush):
+    """:func:`_filter` from ``state`` (:class:`FilterState`, advanced in place)."""
+    wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias, hold_dr, hold_gyro = process
+    first, last = held_range(freeze_bias, hold_dr, hold_gyro)
+    x, P, L, clock, Ra, adapted, counts, nis = state
+    return _filter(t, kind, z, R, x, P, L, clock, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
                    last > first, first, last, _jacobians(sensors), sensors.gate, sensors,
-                   out_times, n_out, sensors.adapt_r, sensors.adapt_alpha, Ra)  # fmt: skip
+                   out_times, n_out, sensors.adapt_r, sensors.adapt_alpha, Ra, adapted, counts,
+                   nis, flush)  # fmt: skip
 
 
 @njit(cache=True)
@@ -402,18 +462,15 @@ def _distinct_times(t):
 
 
 @njit(cache=True)
-def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze, first,
-            last, H, gate, sensors, out_times, n_out, adapt, alpha, Ra):  # fmt: skip
-    """The loop of :func:`_run_filter` over its unpacked records; H = _jacobians(sensors);
-    states first..last-1 held when ``freeze``; ``adapt``: the DVL and DR use the adapted R of
-    :func:`_adapt_r` (in Ra, per kind) instead of their rows' R."""
-    x = x0.copy()
-    P = P0.copy()
-    if freeze:
-        _freeze_bias(x, P, first, last)
-    adapted = np.zeros(4, dtype=np.bool_)  # Ra[kind] holds that kind's running R
-    counts = np.zeros(len(COUNT_NAMES), dtype=np.int64)
-    nis = np.zeros((4, len(NIS_FIELDS)))
+def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze,
+            first, last, H, gate, sensors, out_times, n_out, adapt, alpha, Ra, adapted, counts,
+            nis, flush):  # fmt: skip
+    """The loop of :func:`_run_filter` over its unpacked records, from the state (x, P, L_in,
+    clock, Ra, adapted, counts, nis) of a :class:`FilterState`, advanced in place;
+    H = _jacobians(sensors); states first..last-1 held when ``freeze``; ``adapt``: the DVL and
+    DR use the adapted R of :func:`_adapt_r` (in Ra, per kind) instead of their rows' R.
+    The state at a time is recorded when the next row's time differs, the last one only when
+    ``flush``."""
     out_t = np.empty(n_out)
     out_x = np.empty((n_out, N_STATE))
     out_P = np.empty((n_out, N_STATE, N_STATE))
@@ -422,8 +479,11 @@ def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, f
     xb = np.empty(N_STATE)  # (x, P) before a step, restored when it fails
     Pb = np.empty((N_STATE, N_STATE))
     z3, R3, z1, R1 = np.empty(3), np.empty((3, 3)), np.empty(1), np.empty((1, 1))
-    t_cur = t0
-    factored = False  # L holds the Cholesky factor of the current P
+    t_cur, t_last = clock[0], clock[1]
+    factored = clock[2] != 0.0  # L holds the Cholesky factor of the current P
+    emit_due = clock[3] != 0.0  # the state at t_last is not recorded yet
+    if factored:
+        L[:, :] = L_in
     k_out = 0
     N = t.size
     for k in range(N + 1):
@@ -433,6 +493,10 @@ def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, f
                                   mu, dt_max, ws, xb, Pb, out_t, out_x, out_P, counts)  # fmt: skip
         if k == N:
             break
+        if emit_due and tk != t_last:
+            k_out = _emit(t_last, x, P, L, out_t, out_x, out_P, k_out, counts)
+            factored = True
+            emit_due = False
         kd = kind[k]
         zk, Rk = (z1, R1) if kd == BARO else (z3, R3)
         for a in range(zk.size):
@@ -463,16 +527,31 @@ def _filter(t, kind, z, R, t0, x0, P0, wm, wc, lam, q_acc, q_bias, mu, dt_max, f
                                 sensors, ws, xb, Pb, counts, nis)  # fmt: skip
             if use_ra and used:
                 _adapt_r(Ra[kd], alpha, zk, x, P, H[kd], kd == DR)
-        if out_times is None and k_out < n_out and (k == N - 1 or t[k + 1] != tk):
-            # the repair the next sigma-point draw would make, done now: every emitted
-            # covariance is symmetric positive definite (the next draw then needs none)
-            counts[REPAIRS] += max(_cholesky_repair(P, L), 0)
-            factored = True
-            out_t[k_out] = tk
-            out_x[k_out] = x
-            out_P[k_out] = P
-            k_out += 1
-    return out_t[:k_out], out_x[:k_out], out_P[:k_out], counts, nis
+        if out_times is None:
+            emit_due = True
+            t_last = tk
+    if flush and emit_due:
+        k_out = _emit(t_last, x, P, L, out_t, out_x, out_P, k_out, counts)
+        factored = True
+        emit_due = False
+    clock[0], clock[1] = t_cur, t_last
+    clock[2] = 1.0 if factored else 0.0
+    clock[3] = 1.0 if emit_due else 0.0
+    if factored:
+        L_in[:, :] = L
+    return out_t[:k_out], out_x[:k_out], out_P[:k_out]
+
+
+@njit(cache=True)
+def _emit(t_last, x, P, L, out_t, out_x, out_P, k_out, counts):
+    """Record (x, P) at t_last after the repair the next sigma-point draw would make, done now:
+    every emitted covariance is symmetric positive definite (the next draw then needs none;
+    L holds its factor). Returns the next output index."""
+    counts[REPAIRS] += max(_cholesky_repair(P, L), 0)
+    out_t[k_out] = t_last
+    out_x[k_out] = x
+    out_P[k_out] = P
+    return k_out + 1
 
 
 @njit(cache=True)

@@ -2,7 +2,8 @@
 
 :func:`summarize` counts, per stream, messages, median rate, time span, invalid rows (the
 stream's own ``invalid_count``) and missing values (NaN entries in the stream's measurement:
-for the DVL, NaN altitude plus invalid beams; elsewhere non-finite main values).
+for the DVL, NaN altitude plus invalid beams; for the multibeam, beams without a detection;
+elsewhere non-finite main values).
 """
 
 from __future__ import annotations
@@ -53,6 +54,8 @@ def _missing(name: str, stream) -> dict[str, int]:
             "invalid_beams": int(np.sum(~stream.beam_valid)),
             "velocity": int(np.sum(np.isnan(stream.velocity).any(axis=1))),
         }
+    if name == "multibeam":
+        return {"beams_without_detection": int(np.sum(~stream.valid))}
     main = {
         "imu": "angular_velocity",
         "dead_reckoning": "position",

@@ -10,7 +10,11 @@ it also restores metadata), the bag's ``/tf_static`` (transforms from the topic 
 to its sensor frames, body forward-right-down; see :mod:`undertow.io.topics`), else the BlueROV2
 defaults; ``metadata['mounting_source']`` says which. A user-given topic that is not in the bag
 gives one warning line. A directory without ``metadata.yaml`` holding a single ``.mcap``/``.db3``
-is read as that file. rosbags errors become one-line :class:`~undertow.errors.ReaderError`.
+is read as that file. DVL messages without beam vectors (the A50 driver's) get the A50 geometry,
+or the one recorded in the sidecar's ``metadata.dvl_geometry`` (``log.DvlGeometry.to_dict``:
+a Nortek or Teledyne head, say). The multibeam (``sensor_msgs/PointCloud2`` detections) takes
+its range limits from the sidecar's ``multibeam`` entry when there is one. rosbags errors
+become one-line :class:`~undertow.errors.ReaderError`.
 
 Everything in and beside a bag is untrusted: a message that cannot be decoded or holds malformed
 fields is skipped and counted (one warning per topic); a sidecar that is not a mapping, or whose
@@ -31,7 +35,7 @@ import yaml
 from rosbags.highlevel import AnyReader
 
 from ..errors import ReaderError, UndertowError
-from ..log import Dvl, Log, Mounting
+from ..log import Dvl, DvlGeometry, Log, Mounting
 from ..rotations import quaternion_to_rpy
 from ._collect import MALFORMED, DvlRows, Notes, check_regular
 from .a50_json import _covariance, add_velocity_report, dead_reckoning_from_rows
@@ -208,6 +212,9 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap
         for key, value in (recorded.pop("metadata", None) or {}).items():
             metadata.setdefault(key, value)
         metadata["recorded"] = recorded
+    dvl = _dvl_geometry(dvl, rows, metadata, notes)
+    limits = (source_meta or {}).get("multibeam")
+    limits = limits if isinstance(limits, dict) else {}
     log = Log(
         imu=rows.imu(),
         dvl=dvl,
@@ -216,11 +223,31 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap
         sonar=rows.sonar(),
         wave_probe=rows.wave_probe(),
         ground_truth=rows.ground_truth(),
+        multibeam=rows.multibeam(_limit(limits, "min_range"), _limit(limits, "max_range")),
         mounting=mounting,
         source=str(path),
         metadata=metadata,
     )
     return log
+
+
+def _limit(limits: dict, key: str) -> float | None:
+    """A finite non-negative number from the sidecar's multibeam limits, else None."""
+    value = limits.get(key)
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    return float(value) if ok and math.isfinite(value) and value >= 0 else None
+
+
+def _dvl_geometry(dvl: Dvl | None, rows: Rows, metadata: dict, notes: Notes) -> Dvl | None:
+    """The beam vectors of ``metadata['dvl_geometry']`` for DVL messages that carry none."""
+    data = metadata.get("dvl_geometry")
+    if dvl is None or rows.dvl_units_given or not isinstance(data, dict):
+        return dvl
+    try:
+        return dvl.with_geometry(DvlGeometry.from_dict(data))
+    except UndertowError as exc:
+        notes.add(f"{SIDECAR}: dvl_geometry unusable, A50 beams kept ({_one_line(exc)})")
+        return dvl
 
 
 def _dvl(rows: Rows, notes: Notes, metadata: dict) -> Dvl | None:

@@ -1,7 +1,8 @@
 """Decoded ROS messages -> measurement rows -> :mod:`undertow.log` streams.
 
 One small accumulator per stream; each knows the message types it accepts (DVL by type:
-``waterlinked_a50_ros_driver/msg/DVL`` or ``marine_acoustic_msgs/msg/Dvl``). Times are
+``waterlinked_a50_ros_driver/msg/DVL`` or ``marine_acoustic_msgs/msg/Dvl``; the multibeam a
+``sensor_msgs/msg/PointCloud2`` of detections, :func:`cloud_points`). Times are
 ``header.stamp`` in float seconds (the bag's record time when a message has no header or a
 zero stamp). Used by :mod:`undertow.io.rosbag`.
 """
@@ -13,13 +14,16 @@ import math
 
 import numpy as np
 
-from ..log import GroundTruth, Imu, Pressure, SonarRange, WaveProbe
+from ..log import GroundTruth, Imu, Multibeam, Pressure, SonarRange, WaveProbe
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
 from ._collect import MALFORMED, DvlRows, Notes, count_nan_rows, time_order
 from .a50_json import add_velocity_report, is_position_report, is_velocity_report, position_row
 from .msgdefs import A50_DVL, MARINE_DVL
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+#: sensor_msgs/PointField datatype constants -> numpy type codes
+POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 ACCEPTED = {
     "dvl": (A50_DVL, MARINE_DVL),
     "dead_reckoning": ("geometry_msgs/msg/PoseWithCovarianceStamped",),
@@ -29,6 +33,7 @@ ACCEPTED = {
     "sonar": ("sensor_msgs/msg/Range",),
     "wave_probe": ("geometry_msgs/msg/PointStamped",),
     "ground_truth": ("nav_msgs/msg/Odometry",),
+    "multibeam": (POINTCLOUD2,),
     "tf_static": (TF_MESSAGE,),
 }
 HPA_THRESHOLD = 20_000.0  # an absolute pressure below this (Pa) is a log in hPa/mbar
@@ -56,6 +61,46 @@ def _quat(q) -> tuple[float, float, float, float]:
     return (q.x, q.y, q.z, q.w)
 
 
+def cloud_points(msg) -> tuple[np.ndarray, np.ndarray | None]:
+    """(points (K, 3) float64, intensity (K,) or None) of a ``sensor_msgs/PointCloud2``.
+
+    The cloud holds height x width points, row r at bytes [r row_step, r row_step + width
+    point_step), each point's fields at their ``offset`` with their ``datatype`` (PointField
+    constants INT8 = 1 .. FLOAT64 = 8, ``is_bigendian`` byte order); x, y, z are required,
+    ``intensity`` optional, other fields are ignored. A count other than 1, an unknown datatype
+    or a data array shorter than the layout says raises ValueError (a malformed message)."""
+    fields = {f.name: f for f in msg.fields}
+    if not all(name in fields for name in "xyz"):
+        raise ValueError(f"PointCloud2 without x, y, z fields (has {', '.join(fields) or 'none'})")
+    height, width, step = int(msg.height), int(msg.width), int(msg.point_step)
+    names = [n for n in ("x", "y", "z", "intensity") if n in fields]
+    order = ">" if msg.is_bigendian else "<"
+    formats, offsets = [], []
+    for name in names:
+        f = fields[name]
+        code = POINT_FIELD_TYPES.get(int(f.datatype))
+        if code is None or int(f.count) not in (0, 1):
+            raise ValueError(f"PointCloud2 field {name}: datatype {f.datatype}, count {f.count}")
+        formats.append(order + code)
+        offsets.append(int(f.offset))
+        if int(f.offset) + np.dtype(code).itemsize > step:
+            raise ValueError(f"PointCloud2 field {name} ends past point_step {step}")
+    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": step})
+    data = np.asarray(msg.data, dtype=np.uint8)
+    row_step = int(msg.row_step) if height > 1 else width * step
+    if height * width and (row_step < width * step or data.size < (height - 1) * row_step
+                           + width * step):  # fmt: skip
+        raise ValueError(f"PointCloud2 data of {data.size} bytes, layout needs more")
+    rows = [
+        np.frombuffer(data[r * row_step : r * row_step + width * step].tobytes(), dtype=dtype)
+        for r in range(height)
+    ]
+    cloud = np.concatenate(rows) if rows else np.zeros(0, dtype)
+    points = np.stack([cloud[n].astype(np.float64) for n in "xyz"], axis=1).reshape(-1, 3)
+    intensity = cloud["intensity"].astype(np.float64) if "intensity" in names else None
+    return points, intensity
+
+
 class Rows:
     """Plain row lists per stream, filled by :meth:`add` and turned into streams by builders."""
 
@@ -70,6 +115,10 @@ class Rows:
         self.probe_x: float | None = None
         #: (parent frame, child frame, translation, quaternion x y z w) of /tf_static
         self.transforms: list[tuple] = []
+        #: (time, points (K, 3), intensity (K,) or None) per multibeam ping
+        self.pings: list[tuple] = []
+        #: the DVL messages carried their own beam unit vectors (marine_acoustic_msgs/Dvl)
+        self.dvl_units_given = False
 
     def add(self, stream: str, msgtype: str, msg, record_ns: int) -> None:
         notes = self.notes
@@ -99,6 +148,9 @@ class Rows:
             )
         elif msgtype == MARINE_DVL:
             self._add_marine(msg, record_ns)
+        elif stream == "multibeam":
+            points, intensity = cloud_points(msg)
+            self.pings.append((stamp(msg, record_ns, notes), points, intensity))
         elif stream == "dead_reckoning":
             p = msg.pose.pose
             cov = msg.pose.covariance[0]
@@ -147,6 +199,7 @@ class Rows:
             cov = None
         v = _xyz(msg.velocity)
         self.dvl_mode_given.append(msg.velocity_mode != 0)
+        self.dvl_units_given = True
         valid = msg.velocity_mode != 0 and all(math.isfinite(x) for x in v)
         self.dvl.append(
             stamp(msg, record_ns, self.notes),
@@ -246,6 +299,29 @@ class Rows:
         if np.isfinite(twist).any():  # nav_msgs twist is in the child (body) frame
             velocity = np.einsum("nij,nj->ni", rpy_to_matrix(rpy), twist)
         return GroundTruth(t=a[:, 0], position=a[:, 1:4], orientation=rpy, velocity=velocity)
+
+    def multibeam(self, min_range: float | None = None, max_range: float | None = None):
+        """The pings as a :class:`~undertow.log.Multibeam` (None without pings): every ping
+        padded with NaN to the most detections of any ping; intensity kept when every ping
+        has it; limits as given (else the stream's defaults)."""
+        if not self.pings:
+            return None
+        order = time_order(np.array([p[0] for p in self.pings]), "multibeam", self.notes)
+        if not order.size:
+            self.notes.add("multibeam: no message with a finite time (stream dropped)")
+            return None
+        pings = [self.pings[i] for i in order]
+        beams = max(p[1].shape[0] for p in pings)
+        points = np.full((len(pings), beams, 3), np.nan)
+        has_i = all(p[2] is not None for p in pings)
+        intensity = np.full((len(pings), beams), np.nan) if has_i else None
+        for i, (_, pts, inten) in enumerate(pings):
+            points[i, : pts.shape[0]] = pts
+            if has_i:
+                intensity[i, : inten.shape[0]] = inten
+        limits = {k: float(v) for k, v in (("min_range", min_range), ("max_range", max_range))
+                  if v is not None}  # fmt: skip
+        return Multibeam(t=[p[0] for p in pings], points=points, intensity=intensity, **limits)
 
     def dead_reckoning_rows(self) -> np.ndarray:
         """(t, x, y, z, std, roll, pitch, yaw) rows from the pose topic."""

@@ -6,7 +6,10 @@ topic; ``flavor="standard"`` writes ``marine_acoustic_msgs/msg/Dvl`` (unknown co
 ``velocity_mode`` 0 for an invalid velocity, invalid beam range NaN; no fom). Other streams use
 standard types: Imu, FluidPressure, Range, PoseWithCovarianceStamped (dead reckoning, std^2 on
 the position diagonal), PointStamped (wave probe: x = probe x, z = elevation up), Odometry
-(ground truth, twist in the body frame as ROS requires). The sensor mounting is in the bag
+(ground truth, twist in the body frame as ROS requires), PointCloud2 (multibeam: one organized
+cloud of B points per ping, x y z float64 in the sensor frame, NaN for a beam without a
+detection, plus intensity when the stream has it; see :func:`multibeam_message`). The sensor
+mounting is in the bag
 itself as ``/tf_static`` (see :func:`tf_static_message`), so a bare copy of the ``.mcap`` keeps it
 and ROS tools and Foxglove see the sensor frames; it is also, with source and plain metadata, in a
 sidecar ``undertow.yaml``. The bag is written in a temp dir next to the target, then renamed
@@ -39,10 +42,11 @@ from ..rotations import rpy_to_quaternion, world_to_body
 from .a50_json import velocity_report_line
 from .msgdefs import A50_BEAM, A50_DVL, MARINE_DVL, dvl_typestore
 from .rosbag import SIDECAR
-from .rosbag_streams import TF_MESSAGE
-from .topics import SENSOR_NAMES, TopicMap
+from .rosbag_streams import POINTCLOUD2, TF_MESSAGE
+from .topics import ALL_SENSOR_NAMES, SENSOR_NAMES, TopicMap
 
 _ZERO = QosTime(0, 0)  # rmw default (infinite) deadline, lifespan, lease
+_NO_ESTIMATE = np.array([-1.0] + [0.0] * 8)  # sensor_msgs/Imu: covariance[0] = -1, no estimate
 #: /tf_static as tf2's static broadcaster offers it: latched (transient local), depth 1, reliable
 TF_STATIC_QOS = Qos(
     QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
@@ -50,8 +54,9 @@ TF_STATIC_QOS = Qos(
 )  # fmt: skip
 
 
-class _Builder:
-    """Message constructors bound to the typestore."""
+class MessageBuilder:
+    """Message constructors bound to the typestore (shared by :func:`write_log` and the live
+    recorder, :mod:`undertow.io.recorder`)."""
 
     def __init__(self) -> None:
         self.store = dvl_typestore()
@@ -115,7 +120,7 @@ def write_log(
     if path.exists() and not overwrite:
         raise UndertowError(f"{path}: already exists (pass overwrite=True to replace it)")
     topics = topics or TopicMap()
-    b = _Builder()
+    b = MessageBuilder()
     records = list(_messages(log, flavor, b, ground_truth_rate_hz, topics))
     records.append(tf_static_record(log, b, topics))
     records.sort(key=lambda r: r[1])
@@ -135,14 +140,29 @@ def write_log(
             "mounting": to_plain(drop_unknown=True, value=log.mounting.to_dict()),
             "metadata": to_plain(drop_unknown=True, value=log.metadata) or {},
         }
+        if log.multibeam is not None:
+            mb = log.multibeam
+            sidecar["multibeam"] = {"min_range": mb.min_range, "max_range": mb.max_range}
         (bag / SIDECAR).write_text(yaml.safe_dump(sidecar, sort_keys=False), encoding="utf-8")
     return path
 
 
-def tf_static_record(log: Log, b: _Builder, topics: TopicMap):
-    """The mounting as one ``tf2_msgs/msg/TFMessage`` on ``/tf_static``, at the log's start.
+def tf_static_record(log: Log, b: MessageBuilder, topics: TopicMap):
+    """The mounting as one ``/tf_static`` message at the log's start (:func:`tf_static_message`)."""
+    start = log.time_span[0]
+    t = start if math.isfinite(start) else 0.0
+    sensors = ALL_SENSOR_NAMES if log.multibeam is not None else SENSOR_NAMES
+    ns, msg = tf_static_message(b, topics, log.mounting, t, sensors)
+    return "tf_static", ns, TF_MESSAGE, msg
 
-    One ``geometry_msgs/TransformStamped`` per sensor (imu, dvl, sonar, barometer): parent
+
+def tf_static_message(
+    b: MessageBuilder, topics: TopicMap, mounting, t: float, sensors=SENSOR_NAMES
+):
+    """(record time ns, ``tf2_msgs/msg/TFMessage``): the mounting at time ``t``.
+
+    One ``geometry_msgs/TransformStamped`` per sensor of ``sensors`` (imu, dvl, sonar,
+    barometer; and multibeam, ``mbes_link``, when the log has one): parent
     ``topics.base_frame`` (``base_link``), child the sensor's frame (``topics.frames``:
     ``imu_link``, ``dvl_link``, ``sonar_link``, ``pressure_link``, the frame_id of that sensor's
     messages), translation = lever arm (m), rotation = quaternion of the mounting's roll, pitch,
@@ -151,9 +171,7 @@ def tf_static_record(log: Log, b: _Builder, topics: TopicMap):
     (x forward, y right, z down), not ROS REP-103's forward-left-up; sensor frames are the
     sensors' own (A50: x forward, y right, z down).
     """
-    start = log.time_span[0]
-    t = start if math.isfinite(start) else 0.0
-    mounts = log.mounting.to_dict()
+    mounts = mounting.to_dict()
     transforms = [
         b.transform(
             t,
@@ -162,16 +180,16 @@ def tf_static_record(log: Log, b: _Builder, topics: TopicMap):
             mounts[sensor]["translation"],
             np.asarray(mounts[sensor]["rotation"], dtype=np.float64),
         )
-        for sensor in SENSOR_NAMES
+        for sensor in sensors
     ]
     _, ns = b.header(t, topics.base_frame)
-    return "tf_static", ns, TF_MESSAGE, b.T[TF_MESSAGE](transforms=transforms)
+    return ns, b.T[TF_MESSAGE](transforms=transforms)
 
 
-def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None, topics: TopicMap):
+def _messages(log: Log, flavor: str, b: MessageBuilder, gt_rate: float | None, topics: TopicMap):
     """(stream, record time ns, msgtype, message) for every message of ``log``, stream by
     stream (DVL, IMU, pressure, sonar, wave probe, dead reckoning, ground truth)."""
-    frame = {sensor: getattr(topics.frames, sensor)[0] for sensor in SENSOR_NAMES}
+    frame = {sensor: getattr(topics.frames, sensor)[0] for sensor in ALL_SENSOR_NAMES}
     if log.dvl is not None:
         yield from (_dvl_driver if flavor == "driver" else _dvl_standard)(log, b, frame["dvl"])
     if log.imu is not None:
@@ -186,57 +204,113 @@ def _messages(log: Log, flavor: str, b: _Builder, gt_rate: float | None, topics:
         yield from _dead_reckoning_messages(log.dead_reckoning, b)
     if log.ground_truth is not None:
         yield from _ground_truth_messages(log.ground_truth, b, gt_rate)
+    if log.multibeam is not None:
+        yield from _multibeam_messages(log.multibeam, b, frame["multibeam"])
 
 
-def _imu_messages(s, b: _Builder, frame: str):
+def _multibeam_messages(s, b: MessageBuilder, frame: str):
+    """``sensor_msgs/PointCloud2``, one per ping (:func:`multibeam_message`)."""
+    for i in range(len(s)):
+        intensity = None if s.intensity is None else s.intensity[i]
+        ns, msg = multibeam_message(b, s.t[i], frame, s.points[i], intensity)
+        yield "multibeam", ns, POINTCLOUD2, msg
+
+
+def multibeam_message(b: MessageBuilder, t, frame: str, points, intensity=None):
+    """(record time ns, ``sensor_msgs/PointCloud2``) of one ping: an organized cloud (height 1,
+    width B, one point per beam in beam order) with fields x, y, z (and intensity) as FLOAT64
+    (PointField datatype 8) at offsets 0, 8, 16 (24), little-endian; a beam without a
+    detection is a NaN point and makes the cloud not dense (``is_dense`` False)."""
+    columns = [np.asarray(points, np.float64).reshape(-1, 3)]
+    names = ["x", "y", "z"]
+    if intensity is not None:
+        columns.append(np.asarray(intensity, np.float64).reshape(-1, 1))
+        names.append("intensity")
+    table = np.ascontiguousarray(np.hstack(columns), dtype="<f8")
+    field_t = b.T["sensor_msgs/msg/PointField"]
+    fields = [field_t(name=n, offset=8 * k, datatype=8, count=1) for k, n in enumerate(names)]
+    h, ns = b.header(t, frame)
+    step = 8 * len(names)
+    return ns, b.T[POINTCLOUD2](
+        header=h,
+        height=1,
+        width=int(table.shape[0]),
+        fields=fields,
+        is_bigendian=False,
+        point_step=step,
+        row_step=step * int(table.shape[0]),
+        data=table.view(np.uint8).reshape(-1),
+        is_dense=bool(np.isfinite(table).all()),
+    )
+
+
+def _imu_messages(s, b: MessageBuilder, frame: str):
     """``sensor_msgs/Imu``; a missing orientation or acceleration is zeros with covariance
     element 0 set to -1 ("no estimate", as the sensor_msgs/Imu message definition asks)."""
-    imu_t = b.T["sensor_msgs/msg/Imu"]
     n = len(s)
     acc = s.linear_acceleration if s.linear_acceleration is not None else np.zeros((n, 3))
     q = s.orientation if s.orientation is not None else np.zeros((n, 4))
-    qcov = np.zeros(9) if s.orientation is not None else np.array([-1.0] + [0.0] * 8)
-    acov = np.zeros(9) if s.linear_acceleration is not None else np.array([-1.0] + [0.0] * 8)
+    has_q, has_a = s.orientation is not None, s.linear_acceleration is not None
     for i in range(n):
-        h, ns = b.header(s.t[i], frame)
-        msg = imu_t(
-            header=h,
-            orientation=b.quat(q[i]),
-            orientation_covariance=qcov,
-            angular_velocity=b.vec(s.angular_velocity[i]),
-            angular_velocity_covariance=np.zeros(9),
-            linear_acceleration=b.vec(acc[i]),
-            linear_acceleration_covariance=acov,
-        )
+        ns, msg = imu_message(b, s.t[i], frame, s.angular_velocity[i], acc[i], q[i], has_a, has_q)
         yield "imu", ns, "sensor_msgs/msg/Imu", msg
 
 
-def _pressure_messages(s, b: _Builder, frame: str):
+def imu_message(b: MessageBuilder, t, frame, angular_velocity, acc, q, has_acc, has_q):
+    """(record time ns, ``sensor_msgs/Imu``) of one row; covariance element 0 of a part is -1
+    when the row has no such estimate (``has_acc``/``has_q`` False)."""
+    h, ns = b.header(t, frame)
+    msg = b.T["sensor_msgs/msg/Imu"](
+        header=h,
+        orientation=b.quat(q),
+        orientation_covariance=np.zeros(9) if has_q else _NO_ESTIMATE.copy(),
+        angular_velocity=b.vec(angular_velocity),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=b.vec(acc),
+        linear_acceleration_covariance=np.zeros(9) if has_acc else _NO_ESTIMATE.copy(),
+    )
+    return ns, msg
+
+
+def _pressure_messages(s, b: MessageBuilder, frame: str):
     """``sensor_msgs/FluidPressure`` (Pa, variance 0: not reported)."""
-    pressure_t = b.T["sensor_msgs/msg/FluidPressure"]
     for i in range(len(s)):
-        h, ns = b.header(s.t[i], frame)
-        msg = pressure_t(header=h, fluid_pressure=float(s.pressure[i]), variance=0.0)
+        ns, msg = pressure_message(b, s.t[i], frame, s.pressure[i])
         yield "pressure", ns, "sensor_msgs/msg/FluidPressure", msg
 
 
-def _sonar_messages(s, b: _Builder, frame: str):
+def pressure_message(b: MessageBuilder, t, frame: str, pressure):
+    """(record time ns, ``sensor_msgs/FluidPressure``) of one row (Pa, variance 0)."""
+    h, ns = b.header(t, frame)
+    return ns, b.T["sensor_msgs/msg/FluidPressure"](
+        header=h, fluid_pressure=float(pressure), variance=0.0
+    )
+
+
+def _sonar_messages(s, b: MessageBuilder, frame: str):
     """``sensor_msgs/Range`` (radiation type 0: ultrasound)."""
-    range_t = b.T["sensor_msgs/msg/Range"]
+    limits = (s.field_of_view, s.min_range, s.max_range)
     for i in range(len(s)):
-        h, ns = b.header(s.t[i], frame)
-        msg = range_t(
-            header=h,
-            radiation_type=0,
-            field_of_view=float(s.field_of_view),
-            min_range=float(s.min_range),
-            max_range=float(s.max_range),
-            range=float(s.range[i]),
-        )
+        ns, msg = sonar_message(b, s.t[i], frame, limits, s.range[i])
         yield "sonar", ns, "sensor_msgs/msg/Range", msg
 
 
-def _wave_probe_messages(s, b: _Builder):
+def sonar_message(b: MessageBuilder, t, frame: str, limits, rng):
+    """(record time ns, ``sensor_msgs/Range``) of one row; ``limits`` = (field of view rad,
+    min range m, max range m); radiation type 0 (ultrasound). Range fields are float32."""
+    h, ns = b.header(t, frame)
+    fov, rmin, rmax = limits
+    return ns, b.T["sensor_msgs/msg/Range"](
+        header=h,
+        radiation_type=0,
+        field_of_view=float(fov),
+        min_range=float(rmin),
+        max_range=float(rmax),
+        range=float(rng),
+    )
+
+
+def _wave_probe_messages(s, b: MessageBuilder):
     """``geometry_msgs/PointStamped`` in ``world``: x = probe x, z = elevation (up)."""
     point_t = b.T["geometry_msgs/msg/PointStamped"]
     for i in range(len(s)):
@@ -245,20 +319,27 @@ def _wave_probe_messages(s, b: _Builder):
         yield "wave_probe", ns, "geometry_msgs/msg/PointStamped", msg
 
 
-def _dead_reckoning_messages(s, b: _Builder):
-    """``geometry_msgs/PoseWithCovarianceStamped`` in ``dvl_odom``; std^2 on the position
-    diagonal (row-major 6x6: elements 0, 7, 14), NaN when the log has no std."""
-    pose_t = b.T["geometry_msgs/msg/PoseWithCovarianceStamped"]
+def _dead_reckoning_messages(s, b: MessageBuilder):
+    """``geometry_msgs/PoseWithCovarianceStamped`` in ``dvl_odom`` (see
+    :func:`dead_reckoning_message`)."""
     std = s.std if s.std is not None else np.full(len(s), np.nan)
     for i in range(len(s)):
-        h, ns = b.header(s.t[i], "dvl_odom")
-        cov = np.zeros(36)
-        cov[[0, 7, 14]] = std[i] ** 2
-        msg = pose_t(header=h, pose=b.pose_cov(s.position[i], s.orientation[i], cov))
+        ns, msg = dead_reckoning_message(b, s.t[i], s.position[i], s.orientation[i], std[i])
         yield "dead_reckoning", ns, "geometry_msgs/msg/PoseWithCovarianceStamped", msg
 
 
-def _ground_truth_messages(s, b: _Builder, gt_rate: float | None):
+def dead_reckoning_message(b: MessageBuilder, t, position, rpy, std):
+    """(record time ns, ``geometry_msgs/PoseWithCovarianceStamped``) of one dead-reckoning row
+    in ``dvl_odom``: std^2 on the position diagonal (row-major 6x6: elements 0, 7, 14), NaN
+    when unknown; orientation the quaternion of (roll, pitch, yaw)."""
+    h, ns = b.header(t, "dvl_odom")
+    cov = np.zeros(36)
+    cov[[0, 7, 14]] = std**2
+    pose_t = b.T["geometry_msgs/msg/PoseWithCovarianceStamped"]
+    return ns, pose_t(header=h, pose=b.pose_cov(position, rpy, cov))
+
+
+def _ground_truth_messages(s, b: MessageBuilder, gt_rate: float | None):
     """``nav_msgs/Odometry`` in ``world``, decimated to ``gt_rate``; the twist is the body-frame
     velocity v_b = R^T v_w (R body to world), as nav_msgs/Odometry puts the twist in the
     child frame."""
@@ -281,48 +362,51 @@ def _ground_truth_messages(s, b: _Builder, gt_rate: float | None):
         yield "ground_truth", ns, "nav_msgs/msg/Odometry", msg
 
 
-def _dvl_driver(log: Log, b: _Builder, frame: str):
+def _dvl_driver(log: Log, b: MessageBuilder, frame: str):
     d = log.dvl
     time_ms = np.concatenate([[0.0], np.diff(d.t) * 1e3])
     tov = np.asarray(log.metadata.get("dvl_time_of_validity_s", d.t), dtype=np.float64)
     tov = np.where(np.isfinite(tov), tov, d.t) if tov.shape == d.t.shape else d.t
-    beam_t, dvl_t = b.T[A50_BEAM], b.T[A50_DVL]
     string_t = b.T["std_msgs/msg/String"]
     for i in range(len(d)):
-        h, ns = b.header(d.t[i], frame)
-        beams = [
-            beam_t(
-                id=int(d.beam_id[i, k]),
-                velocity=float(d.beam_velocity[i, k]),
-                distance=float(d.beam_range[i, k]) if d.beam_valid[i, k] else -1.0,
-                rssi=math.nan,
-                nsd=math.nan,
-                valid=bool(d.beam_valid[i, k]),
-            )
-            for k in range(4)
-        ]
-        alt = float(d.altitude[i])
-        yield (
-            "dvl",
-            ns,
-            A50_DVL,
-            dvl_t(
-                header=h,
-                time=float(time_ms[i]),
-                velocity=b.vec(d.velocity[i]),
-                fom=float(d.fom[i]),
-                altitude=alt if math.isfinite(alt) else -1.0,
-                beams=beams,
-                velocity_valid=bool(d.valid[i]),
-                status=0,
-                form="json_v3",
-            ),
-        )
+        ns, msg = dvl_driver_message(b, d, i, frame, time_ms[i])
+        yield "dvl", ns, A50_DVL, msg
         line = velocity_report_line(d, i, time_ms[i], tov[i])
         yield "dvl_json", ns, "std_msgs/msg/String", string_t(data=line)
 
 
-def _dvl_standard(log: Log, b: _Builder, frame: str):
+def dvl_driver_message(b: MessageBuilder, d, i: int, frame: str, time_ms: float):
+    """(record time ns, ``waterlinked_a50_ros_driver/msg/DVL``) of row ``i`` of the Dvl ``d``:
+    NaN altitude as -1 and an invalid beam's distance as -1, as the driver sends them."""
+    beam_t = b.T[A50_BEAM]
+    h, ns = b.header(d.t[i], frame)
+    beams = [
+        beam_t(
+            id=int(d.beam_id[i, k]),
+            velocity=float(d.beam_velocity[i, k]),
+            distance=float(d.beam_range[i, k]) if d.beam_valid[i, k] else -1.0,
+            rssi=math.nan,
+            nsd=math.nan,
+            valid=bool(d.beam_valid[i, k]),
+        )
+        for k in range(4)
+    ]
+    alt = float(d.altitude[i])
+    msg = b.T[A50_DVL](
+        header=h,
+        time=float(time_ms),
+        velocity=b.vec(d.velocity[i]),
+        fom=float(d.fom[i]),
+        altitude=alt if math.isfinite(alt) else -1.0,
+        beams=beams,
+        velocity_valid=bool(d.valid[i]),
+        status=0,
+        form="json_v3",
+    )
+    return ns, msg
+
+
+def _dvl_standard(log: Log, b: MessageBuilder, frame: str):
     d = log.dvl
     dvl_t = b.T[MARINE_DVL]
     minus = np.full(4, -1.0, np.float32)

@@ -4,6 +4,8 @@ Each stream field is a list of candidate topic names; the first one present in a
 common alternatives of BlueROV2 logs (``/BlueROV/pressure2_fluid``, ``/vectornav/IMU``,
 ``/ping_sonar/data``) work without a file. The DVL topic is decoded by message type
 (``waterlinked_a50_ros_driver/msg/DVL`` or ``marine_acoustic_msgs/msg/Dvl``), never by name.
+The multibeam is a ``sensor_msgs/msg/PointCloud2`` of detections in the sensor frame (the
+common output of MBES ROS drivers), on ``/mbes/points`` or ``/multibeam/points``.
 A candidate list the user changed (not the default) that matches no topic of a bag is reported
 by the reader (one warning line); absent defaults stay silent (a DVL-only log is legal).
 
@@ -31,10 +33,13 @@ STREAM_FIELDS = (
     "sonar",
     "wave_probe",
     "ground_truth",
+    "multibeam",
 )
 
 
-SENSOR_NAMES = ("imu", "dvl", "sonar", "barometer")  # as in log.Mounting
+SENSOR_NAMES = ("imu", "dvl", "sonar", "barometer")  # as in log.Mounting; always in /tf_static
+#: every sensor with a tf frame: the multibeam's transform is written when the log has one
+ALL_SENSOR_NAMES = (*SENSOR_NAMES, "multibeam")
 
 
 def _as_list(value):
@@ -50,8 +55,9 @@ class SensorFrames(BaseModel):
     dvl: list[str] = ["dvl_link"]
     sonar: list[str] = ["sonar_link"]
     barometer: list[str] = ["pressure_link"]
+    multibeam: list[str] = ["mbes_link"]
 
-    @field_validator(*SENSOR_NAMES, mode="before")
+    @field_validator(*ALL_SENSOR_NAMES, mode="before")
     @classmethod
     def _one_or_many(cls, value):
         return _as_list(value)
@@ -59,7 +65,7 @@ class SensorFrames(BaseModel):
     def sensor_of(self, frame_id: str) -> str | None:
         """The sensor whose frame is ``frame_id`` (a leading '/' of ROS 1 ignored), or None."""
         frame_id = frame_id.lstrip("/")
-        for sensor in SENSOR_NAMES:
+        for sensor in ALL_SENSOR_NAMES:
             if frame_id in (f.lstrip("/") for f in getattr(self, sensor)):
                 return sensor
         return None
@@ -79,6 +85,7 @@ class TopicMap(BaseModel):
     sonar: list[str] = ["/ping_sonar/range", "/ping_sonar/data", "/sonar/range"]
     wave_probe: list[str] = ["/wave_probe"]
     ground_truth: list[str] = ["/ground_truth/odom", "/ground_truth"]
+    multibeam: list[str] = ["/mbes/points", "/multibeam/points"]
     tf_static: list[str] = ["/tf_static"]
     base_frame: str = "base_link"
     frames: SensorFrames = SensorFrames()

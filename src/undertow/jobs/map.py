@@ -8,6 +8,7 @@ a result object with the warnings and facts the command prints out.
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -15,14 +16,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
-from .._util.atomic import check_output_folder
+from .._util.atomic import check_output_folder, output_folder
+from .._util.plain import to_plain
 from ..errors import ConfigError, DataError, ReaderError
 from ..evaluation.cloud import MapEvaluation, evaluate_map, map_threshold
-from ..io.ply import read_ply
+from ..io.ply import read_ply, write_map_ply
 from ..io.results import save_map
 from ..mapping.config import MappingConfig
 from ..mapping.run import MappingResult, map_log
+from ..mapping.samples import samples_from_config
+from ..mapping.tiled import Tiling, map_tiled
 from ..occupancy import MAP_FILE, OccupancyMap, not_an_npz
 from ..settings import Settings
 from ..trajectory import Trajectory
@@ -69,7 +74,8 @@ def mapping_config(settings: Settings, overrides: dict) -> MappingConfig:
 def map_file(log_path: str | Path, trajectory_path: str | Path,
              settings: Settings | str | Path | None = None, *, topics: str | Path | None = None,
              prior: OccupancyMap | str | Path | None = None, out_dir: str | Path | None = None,
-             overwrite: bool = False, **overrides) -> MappingResult:  # fmt: skip
+             overwrite: bool = False, tiles: float | None = None, scheduler: str | None = None,
+             **overrides) -> MappingResult:  # fmt: skip
     """Occupancy map of the seafloor from a log's DVL beams and sonar ranges along a trajectory
     (a ``trajectory.npz`` with covariances, or its localization folder).
 
@@ -78,11 +84,17 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     (``method``, ``resolution``, ``length_scale``, ``variance_bounds``, ...) taking precedence
     over the settings' ``mapping`` section. ``prior``: a map (or ``map.npz``, or its folder) to
     seed from. With ``out_dir``, the folder is checked before any work and then written
-    (:func:`~undertow.io.results.save_map`). Warnings are returned in ``result.warnings``."""
+    (:func:`~undertow.io.results.save_map`). Warnings are returned in ``result.warnings``.
+
+    ``tiles``: map in square tiles of this size (m) as Dask tasks on ``scheduler`` ("local",
+    "threads", "sync" or ``tcp://host:port``; :func:`~undertow.mapping.tiled.map_tiled`), the
+    tiles also written to ``out_dir/tiles``; a tile that fails twice is left out with a
+    warning naming it."""
     settings_path = None if isinstance(settings, Settings) else settings
     if not isinstance(settings, Settings):
         settings = Settings.from_yaml(settings_path)
     config = mapping_config(settings, overrides)  # the options first, then the files
+    _check_tiles(tiles, scheduler, prior, config)
     if out_dir is not None:
         given_prior = None if isinstance(prior, OccupancyMap) else prior
         inputs = [log_path, trajectory_path, given_prior, settings_path, topics]
@@ -95,12 +107,80 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(log_path, topics, settings)
+        if tiles is not None:
+            return _map_tiled_file(log, trajectory, config, tiles, scheduler, out_dir,
+                                   overwrite, caught)  # fmt: skip
         result = map_log(log, trajectory, config, prior=prior)
     result.warnings = caught
     if out_dir is not None:
         save_map(result.map, config.model_dump(mode="json"), result.metadata, out_dir, overwrite,
                  threshold=config.occupied_threshold)  # fmt: skip
     return result
+
+
+def _check_tiles(tiles, scheduler, prior, config: MappingConfig) -> None:
+    """The tiling options, checked (one line each) before any file is read."""
+    if tiles is None:
+        if scheduler is not None:
+            raise ConfigError("--scheduler applies to tiled mapping: give --tiles SIZE_M too")
+        return
+    from ..study.batch import check_scheduler
+
+    Tiling.for_config(config, tiles)
+    if prior is not None:
+        raise ConfigError("--prior cannot be combined with --tiles (map the prior's area untiled)")
+    check_scheduler(scheduler, reach=True)
+
+
+def _map_tiled_file(log, trajectory, config: MappingConfig, tiles: float, scheduler,
+                    out_dir, overwrite: bool, caught: list[str]) -> MappingResult:  # fmt: skip
+    """:func:`map_file` with ``tiles``: samples, tiles on Dask, merged map; with ``out_dir``
+    the tiles are written to ``out_dir/tiles`` as they finish, then the merged map."""
+    with collect_warnings(caught):
+        samples = samples_from_config(log, trajectory, config)
+        if out_dir is None:
+            tiled = map_tiled(samples, config, tiles, scheduler=scheduler)
+        else:
+            with output_folder(out_dir, overwrite) as out:
+                tiled = map_tiled(samples, config, tiles, scheduler=scheduler,
+                                  tile_dir=out / "tiles")  # fmt: skip
+                _write_map(
+                    out, tiled.map, config, _tiled_metadata(tiled, samples, log, trajectory, config)
+                )
+    occupancy = dataclasses.replace(
+        tiled.map,
+        metadata={**tiled.map.metadata, "occupied_threshold": config.occupied_threshold},
+    )
+    result = MappingResult(
+        occupancy, config, _tiled_metadata(tiled, samples, log, trajectory, config)
+    )
+    result.warnings = caught
+    return result
+
+
+def _tiled_metadata(tiled, samples, log, trajectory, config) -> dict:
+    occupancy = tiled.map
+    return {
+        "mapper": {k: v for k, v in tiled.metadata.items() if k != "tiling"},
+        "tiling": {k: v for k, v in tiled.metadata["tiling"].items() if k != "per_tile"},
+        "samples": {
+            "hits": int((samples.label == 1).sum()),
+            "free": int((samples.label == 0).sum()),
+            "dropped": {k: int(v) for k, v in samples.dropped.items()},
+        },
+        "cells_with_mass": len(occupancy),
+        "occupied_cells": len(occupancy.occupied(config.occupied_threshold)),
+        "trajectory_variant": trajectory.variant,
+        "source": log.source,
+    }
+
+
+def _write_map(out: Path, occupancy: OccupancyMap, config: MappingConfig, metadata: dict) -> None:
+    """map.npz, map.ply and config.yaml into ``out`` (as :func:`save_map` does)."""
+    occupancy.save(out / "map.npz")
+    write_map_ply(out / "map.ply", occupancy, threshold=config.occupied_threshold)
+    doc = {"mapping": config.model_dump(mode="json"), "result": to_plain(metadata)}
+    (out / "config.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
 
 
 def _check_prior(prior, config: MappingConfig) -> None:

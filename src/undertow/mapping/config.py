@@ -37,7 +37,9 @@ Method = Literal["csm", "bki", "adaptive"]
 
 
 class MappingConfig(BaseModel):
-    """Mapping stage settings (grid 0.1 m, sigma_0 DVL 0.9 / sonar 0.6, l_min, l_max)."""
+    """Mapping stage settings (grid 0.1 m, sigma_0 DVL 0.9 / sonar 0.6 / multibeam 0.6, l_min,
+    l_max). A multibeam stream, when the log has one, is mapped unless ``use_multibeam`` is
+    false; a multibeam-only map (use_dvl and use_sonar false) sets ``use_multibeam: true``."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
@@ -59,8 +61,12 @@ class MappingConfig(BaseModel):
     )
     sigma0_dvl: float = Field(0.9, gt=0, allow_inf_nan=False)
     sigma0_sonar: float = Field(0.6, gt=0, allow_inf_nan=False)
+    sigma0_multibeam: float = Field(
+        0.6, gt=0, allow_inf_nan=False, description="sigma_0 of multibeam samples (as the sonar)"
+    )
     use_dvl: bool = True
     use_sonar: bool = True
+    use_multibeam: bool = True
     occupied_threshold: float = Field(OCCUPIED_THRESHOLD, ge=0, le=1)
     max_memory_gb: float | None = Field(
         None, gt=0, allow_inf_nan=False, description="refuse a map whose storage would exceed "
@@ -75,10 +81,11 @@ class MappingConfig(BaseModel):
             lo < 0 or lo > hi for lo, hi in zip(*self.variance_bounds, strict=True)
         ):
             raise ValueError("variance_bounds need 0 <= min <= max per axis")
-        if not (self.use_dvl or self.use_sonar):
+        multibeam_only = self.use_multibeam and "use_multibeam" in self.model_fields_set
+        if not (self.use_dvl or self.use_sonar or multibeam_only):
             raise ValueError(
                 "use_dvl and use_sonar are both false in the config: enable at least one range "
-                "stream"
+                "stream (use_multibeam: true for a multibeam-only map)"
             )
         # a length scale under a tenth of a cell puts a sample's kernel mass in at most one
         # cell centre, or none: the map would lose its samples

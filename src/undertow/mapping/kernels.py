@@ -140,7 +140,7 @@ def _rehash(chunk_keys, n, table_keys, table_vals):
         table_vals[s] = c
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # other threads (links, Dask tiles) run meanwhile
 def _scatter(start, mode, points, label, sigma0, variance, var_lo, var_hi, l_min, l_max, res,
              table_keys, table_vals, chunk_keys, n_chunks, alpha, beta):  # fmt: skip
     """Add k(m_*, m_i) y_i to alpha and k(m_*, m_i)(1 - y_i) to beta (``eq:alpha_param``,

@@ -33,7 +33,8 @@ def map_log(
 ) -> MappingResult:
     """Training samples from every valid range (DVL beams, sonar), then one mapper pass."""
     config = config or MappingConfig()
-    log.require("dvl", stage="map") if config.use_dvl and log.sonar is None else None
+    if config.use_dvl and log.sonar is None and log.multibeam is None:
+        log.require("dvl", stage="map")
     try:
         samples = samples_from_config(log, trajectory, config)
         mapper = mapper_from_config(config, prior=prior)

@@ -1,8 +1,10 @@
 """From range measurements to BKI training samples (points labelled occupied / free).
 
-Every valid range r of a DVL beam (slant range along its unit vector u, DVL frame) or of the
-sonar (along the sonar frame's +z axis) gives, with the body pose (p, R) interpolated at the
-range's time and the sensor mounting (lever arm t_s, rotation R_s, both in the body frame):
+Every valid range r of a DVL beam (slant range along its unit vector u, DVL frame: the beam
+geometry the log carries, ``Dvl.beam_unit``), of the sonar (along the sonar frame's +z axis) or
+of a multibeam beam (r = |p|, u = p / r for its detection p in the multibeam frame) gives,
+with the body pose (p, R) interpolated at the range's time and the sensor mounting (lever arm
+t_s, rotation R_s, both in the body frame):
 
     origin o = p + R t_s,   direction v = R R_s u,   hit m = o + r v   (label y = 1),
 
@@ -12,8 +14,8 @@ mapping with Bayesian generalized kernel inference", IEEE T-RO 2019;
 github.com/RobustFieldAutonomyLab/la3dm: free points every free_resolution along each ray, from
 the origin, labelled 0). Position and its per-axis variance are interpolated linearly,
 roll/pitch/yaw on the unwrapped angles. Invalid beams, non-finite or out-of-range values (DVL
-0.05-50 m, sonar min_range-max_range) and ranges outside the trajectory's time span are dropped
-and counted in ``Samples.dropped``.
+0.05-50 m, sonar and multibeam min_range-max_range) and ranges outside the trajectory's time
+span are dropped and counted in ``Samples.dropped``.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from ..trajectory import Trajectory
 from .config import MappingConfig
 from .kernels import _expand_rays
 
-SENSOR_DVL, SENSOR_SONAR = 0, 1
+SENSOR_DVL, SENSOR_SONAR, SENSOR_MULTIBEAM = 0, 1, 2
 DVL_MIN_RANGE, DVL_MAX_RANGE = 0.05, 50.0
 
 
@@ -38,7 +40,8 @@ DVL_MIN_RANGE, DVL_MAX_RANGE = 0.05, 50.0
 class Samples:
     """Training samples: ``points`` (N, 3) world, ``label`` (N,) 1 hit / 0 free, ``sigma0`` (N,),
     ``pose_variance`` (N, 3) m^2, ``ray`` (N,) index into ``origins`` (R, 3) (-1 if unknown),
-    ``sensor`` (N,) 0 DVL / 1 sonar / -1 unknown, ``dropped`` counts of rejected ranges."""
+    ``sensor`` (N,) 0 DVL / 1 sonar / 2 multibeam / -1 unknown, ``dropped`` counts of rejected
+    ranges."""
 
     points: np.ndarray
     label: np.ndarray
@@ -95,27 +98,39 @@ class Samples:
 
 def _interpolate_pose(trajectory: Trajectory, t: np.ndarray):
     """Position (linear), rpy (on unwrapped angles) and position variance at times t."""
-    tt = trajectory.t
-    pos = np.stack([np.interp(t, tt, trajectory.position[:, j]) for j in range(3)], axis=1)
     ang = np.unwrap(trajectory.orientation, axis=0)
+    return pose_at(trajectory.t, trajectory.position, ang, trajectory.position_variance, t)
+
+
+def pose_at(tt, position, unwrapped_rpy, variance, t):
+    """(position, rpy wrapped, position variance) at times t, interpolated linearly between the
+    states (tt, position (N, 3), unwrapped rpy (N, 3), variance (N, 3)); any run of states
+    that brackets every t gives the same values as the whole trajectory."""
+    pos = np.stack([np.interp(t, tt, position[:, j]) for j in range(3)], axis=1)
+    ang = unwrapped_rpy
     rpy = wrap_angle(np.stack([np.interp(t, tt, ang[:, j]) for j in range(3)], axis=1))
-    pv = trajectory.position_variance
-    var = np.stack([np.interp(t, tt, pv[:, j]) for j in range(3)], axis=1)
+    var = np.stack([np.interp(t, tt, variance[:, j]) for j in range(3)], axis=1)
     return pos, rpy, var
 
 
 def _rays(t, r, unit, ok, mount, trajectory, sigma0, sensor):
     """World origins, directions and ranges of the kept rays (flattened), with their metadata."""
     t, r, unit = t[ok], r[ok], unit[ok]
-    pos, rpy, var = _interpolate_pose(trajectory, t)
+    return rays_from_pose(r, unit, mount, *_interpolate_pose(trajectory, t), sigma0, sensor)
+
+
+def rays_from_pose(r, unit, mount, pos, rpy, var, sigma0, sensor):
+    """(origin o = p + R t_s, direction v = R R_s u, r, pose variance, sigma0, sensor) of rays
+    with ranges r along units u (sensor frame) from body poses (pos, rpy, var)."""
     R = rpy_to_matrix(rpy)
     origin = pos + R @ np.asarray(mount.translation, float)
     direction = np.einsum("nij,nj->ni", R @ mount.rotation_matrix(), unit)
-    n = t.size
+    n = r.size
     return origin, direction, r, var, np.full(n, sigma0), np.full(n, sensor, np.int8)
 
 
-def _check_range(kind, t, r, flag, lo, hi, span, dropped) -> np.ndarray:
+def check_range(kind, t, r, flag, lo, hi, span, dropped) -> np.ndarray:
+    """flag & in [lo, hi] & t inside span; the rest counted in ``dropped`` by reason."""
     finite = np.isfinite(r)
     in_range = finite & (r >= lo) & (r <= hi)
     in_time = (t >= span[0]) & (t <= span[1])
@@ -130,15 +145,17 @@ def build_samples(log: Log, trajectory: Trajectory, **settings) -> Samples:
     """Hits and free samples from the log's DVL beam ranges and sonar ranges (see module doc).
 
     ``settings`` are :class:`~undertow.mapping.config.MappingConfig` fields (``free_resolution``,
-    ``sigma0_dvl``, ``sigma0_sonar``, ``use_dvl``, ``use_sonar``); the ones not given take its
+    ``sigma0_dvl``, ``sigma0_sonar``, ``sigma0_multibeam``, ``use_dvl``, ``use_sonar``,
+    ``use_multibeam``); the ones not given take its
     defaults, and all are checked there."""
     return samples_from_config(log, trajectory, MappingConfig.from_dict(settings))
 
 
 def samples_from_config(log: Log, trajectory: Trajectory, config: MappingConfig) -> Samples:
     """:func:`build_samples` with the config's (checked) values."""
-    f, use_dvl, use_sonar = config.free_resolution, config.use_dvl, config.use_sonar
-    wanted = [n for n, use in (("dvl", use_dvl), ("sonar", use_sonar)) if use]
+    f = config.free_resolution
+    use = {"dvl": config.use_dvl, "sonar": config.use_sonar, "multibeam": config.use_multibeam}
+    wanted = [n for n, on in use.items() if on]
     if not any(getattr(log, n) is not None and len(getattr(log, n)) for n in wanted):
         raise MissingStreamError(f"mapping needs a range stream ({' or '.join(wanted)} "
                                  "enabled) but the log has none of them")  # fmt: skip
@@ -147,35 +164,50 @@ def samples_from_config(log: Log, trajectory: Trajectory, config: MappingConfig)
     span = (float(trajectory.t[0]), float(trajectory.t[-1]))
     dropped: dict[str, int] = {}
     parts = []
-    if use_dvl and log.dvl is not None and len(log.dvl):
+    if use["dvl"] and log.dvl is not None and len(log.dvl):
         d = log.dvl
-        t = np.repeat(d.t, 4)
+        t = np.repeat(d.t, d.beam_range.shape[1])
         r = d.beam_range.reshape(-1)
         unit = d.beam_unit.reshape(-1, 3)
         flag = d.beam_valid.reshape(-1) & np.all(np.isfinite(unit), axis=1)
-        ok = _check_range("dvl", t, r, flag, DVL_MIN_RANGE, DVL_MAX_RANGE, span, dropped)
+        ok = check_range("dvl", t, r, flag, DVL_MIN_RANGE, DVL_MAX_RANGE, span, dropped)
         parts.append(_rays(t, r, unit, ok, log.mounting.dvl, trajectory, config.sigma0_dvl,
                            SENSOR_DVL))  # fmt: skip
-    if use_sonar and log.sonar is not None and len(log.sonar):
+    if use["sonar"] and log.sonar is not None and len(log.sonar):
         s = log.sonar
         flag = np.ones(len(s), bool)
-        ok = _check_range("sonar", s.t, s.range, flag, s.min_range, s.max_range, span, dropped)
+        ok = check_range("sonar", s.t, s.range, flag, s.min_range, s.max_range, span, dropped)
         unit = np.tile([0.0, 0.0, 1.0], (len(s), 1))
         parts.append(_rays(s.t, s.range, unit, ok, log.mounting.sonar, trajectory,
                            config.sigma0_sonar, SENSOR_SONAR))  # fmt: skip
-    _check_time_overlap(log, span, dropped, sum(p[2].size for p in parts), use_dvl, use_sonar)
+    if use["multibeam"] and log.multibeam is not None and len(log.multibeam):
+        parts.append(_multibeam_rays(log, trajectory, config, span, dropped))
+    named = [n for n in wanted if n != "multibeam" or log.multibeam is not None]
+    _check_time_overlap(log, span, dropped, sum(p[2].size for p in parts), named)
     origin, direction, r, var, sig, sensor = (np.concatenate(c) for c in zip(*parts, strict=True))
-    return _expand(origin, direction, r, var, sig, sensor, f, dropped)
+    return expand(origin, direction, r, var, sig, sensor, f, dropped)
 
 
-def _check_time_overlap(log: Log, span, dropped: dict, kept: int, use_dvl, use_sonar) -> None:
+def _multibeam_rays(log: Log, trajectory: Trajectory, config: MappingConfig, span, dropped):
+    """Rays of every multibeam detection p: r = |p|, u = p / r (multibeam frame); beams without
+    a detection count as ``multibeam_invalid``."""
+    m = log.multibeam
+    t = np.repeat(m.t, m.beams)
+    r = m.range.reshape(-1)
+    unit = m.beam_unit.reshape(-1, 3)
+    flag = np.all(np.isfinite(unit), axis=1)
+    ok = check_range("multibeam", t, r, flag, m.min_range, m.max_range, span, dropped)
+    return _rays(t, r, unit, ok, log.mounting.multibeam, trajectory, config.sigma0_multibeam,
+                 SENSOR_MULTIBEAM)  # fmt: skip
+
+
+def _check_time_overlap(log: Log, span, dropped: dict, kept: int, streams: list[str]) -> None:
     """No usable range inside the trajectory's time span is an error naming both spans (a
     trajectory of another log, or times in another clock); more than half outside it, a
     warning (the map covers only part of the log)."""
     outside = sum(v for k, v in dropped.items() if k.endswith("_outside_trajectory"))
     if outside == 0:
         return
-    streams = [n for n, use in (("dvl", use_dvl), ("sonar", use_sonar)) if use]
     times = [getattr(log, n).t for n in streams if getattr(log, n) is not None]
     times = [t for t in times if len(t)]
     first, last = min(float(t[0]) for t in times), max(float(t[-1]) for t in times)
@@ -196,7 +228,7 @@ def _check_time_overlap(log: Log, span, dropped: dict, kept: int, use_dvl, use_s
         )
 
 
-def _expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
+def expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
     """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f (numba kernel
     :func:`~undertow.mapping.kernels._expand_rays`: hits first, then free samples ray by ray)."""
     n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
