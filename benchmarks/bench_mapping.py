@@ -13,12 +13,14 @@ lawnmower survey built here (no simulator needed); ranges are exact ray/floor in
 
 Multibeam (``per_ping.multibeam``): pings of a 256-beam fan (120 deg swath across track) at
 the same altitude over a seabed heightfield, each beam a hit plus free samples, built from the
-rays (no log) and integrated one call per ping; OctoMap inserts the same end points. Threads
+detections (world rays, computed outside the timing as OctoMap's end points are) and integrated
+one call per ping, on all numba threads and on one; OctoMap inserts the same end points. Threads
 (``per_ping.threads``): the adaptive figures with numba limited to 1 and to 2 threads.
 
 Km-scale (``km_survey``): a lawnmower of 256-beam pings (>= 10^7 rays) over a 1 km x 1 km seabed
 heightfield 10 m below, mapped at 1 m (length scales and free spacing scaled with the cell),
-once in one worker process (one mapper, pings streamed in batches) and once tiled
+in one worker process (one mapper, pings streamed in batches) with the scatter on one numba
+thread and on two (slabs of cells per thread, ``mapping/grid.py``), and tiled
 (:mod:`undertow.mapping.tiled`) on a LocalCluster of 2 single-threaded workers, each tile task
 generating the pings that reach its tile; wall time, peak RSS per worker, per-tile cost, the
 merge (reading the tile directory back as one map) and the extrapolation to 16 workers.
@@ -43,6 +45,7 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # OctoMap on one core, like our kernels
 
+import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
 from undertow.log import Dvl, Log, Mounting, SonarRange  # noqa: E402
@@ -307,8 +310,6 @@ def fan_samples(k: np.ndarray, g: dict, f: float, sigma0: float = 0.9, box=None)
     through the same numba expansion as ``samples_from_config``; with ``box`` (x0, y0, x1, y1)
     only the rays whose segment's x-y bounding box meets it (found first with the longest
     range the seabed allows, then with the exact one)."""
-    from undertow.mapping.kernels import _expand_rays
-
     o, v = _fan(k, g)
     origin, v = np.repeat(o, BEAMS, axis=0), v.reshape(-1, 3)
     var = np.repeat(ping_variance(k, g), BEAMS, axis=0)
@@ -320,6 +321,15 @@ def fan_samples(k: np.ndarray, g: dict, f: float, sigma0: float = 0.9, box=None)
     if box is not None:
         keep = _meets(origin, origin + r[:, None] * v, box)
         origin, v, r, var = origin[keep], v[keep], r[keep], var[keep]
+    return samples_from_rays(origin, v, r, var, f, sigma0)
+
+
+def samples_from_rays(origin, v, r, var, f: float, sigma0: float = 0.9) -> Samples:
+    """Training samples of world rays (origins, unit directions, ranges, pose variances; one
+    row per beam): a hit per beam and free samples every f from the origin, through the same
+    numba expansion as ``samples_from_config``."""
+    from undertow.mapping.kernels import _expand_rays
+
     n = r.size
     n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
     arrays = _expand_rays(np.ascontiguousarray(origin), np.ascontiguousarray(v), r,
@@ -336,21 +346,32 @@ def bench_multibeam(n_pings: int = 2000, altitude: float = ALTITUDE, repeats: in
     fan_samples(k[:1], g, 0.1)  # compile / cache load
     _mapper("adaptive").integrate(fan_samples(k[:1], g, 0.1))
     o, v, r = fan_rays(k, g)
-    ms = ms_batch = float("inf")
-    for _ in range(repeats):
-        mapper = _mapper("adaptive")
-        t0 = time.perf_counter()
-        for i in range(n_pings):
-            mapper.integrate(fan_samples(k[i : i + 1], g, 0.1))
-        ms = min(ms, (time.perf_counter() - t0) * 1e3 / n_pings)
-        mapper = _mapper("adaptive")
-        t0 = time.perf_counter()
-        mapper.integrate(fan_samples(k, g, 0.1))
-        ms_batch = min(ms_batch, (time.perf_counter() - t0) * 1e3 / n_pings)
-    samples = len(fan_samples(k, g, 0.1)) / n_pings
+    var = ping_variance(k, g)
+    # the detections (rays) come from the sensor, outside the timing, as OctoMap's end points
+    rays = [(np.repeat(o[i : i + 1], BEAMS, axis=0), v[i], r[i], np.repeat(var[i : i + 1], BEAMS,
+             axis=0)) for i in range(n_pings)]  # fmt: skip
+    whole = (np.repeat(o, BEAMS, axis=0), v.reshape(-1, 3), r.ravel(), np.repeat(var, BEAMS, 0))
+    samples = len(samples_from_rays(*whole, 0.1)) / n_pings
     out = {"beams": BEAMS, "swath_deg": SWATH_DEG, "altitude_m": altitude, "pings": n_pings,
-           "samples_per_ping": samples, "adaptive_build_plus_integrate_ms_per_ping": ms,
-           "adaptive_whole_set_ms_per_ping": ms_batch}  # fmt: skip
+           "samples_per_ping": samples, "numba_threads": numba.get_num_threads()}  # fmt: skip
+    for threads in (numba.get_num_threads(), 1):  # both cores (the headline), then one
+        numba.set_num_threads(threads)
+        ms = ms_batch = float("inf")
+        for _ in range(repeats):
+            mapper = _mapper("adaptive")
+            t0 = time.perf_counter()
+            for ray in rays:
+                mapper.integrate(samples_from_rays(*ray, 0.1))
+            ms = min(ms, (time.perf_counter() - t0) * 1e3 / n_pings)
+            mapper = _mapper("adaptive")
+            t0 = time.perf_counter()
+            mapper.integrate(samples_from_rays(*whole, 0.1))
+            ms_batch = min(ms_batch, (time.perf_counter() - t0) * 1e3 / n_pings)
+        suffix = "" if threads == out["numba_threads"] else f"_{threads}_thread"
+        out[f"adaptive_build_plus_integrate_ms_per_ping{suffix}"] = ms
+        out[f"adaptive_whole_set_ms_per_ping{suffix}"] = ms_batch
+    numba.set_num_threads(out["numba_threads"])
+    ms = out["adaptive_build_plus_integrate_ms_per_ping"]
     try:
         import octomap
     except ImportError:
@@ -369,9 +390,8 @@ def bench_multibeam(n_pings: int = 2000, altitude: float = ALTITUDE, repeats: in
 
 def bench_threads(n_pings: int, area: float, repeats: int = 3) -> dict:
     """The per-ping adaptive figure (build + integrate, whole log) with numba limited to 1 and
-    2 threads (the scatter kernel is serial: both should match), and OctoMap's, same run."""
-    import numba
-
+    2 threads (the scatter runs on numba's threads, one slab of cells each), and OctoMap's,
+    same run."""
     log, traj, rays = survey_batch(0, n_pings, n_pings, area)
     out = {}
     for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
@@ -422,14 +442,21 @@ def tile_pings(tile, g: dict, tiling: Tiling) -> np.ndarray:
     return k[keep], np.array([x0, y0, x1, y1])
 
 
-def km_tile_task(tile, g: dict, tiling: Tiling | None, config: MappingConfig):
+def km_tile_task(tile, g: dict, tiling: Tiling | None, config: MappingConfig, threads: int = 1):
     """One Dask task: generate, in batches, the rays of the pings that reach ``tile`` whose
     segment meets the tile grown by the halo, integrate all their samples (those outside the
-    halo only touch cells the tile does not own, which it drops), return the cells it owns and
-    the costs (``tiling`` None: the whole survey in one mapper, every cell kept)."""
+    halo only touch cells the tile does not own, which it drops) with the scatter on
+    ``threads`` numba threads, return the cells it owns and the costs (``tiling`` None: the
+    whole survey in one mapper, every cell kept)."""
+    from undertow.mapping.grid import scatter_threads
     from undertow.mapping.mappers import mapper_from_config
     from undertow.mapping.tiled import TileResult
 
+    with scatter_threads(threads):
+        return _km_tile(tile, g, tiling, config, mapper_from_config, TileResult)
+
+
+def _km_tile(tile, g, tiling, config, mapper_from_config, TileResult):  # noqa: N803
     t0, cpu0 = time.perf_counter(), time.process_time()
     mapper = mapper_from_config(config)
     gen = integ = 0.0
@@ -484,13 +511,15 @@ def km_tiles(g: dict, tiling: Tiling) -> list:
     return [(i, j) for i in range(first, last + 1) for j in range(first, last + 1)]
 
 
-def _run_km(g: dict, tiling: Tiling | None, config, workers: int, tile_dir) -> dict:
+def _run_km(g: dict, tiling: Tiling | None, config, workers: int, tile_dir,
+            threads: int = 1) -> dict:  # fmt: skip
     """All tiles of ``tiling`` the survey reaches (None: one task, the whole survey) on a
-    LocalCluster of ``workers`` single-threaded processes."""
+    LocalCluster of ``workers`` single-threaded processes, each task's scatter on ``threads``
+    numba threads."""
     from undertow.mapping.tiled import run_tiles, write_tile
 
     tiles = [(0, 0)] if tiling is None else km_tiles(g, tiling)
-    jobs = {tile: (g, tiling, config) for tile in tiles}
+    jobs = {tile: (g, tiling, config, threads) for tile in tiles}
     per_tile, sums = {}, np.zeros(3)
 
     def collect(item) -> None:
@@ -528,7 +557,9 @@ def bench_km(rays: int = 10_000_000, area: float = 1000.0, tile_m: float = 250.0
     g = fan_geometry(area, KM_ALTITUDE, int(np.ceil(rays / BEAMS)))
     var = ping_variance(np.arange(g["n_pings"]), g)
     config = km_config((var.min(axis=0), var.max(axis=0)))  # session bounds, before tiling
-    single = _run_km(g, None, config, 1, None)  # one mapper over the whole survey
+    single = _run_km(g, None, config, 1, None)  # one mapper over the whole survey, one thread
+    # the same with the scatter on both cores (mapping/grid.py: slabs of cells per thread)
+    single_2 = _run_km(g, None, config, 1, None, threads=2)
     tiling = Tiling.for_config(config, tile_m)
     with tempfile.TemporaryDirectory() as tmp:
         tiled = _run_km(g, tiling, config, 2, Path(tmp))
@@ -549,8 +580,10 @@ def bench_km(rays: int = 10_000_000, area: float = 1000.0, tile_m: float = 250.0
         "rays": g["n_pings"] * BEAMS, "pings": g["n_pings"], "area_m": [area, area],
         "lines": g["n_lines"], "altitude_m": KM_ALTITUDE, "resolution_m": KM_RES,
         "tile_m": tiling.size_m, "halo_m": tiling.halo,
-        "single_worker": single, "tiled_2_workers": tiled,
+        "single_worker": single, "single_worker_2_threads": single_2, "tiled_2_workers": tiled,
         "speedup": single["wall_s"] / tiled["wall_s"], "speedup_target": 1.6,
+        "speedup_over_single_2_threads": single_2["wall_s"] / tiled["wall_s"],
+        "single_2_threads_speedup": single["wall_s"] / single_2["wall_s"],
         "speedup_cpu_bound": sum(single["cpu_s_per_worker"]) / max(tiled["cpu_s_per_worker"]),
         "load_average_after": os.getloadavg(),
         "same_map": {"cells": [single["cells"], tiled["cells"], merged_cells],

@@ -11,7 +11,10 @@ reported.
 from __future__ import annotations
 
 import math
+import threading
+from contextlib import contextmanager
 
+import numba
 import numpy as np
 
 from ..errors import DataError
@@ -22,10 +25,41 @@ from .kernels import (
     MODE_PRODUCT,
     _add_mass,
     _count_chunks,
+    _extent,
+    _insert_chunks,
     _max_abs,
     _rehash,
-    _scatter,
+    _scatter_parallel,
+    _scatter_slab,
+    _slab_splits,
 )
+
+PARALLEL_MIN_SAMPLES = 2048  # below this a scatter stays on the calling thread
+# one parallel scatter at a time per process: a second caller (a Dask thread, the live view)
+# runs the serial kernel instead of nesting numba's thread pool (its workqueue layer aborts then)
+_PARALLEL = threading.Lock()
+_ALL = 1 << 62  # a slab holding every cell
+
+
+@contextmanager
+def scatter_threads(n: int):
+    """Scatters on this thread use at most ``n`` numba threads inside the block (1: serial;
+    the setting is per calling thread, as ``numba.set_num_threads``)."""
+    before = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
+def parallel_parts(n_samples: int) -> int:
+    """Threads a scatter of ``n_samples`` uses: numba's thread count for the calling thread
+    (``numba.set_num_threads``, ``NUMBA_NUM_THREADS``), 1 under :data:`PARALLEL_MIN_SAMPLES`."""
+    if n_samples < PARALLEL_MIN_SAMPLES:
+        return 1
+    return int(numba.get_num_threads())
+
 
 # bytes per chunk: alpha and beta (float32), its key, two hash slots (key, value)
 CHUNK_BYTES = 2 * 4 * CHUNK**3 + 3 * 8 + 2 * 2 * 8
@@ -70,15 +104,29 @@ class ChunkedGrid:
         return (self._table_keys, self._table_vals, self._keys, self._n, self._alpha, self._beta)
 
     def scatter(self, mode, points, label, sigma0, variance, var_bounds, l_min, l_max) -> None:
-        """Run the scatter kernel over all samples, growing the chunk arrays as needed."""
+        """Place every chunk the samples touch (growing the arrays as needed), then run the
+        scatter kernel: on numba's threads, one slab of cells each, when there are enough
+        samples (:func:`parallel_parts`); the map is the same either way, bit for bit."""
         start, n = 0, points.shape[0]
         self._check_extent(points)
         lo, hi = var_bounds
+        res = self.resolution
         while start < n:
-            start = _scatter(start, mode, points, label, sigma0, variance, lo, hi, l_min, l_max,
-                             self.resolution, *self._tables())  # fmt: skip
+            start = _insert_chunks(start, mode, points, variance, lo, hi, l_min, l_max, res,
+                                   *self._tables()[:4])  # fmt: skip
             if start < n:
                 self._grow()
+        tk, tv, _, _, alpha, beta = self._tables()
+        args = (mode, points, label, sigma0, variance, lo, hi, l_min, l_max, res, tk, tv, alpha,
+                beta)  # fmt: skip
+        parts = parallel_parts(n)
+        if parts > 1 and _PARALLEL.acquire(blocking=False):
+            try:
+                _scatter_parallel(*_slab_splits(points, res, parts), *args)
+            finally:
+                _PARALLEL.release()
+        else:
+            _scatter_slab(0, -_ALL, _ALL, *args)
 
     def _check_extent(self, points: np.ndarray) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range."""
@@ -118,7 +166,8 @@ class ChunkedGrid:
         if peak(held + n * chunks_per_sample) <= limit_bytes:
             return int(peak(held + n * chunks_per_sample))  # cheapest upper bound
         cells_per_axis = np.asarray(cells_per_axis)
-        extent = (points.max(axis=0) - points.min(axis=0)) / self.resolution + cells_per_axis
+        p_lo, p_hi = _extent(points)
+        extent = (p_hi - p_lo) / self.resolution + cells_per_axis
         box = float(np.prod(np.ceil(extent / CHUNK) + 1))
         if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:
             return int(peak(held + min(n * chunks_per_sample, box)))  # cheap upper bound

@@ -15,14 +15,18 @@ Public (numpy, for users and tests):
 Private (numba, plain arrays): the scatter kernel loops over training samples and adds each
 sample's kernel weight to the cells inside its compact support, found by index arithmetic
 (cell index i = floor(p / res), centre (i + 1/2) res); the grid is a hash of dense 8^3 chunks in
-plain arrays (open addressing, linear probing). A scatter call returns the index of the first
-sample it could not place because the chunk arrays are full; the caller grows them and resumes.
+plain arrays (open addressing, linear probing). A scatter is two passes: :func:`_insert_chunks`
+places every chunk the supports touch (returning the first sample it could not place when the
+chunk arrays are full; the caller grows them and resumes), then :func:`_scatter_slab` adds the
+mass with the table read only, so :func:`_scatter_parallel` can run it on several threads, each
+owning a slab of cells along x or y and walking all samples in order: every cell receives the
+same terms in the same order whatever the slabs, so the map is the same bit for bit.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 CHUNK = 8  # cells per chunk edge
 CHUNK_SHIFT = 3  # log2(CHUNK)
@@ -61,6 +65,22 @@ def _max_abs(points) -> float:
     return m
 
 
+@njit(cache=True)
+def _extent(points):
+    """(min (3,), max (3,)) over the rows of ``points`` (N, 3), N > 0, in one pass (numpy's
+    axis-0 reductions of an (N, 3) array are many times slower)."""
+    lo = points[0].copy()
+    hi = points[0].copy()
+    for i in range(1, points.shape[0]):
+        for j in range(3):
+            v = points[i, j]
+            if v < lo[j]:
+                lo[j] = v
+            elif v > hi[j]:
+                hi[j] = v
+    return lo, hi
+
+
 @njit(cache=True, inline="always")
 def _k1(d, l):
     """Unit-sigma_0 sparse kernel of ``eq:kernel`` at distance d >= 0."""
@@ -72,15 +92,19 @@ def _k1(d, l):
 
 
 @njit(cache=True, inline="always")
-def _axis_weights(d0, step, count, l, out):
+def _axis_weights(d0, step, count, l, out, rot, j):
     """out[a] = _k1(|d_a|, l) for the signed distances d_a = d0 + a step of ``count`` cell
     centres along one axis. The angles 2 pi d_a / l are equally spaced, so cos and sin follow
-    by the angle-addition recurrence (4 trig calls per axis instead of 2 per cell); with
-    sin(2 pi |d| / l) = sign(d) sin(2 pi d / l) the result is ``eq:kernel`` to rounding."""
+    by the angle-addition recurrence (2 trig calls for the first angle, 2 for the step, instead
+    of 2 per cell); with sin(2 pi |d| / l) = sign(d) sin(2 pi d / l) the result is
+    ``eq:kernel`` to rounding. ``rot[j]`` caches (l, cos, sin) of the step: the samples of one
+    ray share their length scale."""
     theta = _TWO_PI * d0 / l
-    delta = _TWO_PI * step / l
+    if rot[j, 0] != l:
+        delta = _TWO_PI * step / l
+        rot[j, 0], rot[j, 1], rot[j, 2] = l, np.cos(delta), np.sin(delta)
+    cd, sd = rot[j, 1], rot[j, 2]
     c, s = np.cos(theta), np.sin(theta)
-    cd, sd = np.cos(delta), np.sin(delta)
     for a in range(count):
         d = d0 + a * step
         r = abs(d) / l
@@ -140,108 +164,243 @@ def _rehash(chunk_keys, n, table_keys, table_vals):
         table_vals[s] = c
 
 
+@njit(cache=True, inline="always")
+def _same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
+    """Whether chunk box (first chunk, counts) is the one held in ``box``."""
+    return (box[0] == c0x and box[1] == c0y and box[2] == c0z and box[3] == ncx
+            and box[4] == ncy and box[5] == ncz)  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _set_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
+    box[0], box[1], box[2], box[3], box[4], box[5] = c0x, c0y, c0z, ncx, ncy, ncz
+
+
+@njit(cache=True, inline="always")
+def _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt):
+    """Sample s's support box (first cell ``lo``, cells ``cnt`` per axis); ``lengths`` gets
+    l_ij of ``eq:lengthscale_1`` (l_min in the other modes)."""
+    for j in range(3):
+        lengths[j] = l_min[j]
+        span = var_hi[j] - var_lo[j]
+        if mode == MODE_PRODUCT and span > 0.0:
+            v = min(max((variance[s, j] - var_lo[j]) / span, 0.0), 1.0)
+            lengths[j] = v * (l_max[j] - l_min[j]) + l_min[j]
+    for j in range(3):
+        p = points[s, j] / res
+        if mode == MODE_CELL:
+            lo[j] = np.int64(np.floor(p))
+            cnt[j] = 1
+            continue
+        lj = lengths[j] if mode == MODE_PRODUCT else lengths[0]
+        r = lj / res
+        i0 = np.int64(np.floor(p - r - 0.5)) + 1
+        i1 = np.int64(np.ceil(p + r - 0.5)) - 1
+        if i1 < i0:
+            i1 = i0
+        lo[j] = i0
+        cnt[j] = i1 - i0 + 1
+
+
+@njit(cache=True, inline="always")
+def _support_weights(s, mode, points, res, lengths, lo, cnt, w, rot):
+    """Per axis j, at the support's cell centres: the unit kernel k(|d_j|; l_ij) (product
+    mode), |d_j| (radial: the kernel takes the norm) or 1 (cell); ``rot`` as in
+    :func:`_axis_weights` (3 x 3, NaN to start)."""
+    for j in range(3):
+        if mode == MODE_CELL:
+            w[j, 0] = 1.0
+            continue
+        p = points[s, j] / res
+        if mode == MODE_PRODUCT:
+            _axis_weights((lo[j] + 0.5 - p) * res, res, cnt[j], lengths[j], w[j], rot, j)
+        else:
+            for a in range(cnt[j]):
+                w[j, a] = abs((lo[j] + a + 0.5) - p) * res  # distance to the cell centre
+
+
+@njit(cache=True, inline="always")
+def _add_sample(s, mode, label, sigma0, l0, lo, cnt, w, a0, a1, b0, b1, chunks, c0x, c0y, c0z,
+                alpha, beta):  # fmt: skip
+    """Add sample s's weighted label to the cells lo + (a, b, c) of its support with a in
+    [a0, a1), b in [b0, b1) (the whole support: [0, cnt)), in the chunks ``chunks`` (indexed
+    from chunk (c0x, c0y, c0z))."""
+    y = label[s]
+    sig = 1.0 if mode == MODE_CELL else sigma0[s]
+    for a in range(a0, a1):
+        ix = lo[0] + a
+        wa = w[0, a]
+        if mode == MODE_PRODUCT and wa <= 0.0:
+            continue
+        for b in range(b0, b1):
+            iy = lo[1] + b
+            wb = w[1, b]
+            if mode == MODE_PRODUCT and wb <= 0.0:
+                continue
+            for c in range(cnt[2]):
+                iz = lo[2] + c
+                wc = w[2, c]
+                if mode == MODE_PRODUCT:
+                    k = wa * wb * wc
+                elif mode == MODE_RADIAL:
+                    k = _k1(np.sqrt(wa * wa + wb * wb + wc * wc), l0)
+                else:
+                    k = 1.0
+                if k <= 0.0:
+                    continue
+                k *= sig
+                ci = chunks[(ix >> CHUNK_SHIFT) - c0x, (iy >> CHUNK_SHIFT) - c0y,
+                            (iz >> CHUNK_SHIFT) - c0z]  # fmt: skip
+                if y != 0.0:  # hits (y = 1) touch only alpha, free samples only beta
+                    alpha[ci, ix & 7, iy & 7, iz & 7] += k * y
+                if y != 1.0:
+                    beta[ci, ix & 7, iy & 7, iz & 7] += k * (1.0 - y)
+
+
+@njit(cache=True, nogil=True)
+def _insert_chunks(start, mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys,
+                   table_vals, chunk_keys, n_chunks):  # fmt: skip
+    """Insert every chunk the supports of samples start.. touch (the pass before
+    :func:`_scatter_slab`); returns len(points) when done, else the first sample whose
+    chunks did not fit (the caller grows the arrays and resumes there)."""
+    n = points.shape[0]
+    lo = np.zeros(3, np.int64)
+    cnt = np.zeros(3, np.int64)
+    lengths = np.empty(3)
+    box = np.full(6, -1, np.int64)
+    for s in range(start, n):
+        _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt)
+        c0x, c0y, c0z = lo[0] >> CHUNK_SHIFT, lo[1] >> CHUNK_SHIFT, lo[2] >> CHUNK_SHIFT
+        ncx = ((lo[0] + cnt[0] - 1) >> CHUNK_SHIFT) - c0x + 1
+        ncy = ((lo[1] + cnt[1] - 1) >> CHUNK_SHIFT) - c0y + 1
+        ncz = ((lo[2] + cnt[2] - 1) >> CHUNK_SHIFT) - c0z + 1
+        if _same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
+            continue
+        for a in range(ncx):
+            for b in range(ncy):
+                for c in range(ncz):
+                    ci = _find_or_insert(c0x + a, c0y + b, c0z + c, table_keys, table_vals,
+                                         chunk_keys, n_chunks)  # fmt: skip
+                    if ci < 0:
+                        return s
+        _set_box(box, c0x, c0y, c0z, ncx, ncy, ncz)
+    return n
+
+
+@njit(cache=True, inline="always")
+def _lookup(cx, cy, cz, table_keys, table_vals):
+    """Index of chunk (cx, cy, cz), which must be in the table (read only: thread safe)."""
+    key = _pack(cx, cy, cz)
+    mask = table_keys.shape[0] - 1
+    s = _slot(key, mask)
+    while table_keys[s] != key:
+        s = (s + 1) & mask
+    return table_vals[s]
+
+
 @njit(cache=True, nogil=True)  # other threads (links, Dask tiles) run meanwhile
-def _scatter(start, mode, points, label, sigma0, variance, var_lo, var_hi, l_min, l_max, res,
-             table_keys, table_vals, chunk_keys, n_chunks, alpha, beta):  # fmt: skip
+def _scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_lo, var_hi,
+                  l_min, l_max, res, table_keys, table_vals, alpha, beta):  # fmt: skip
     """Add k(m_*, m_i) y_i to alpha and k(m_*, m_i)(1 - y_i) to beta (``eq:alpha_param``,
-    ``eq:beta_param``; ``eq:new_conc_params_*`` in product mode) for samples start.. .
+    ``eq:beta_param``; ``eq:new_conc_params_*`` in product mode) for every sample, in the cells
+    whose index along ``axis`` (0 or 1) is in [first, stop) (the slab; everything with
+    first, stop = -2^62, 2^62). Every chunk touched must already be in the table
+    (:func:`_insert_chunks`).
 
     mode 0: sigma_0 prod_j k(|d_j|; l_ij) with l_ij from ``eq:lengthscale_1``:
     l_ij = s~_ij^2 (l_max_j - l_min_j) + l_min_j,
     s~_ij^2 = clip((s_ij^2 - lo_j) / (hi_j - lo_j), 0, 1) (0 where hi_j <= lo_j);
     mode 1: sigma_0 k(||d||; l_min_0); mode 2: weight 1 in the sample's own cell (counting
-    sensor model). Returns len(points) when done, else the index of the first sample not
-    applied (chunk arrays full; nothing of that sample was added).
+    sensor model). Samples are applied in order, so each cell's sums do not depend on how the
+    cells are cut into slabs.
     """
     n = points.shape[0]
     max_len = max(l_max[0], l_max[1], l_max[2], l_min[0], l_min[1], l_min[2])
     nmax = int(np.ceil(2.0 * max_len / res)) + 3
+    ncm = (nmax >> CHUNK_SHIFT) + 2
     w = np.zeros((3, nmax))
     lo = np.zeros(3, np.int64)
     cnt = np.zeros(3, np.int64)
     lengths = np.empty(3)
-    ncm = (nmax >> CHUNK_SHIFT) + 2
     chunks = np.empty((ncm, ncm, ncm), np.int64)
-    for s in range(start, n):
-        for j in range(3):
-            lengths[j] = l_min[j]
-            span = var_hi[j] - var_lo[j]
-            if mode == MODE_PRODUCT and span > 0.0:
-                v = min(max((variance[s, j] - var_lo[j]) / span, 0.0), 1.0)
-                lengths[j] = v * (l_max[j] - l_min[j]) + l_min[j]
-        for j in range(3):
-            p = points[s, j] / res
-            if mode == MODE_CELL:
-                lo[j] = np.int64(np.floor(p))
-                cnt[j] = 1
-                w[j, 0] = 1.0
-                continue
-            lj = lengths[j] if mode == MODE_PRODUCT else lengths[0]
-            r = lj / res
-            i0 = np.int64(np.floor(p - r - 0.5)) + 1
-            i1 = np.int64(np.ceil(p + r - 0.5)) - 1
-            if i1 < i0:
-                i1 = i0
-            lo[j] = i0
-            cnt[j] = i1 - i0 + 1
-            if mode == MODE_PRODUCT:
-                _axis_weights((i0 + 0.5 - p) * res, res, cnt[j], lj, w[j])
-            else:
-                for a in range(cnt[j]):
-                    w[j, a] = abs((i0 + a + 0.5) - p) * res  # distance to the cell centre
-        c0x = lo[0] >> CHUNK_SHIFT
-        c0y = lo[1] >> CHUNK_SHIFT
-        c0z = lo[2] >> CHUNK_SHIFT
+    box = np.full(6, -1, np.int64)  # the chunk box ``chunks`` holds (none yet: counts -1)
+    rot = np.full((3, 3), np.nan)
+    for s in range(n):
+        _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt)
+        u0 = max(first - lo[axis], 0)  # the slab's part of the support along `axis`
+        u1 = min(stop - lo[axis], cnt[axis])
+        if u0 >= u1:
+            continue
+        _support_weights(s, mode, points, res, lengths, lo, cnt, w, rot)
+        c0x, c0y, c0z = lo[0] >> CHUNK_SHIFT, lo[1] >> CHUNK_SHIFT, lo[2] >> CHUNK_SHIFT
         ncx = ((lo[0] + cnt[0] - 1) >> CHUNK_SHIFT) - c0x + 1
         ncy = ((lo[1] + cnt[1] - 1) >> CHUNK_SHIFT) - c0y + 1
         ncz = ((lo[2] + cnt[2] - 1) >> CHUNK_SHIFT) - c0z + 1
-        for a in range(ncx):
-            for b in range(ncy):
-                for c in range(ncz):
-                    ci = _find_or_insert(c0x + a, c0y + b, c0z + c,
-                                         table_keys, table_vals, chunk_keys, n_chunks)  # fmt: skip
-                    if ci < 0:
-                        return s
-                    chunks[a, b, c] = ci
-        y = label[s]
-        sig = 1.0 if mode == MODE_CELL else sigma0[s]
-        l0 = lengths[0]
-        for a in range(cnt[0]):
-            ix = lo[0] + a
-            wa = w[0, a]
-            if mode == MODE_PRODUCT and wa <= 0.0:
-                continue
-            for b in range(cnt[1]):
-                iy = lo[1] + b
-                wb = w[1, b]
-                if mode == MODE_PRODUCT and wb <= 0.0:
-                    continue
-                for c in range(cnt[2]):
-                    iz = lo[2] + c
-                    wc = w[2, c]
-                    if mode == MODE_PRODUCT:
-                        k = wa * wb * wc
-                    elif mode == MODE_RADIAL:
-                        k = _k1(np.sqrt(wa * wa + wb * wb + wc * wc), l0)
-                    else:
-                        k = 1.0
-                    if k <= 0.0:
-                        continue
-                    k *= sig
-                    ci = chunks[(ix >> CHUNK_SHIFT) - c0x, (iy >> CHUNK_SHIFT) - c0y,
-                                (iz >> CHUNK_SHIFT) - c0z]  # fmt: skip
-                    if y != 0.0:  # hits (y = 1) touch only alpha, free samples only beta
-                        alpha[ci, ix & 7, iy & 7, iz & 7] += k * y
-                    if y != 1.0:
-                        beta[ci, ix & 7, iy & 7, iz & 7] += k * (1.0 - y)
-    return n
+        if not _same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):  # neighbours share chunks
+            for a in range(ncx):
+                for b in range(ncy):
+                    for c in range(ncz):
+                        chunks[a, b, c] = _lookup(c0x + a, c0y + b, c0z + c, table_keys,
+                                                  table_vals)  # fmt: skip
+            _set_box(box, c0x, c0y, c0z, ncx, ncy, ncz)
+        if axis == 0:
+            _add_sample(s, mode, label, sigma0, lengths[0], lo, cnt, w, u0, u1, 0, cnt[1],
+                        chunks, c0x, c0y, c0z, alpha, beta)  # fmt: skip
+        else:
+            _add_sample(s, mode, label, sigma0, lengths[0], lo, cnt, w, 0, cnt[0], u0, u1,
+                        chunks, c0x, c0y, c0z, alpha, beta)  # fmt: skip
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _scatter_parallel(axis, splits, mode, points, label, sigma0, variance, var_lo, var_hi, l_min,
+                      l_max, res, table_keys, table_vals, alpha, beta):  # fmt: skip
+    """:func:`_scatter_slab` for the slabs [splits[t], splits[t + 1]) on numba's threads. Each
+    thread walks the samples in order and writes only its own slab's cells, so every cell gets
+    the same terms in the same order as in one slab (bit-identical maps) and no two threads
+    write one cell."""
+    for part in prange(splits.shape[0] - 1):
+        _scatter_slab(axis, splits[part], splits[part + 1], mode, points, label, sigma0,
+                      variance, var_lo, var_hi, l_min, l_max, res, table_keys, table_vals, alpha,
+                      beta)  # fmt: skip
+
+
+@njit(cache=True)
+def _slab_splits(points, res, parts):
+    """(axis, splits) for :func:`_scatter_parallel`: the horizontal axis along which the
+    samples' cells spread most, and ``parts`` + 1 cell-index boundaries along it (open at both
+    ends) at the quantiles of the samples' cells, so each slab gets about as many samples."""
+    n = points.shape[0]
+    lo0, hi0, lo1, hi1 = np.inf, -np.inf, np.inf, -np.inf
+    for s in range(n):
+        lo0, hi0 = min(lo0, points[s, 0]), max(hi0, points[s, 0])
+        lo1, hi1 = min(lo1, points[s, 1]), max(hi1, points[s, 1])
+    axis = 0 if hi0 - lo0 >= hi1 - lo1 else 1
+    first = np.int64(np.floor((lo0 if axis == 0 else lo1) / res))
+    width = np.int64(np.floor((hi0 if axis == 0 else hi1) / res)) - first + 1
+    splits = np.empty(parts + 1, np.int64)
+    splits[0], splits[parts] = -(1 << 62), 1 << 62
+    if width > 4 * n + 4096:  # sparse: sort the indices instead of counting them
+        index = np.sort(np.floor(points[:, axis] / res))
+        for t in range(1, parts):
+            splits[t] = np.int64(index[(t * n) // parts])
+        return axis, splits
+    counts = np.zeros(width, np.int64)
+    for s in range(n):
+        counts[np.int64(np.floor(points[s, axis] / res)) - first] += 1
+    t, seen = 1, 0
+    for i in range(width):
+        seen += counts[i]
+        while t < parts and seen * parts >= t * n:
+            splits[t] = first + i + 1
+            t += 1
+    return axis, splits
 
 
 @njit(cache=True)
 def _count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys, n,
                   limit):  # fmt: skip
     """Number of distinct chunks the scatter kernel would touch (the supports of ``points``,
-    computed as in :func:`_scatter`), counting on from ``n`` chunks already in ``table_keys``
+    computed as in :func:`_scatter_slab`), counting on from ``n`` chunks already in ``table_keys``
     (a key-only hash set, size a power of two > 2 ``limit``); stops once it exceeds ``limit``."""
     mask = table_keys.shape[0] - 1
     lo = np.zeros(3, np.int64)
@@ -283,7 +442,7 @@ def _count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, tab
 @njit(cache=True)
 def _add_mass(start, cells, d_alpha, d_beta, table_keys, table_vals, chunk_keys, n_chunks,
               alpha, beta):  # fmt: skip
-    """Add per-cell mass (seeding from a prior map); same resume protocol as :func:`_scatter`."""
+    """Add per-cell mass (seeding from a prior map); resumes as :func:`_insert_chunks` does."""
     for s in range(start, cells.shape[0]):
         ix, iy, iz = cells[s, 0], cells[s, 1], cells[s, 2]
         ci = _find_or_insert(ix >> CHUNK_SHIFT, iy >> CHUNK_SHIFT, iz >> CHUNK_SHIFT,

@@ -18,13 +18,15 @@ The adaptive kernel's session normalization (``eq:lengthscale_1``: s~^2 = (s^2 -
 (s_max^2 - s_min^2)) takes its bounds over ALL samples before tiling, and every tile uses them.
 
 Schedulers (``scheduler=``): ``"local"`` (None) a :class:`distributed.LocalCluster` of
-single-threaded worker processes, ``"threads"`` an in-process cluster of threads (the numba
-scatter kernel holds the GIL, so this one does not run tiles in parallel; it avoids sending
-samples to other processes), ``"sync"`` sequential without Dask, or the address of a running
+single-threaded worker processes, ``"threads"`` an in-process cluster of threads (the scatter
+passes release the GIL, so tiles overlap there too, apart from the Python and numpy work around
+them; it avoids sending samples to other processes), ``"sync"`` sequential without Dask, or the address of a running
 scheduler (``tcp://host:8786``). A task that raises is retried by Dask (``retries``); one that
 fails again is reported by tile id, the other tiles are kept. At most one task per worker is in
 flight, so a worker holds one tile's samples and grid at a time; finished tiles can be written
 one by one to a tile directory (:func:`write_tile`) and read back as one map (:func:`read_tiles`).
+Each tile's scatter runs on one numba thread (:func:`~undertow.mapping.grid.scatter_threads`):
+the tiles are the parallelism.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ import numpy as np
 from ..errors import ConfigError, DataError, ReaderError
 from ..occupancy import OccupancyMap
 from .config import MappingConfig
+from .grid import scatter_threads
 from .mappers import mapper_from_config
 from .samples import Samples
 
@@ -175,7 +178,8 @@ def map_tile(tile: TileId, samples: Samples, config: MappingConfig, tiling: Tili
     if bounds is not None:
         config = config.model_copy(update={"variance_bounds": tuple(bounds)})
     mapper = mapper_from_config(config)
-    mapper.integrate(samples)
+    with scatter_threads(1):  # the tiles are the parallelism: one thread each
+        mapper.integrate(samples)
     cells, alpha, beta = mapper.grid.cells()
     own = np.all(tiling.tiles_of_cells(cells) == np.asarray(tile), axis=1)
     return TileResult(tile, cells[own], alpha[own], beta[own], len(samples),
