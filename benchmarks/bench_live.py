@@ -72,7 +72,10 @@ def _subscriber(port: int, stop: threading.Event) -> None:
                         subs = [{"id": c, "channelId": c} for c in new]
                         await ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
 
-    asyncio.run(run())
+    try:
+        asyncio.run(run())
+    except websockets.exceptions.ConnectionClosed:
+        pass  # the live session closed its server first: the end of the run
 
 
 def _thread_cpu() -> dict:

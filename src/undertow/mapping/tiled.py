@@ -20,11 +20,12 @@ The adaptive kernel's session normalization (``eq:lengthscale_1``: s~^2 = (s^2 -
 Schedulers (``scheduler=``): ``"local"`` (None) a :class:`distributed.LocalCluster` of
 single-threaded worker processes, ``"threads"`` an in-process cluster of threads (the scatter
 passes release the GIL, so tiles overlap there too, apart from the Python and numpy work around
-them; it avoids sending samples to other processes), ``"sync"`` sequential without Dask, or the address of a running
-scheduler (``tcp://host:8786``). A task that raises is retried by Dask (``retries``); one that
-fails again is reported by tile id, the other tiles are kept. At most one task per worker is in
-flight, so a worker holds one tile's samples and grid at a time; finished tiles can be written
-one by one to a tile directory (:func:`write_tile`) and read back as one map (:func:`read_tiles`).
+them; it avoids sending samples to other processes), ``"sync"`` sequential without Dask, or the
+address of a running scheduler (``tcp://host:8786``). A task that raises is retried by Dask
+(``retries``); one that fails again is reported by tile id, the other tiles are kept. At most
+one task per worker is in flight, so a worker holds one tile's samples and grid at a time;
+finished tiles can be written one by one to a tile directory (:func:`write_tile`) and read back
+as one map (:func:`read_tiles`).
 Each tile's scatter runs on one numba thread (:func:`~undertow.mapping.grid.scatter_threads`):
 the tiles are the parallelism.
 """
