@@ -32,6 +32,7 @@ import collections
 import gc
 import json
 import math
+import tempfile
 import threading
 import time
 import warnings
@@ -532,6 +533,26 @@ def _warm_up(variant: str, mapping) -> None:
                 mapper.push(chunk, localizer.trajectory())
         if mapper is not None and localizer.ready:
             mapper.finish(localizer.trajectory())
+        _warm_up_recorder(records, localizer.trajectory())
+
+
+def _warm_up_recorder(records, trajectory) -> None:
+    """Write one message of every kind to a throwaway recording: rosbags generates each
+    message type's serializer on its first use (about 30 ms in all here), and the generated
+    code is shared by later recorders, so the session's first records do not wait for it."""
+    streams = {r.stream: r for r in records}
+    still = {"position": np.zeros(3), "orientation": np.zeros(3)}
+    streams["dead_reckoning"] = Record("dead_reckoning", records[0].t, still)
+    with tempfile.TemporaryDirectory() as tmp:
+        recorder = Recorder(Path(tmp) / "warm-up")
+        for record in streams.values():
+            recorder.write_record(record)
+        t = float(trajectory.t[-1]) if len(trajectory.t) else records[-1].t
+        if len(trajectory.t):
+            recorder.write_pose(t, trajectory.x[-1], trajectory.P[-1])
+        recorder.write_wave(t, 0.0, math.nan)
+        recorder.write_status(t, {"warm_up": True})
+        recorder.close()
 
 
 def _live_mapping(settings: Settings):
