@@ -43,6 +43,15 @@ runner = CliRunner()
 DATASHEET_TILTS = {"a50": 22.5, "dvl1000": 25.0, "pathfinder": 30.0}
 
 
+def test_pathfinder_beam_numbering_follows_the_guide():
+    """The Pathfinder DVL Guide's PD4 convention, mounted beam 3 forward: X velocity positive
+    moving toward beam 2, Y positive moving toward beam 3, so with y to starboard here beam 2
+    points to starboard, beam 1 to port, beam 4 aft."""
+    units = dvl_preset("pathfinder").units()
+    horizontal = units[:, :2] / np.linalg.norm(units[:, :2], axis=1, keepdims=True)
+    np.testing.assert_allclose(horizontal, [[0, -1], [0, 1], [1, 0], [-1, 0]], atol=1e-15)
+
+
 @pytest.mark.parametrize("name", sorted(DATASHEET_TILTS))
 def test_presets_give_the_beam_vectors_of_their_tilt_and_azimuths(name):
     """b_i = Rz(az_i) Ry(tilt) e_z: the datasheet tilt from the vertical, the azimuth about z."""

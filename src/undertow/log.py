@@ -539,15 +539,21 @@ class DvlGeometry:
 #: - ``dvl1000``: Nortek DVL1000 datasheet: 4 beams at 25 deg; Nortek's X-configuration head
 #:   puts the beams 45 deg off the instrument's x axis (azimuths +45, -45, -135, +135 deg here,
 #:   beams 1..4).
-#: - ``pathfinder``: Teledyne RDI Pathfinder DVL datasheet: 4 beams at 30 deg, Janus; beam
-#:   numbering of Teledyne RDI's "ADCP Coordinate Transformation" (P/N 951-6079-00) mounted
-#:   beam 3 forward: beam 1 to starboard (+90 deg), 2 to port (-90), 3 forward (0), 4 aft (180).
+#: - ``pathfinder``: Teledyne RDI Pathfinder DVL datasheet: 4 beams at 30 deg, Janus. Beam
+#:   numbering from the Pathfinder DVL Guide (P/N 95B-6116-00, 2018) mounted beam 3 forward:
+#:   its instrument Y axis points to beam 3 and X to beam 2 ("if Beam 2 is going forward, then
+#:   X velocity is positive", PD4-PD13 formats), Z up for a down-facing unit (right-handed), so
+#:   beam 2 is to starboard (+90 deg), 1 to port (-90), 3 forward (0), 4 aft (180); the Guide's
+#:   roll sign agrees (Tilt 2 positive when beam 2 is higher than beam 1 is negative facing
+#:   down, i.e. starboard up is negative roll).
 #:
+#: The DVL1000's numbering comes from a figure of Nortek's manual that could not be read here:
+#: check it against your unit before relying on beam ids (the velocity does not depend on it).
 #: Beam widths are left None (not modelled): the ray caster casts one ray per beam axis.
 DVL_PRESETS: dict[str, DvlGeometry] = {
     "a50": DvlGeometry("a50", 22.5, A50_AZIMUTHS_DEG),
     "dvl1000": DvlGeometry("dvl1000", 25.0, (45.0, -45.0, -135.0, 135.0)),
-    "pathfinder": DvlGeometry("pathfinder", 30.0, (90.0, -90.0, 0.0, 180.0)),
+    "pathfinder": DvlGeometry("pathfinder", 30.0, (-90.0, 90.0, 0.0, 180.0)),
 }
 
 
