@@ -75,19 +75,24 @@ def _run_live(log, out, faults=None, seed=0):
     )
     live = LiveSession(settings, out).start()
     assert live.wait_connected(10.0)  # MAVLink over UDP: the link listens before data is sent
+    return session, live, _run_to_the_end(session, live)
+
+
+def _run_to_the_end(session, live):
+    """Start serving, run ``live`` until a second after the last message was sent (a loaded
+    machine may delay the sender's last packets), stop both; the live result."""
     session.start()
 
-    def stop_after_the_last_message():  # a loaded machine may delay the sender's last packets
+    def stop_after_the_last_message():
         session.wait()
         time.sleep(1.0)
         live.request_stop()
 
     threading.Thread(target=stop_after_the_last_message, daemon=True).start()
     try:
-        result = live.run()
+        return live.run()
     finally:
         session.stop()
-    return session, live, result
 
 
 @pytest.fixture(scope="module")
@@ -237,18 +242,7 @@ def test_a_dvl_without_orientation_is_recorded_and_named_once(source_log, tmp_pa
     live = LiveSession(settings, tmp_path / "dvl-only").start()
     notices = []
     live.on_notice = notices.append
-    session.start()
-
-    def stop_at_the_end():
-        session.wait()
-        time.sleep(1.0)
-        live.request_stop()
-
-    threading.Thread(target=stop_at_the_end, daemon=True).start()
-    try:
-        result = live.run()
-    finally:
-        session.stop()
+    result = _run_to_the_end(session, live)
     assert len(notices) == 1 and "orientation" in notices[0]
     assert result.localization is None and result.map is None
     assert any("never started" in n for n in result.warnings)

@@ -25,7 +25,7 @@ from ..evaluation.cloud import MapEvaluation, evaluate_map, map_threshold
 from ..io.ply import read_ply, write_map_ply
 from ..io.results import save_map
 from ..mapping.config import MappingConfig
-from ..mapping.run import MappingResult, map_log
+from ..mapping.run import MappingResult, map_log, map_metadata
 from ..mapping.samples import samples_from_config
 from ..mapping.tiled import Tiling, map_tiled
 from ..occupancy import MAP_FILE, OccupancyMap, not_an_npz
@@ -124,7 +124,7 @@ def _check_tiles(tiles, scheduler, prior, config: MappingConfig) -> None:
         if scheduler is not None:
             raise ConfigError("--scheduler applies to tiled mapping: give --tiles SIZE_M too")
         return
-    from ..study.batch import check_scheduler
+    from .._util.dask import check_scheduler
 
     Tiling.for_config(config, tiles)
     if prior is not None:
@@ -159,20 +159,10 @@ def _map_tiled_file(log, trajectory, config: MappingConfig, tiles: float, schedu
 
 
 def _tiled_metadata(tiled, samples, log, trajectory, config) -> dict:
-    occupancy = tiled.map
-    return {
-        "mapper": {k: v for k, v in tiled.metadata.items() if k != "tiling"},
-        "tiling": {k: v for k, v in tiled.metadata["tiling"].items() if k != "per_tile"},
-        "samples": {
-            "hits": int((samples.label == 1).sum()),
-            "free": int((samples.label == 0).sum()),
-            "dropped": {k: int(v) for k, v in samples.dropped.items()},
-        },
-        "cells_with_mass": len(occupancy),
-        "occupied_cells": len(occupancy.occupied(config.occupied_threshold)),
-        "trajectory_variant": trajectory.variant,
-        "source": log.source,
-    }
+    meta = map_metadata({k: v for k, v in tiled.metadata.items() if k != "tiling"}, samples,
+                        tiled.map, config, trajectory, log)  # fmt: skip
+    tiling = {k: v for k, v in tiled.metadata["tiling"].items() if k != "per_tile"}
+    return {"mapper": meta.pop("mapper"), "tiling": tiling, **meta}
 
 
 def _write_map(out: Path, occupancy: OccupancyMap, config: MappingConfig, metadata: dict) -> None:

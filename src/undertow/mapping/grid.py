@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import DataError
 from .kernels import _OFFSET as _CHUNK_LIMIT
 from .kernels import (
+    ALL_CELLS,
     CHUNK,
     MODE_CELL,
     MODE_PRODUCT,
@@ -38,7 +39,6 @@ PARALLEL_MIN_SAMPLES = 2048  # below this a scatter stays on the calling thread
 # one parallel scatter at a time per process: a second caller (a Dask thread, the live view)
 # runs the serial kernel instead of nesting numba's thread pool (its workqueue layer aborts then)
 _PARALLEL = threading.Lock()
-_ALL = 1 << 62  # a slab holding every cell
 
 
 @contextmanager
@@ -126,7 +126,7 @@ class ChunkedGrid:
             finally:
                 _PARALLEL.release()
         else:
-            _scatter_slab(0, -_ALL, _ALL, *args)
+            _scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
 
     def _check_extent(self, points: np.ndarray) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range."""

@@ -32,6 +32,7 @@ CHUNK = 8  # cells per chunk edge
 CHUNK_SHIFT = 3  # log2(CHUNK)
 _OFFSET = 1 << 20  # chunk coordinates are packed in 21 bits per axis
 MODE_PRODUCT, MODE_RADIAL, MODE_CELL = 0, 1, 2
+ALL_CELLS = 1 << 62  # slab bounds (-ALL_CELLS, ALL_CELLS) hold every cell
 _TWO_PI = 2.0 * np.pi
 
 
@@ -304,7 +305,7 @@ def _scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_
     """Add k(m_*, m_i) y_i to alpha and k(m_*, m_i)(1 - y_i) to beta (``eq:alpha_param``,
     ``eq:beta_param``; ``eq:new_conc_params_*`` in product mode) for every sample, in the cells
     whose index along ``axis`` (0 or 1) is in [first, stop) (the slab; everything with
-    first, stop = -2^62, 2^62). Every chunk touched must already be in the table
+    first, stop = -ALL_CELLS, ALL_CELLS). Every chunk touched must already be in the table
     (:func:`_insert_chunks`).
 
     mode 0: sigma_0 prod_j k(|d_j|; l_ij) with l_ij from ``eq:lengthscale_1``:
@@ -378,7 +379,7 @@ def _slab_splits(points, res, parts):
     first = np.int64(np.floor((lo0 if axis == 0 else lo1) / res))
     width = np.int64(np.floor((hi0 if axis == 0 else hi1) / res)) - first + 1
     splits = np.empty(parts + 1, np.int64)
-    splits[0], splits[parts] = -(1 << 62), 1 << 62
+    splits[0], splits[parts] = -ALL_CELLS, ALL_CELLS
     if width > 4 * n + 4096:  # sparse: sort the indices instead of counting them
         index = np.sort(np.floor(points[:, axis] / res))
         for t in range(1, parts):
@@ -404,26 +405,14 @@ def _count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, tab
     (a key-only hash set, size a power of two > 2 ``limit``); stops once it exceeds ``limit``."""
     mask = table_keys.shape[0] - 1
     lo = np.zeros(3, np.int64)
+    cnt = np.zeros(3, np.int64)
     hi = np.zeros(3, np.int64)
+    lengths = np.empty(3)
     for s in range(points.shape[0]):
+        _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt)
         for j in range(3):
-            p = points[s, j] / res
-            if mode == MODE_CELL:
-                lo[j] = np.int64(np.floor(p)) >> CHUNK_SHIFT
-                hi[j] = lo[j]
-                continue
-            lj = l_min[0]
-            if mode == MODE_PRODUCT:
-                lj = l_min[j]
-                span = var_hi[j] - var_lo[j]
-                if span > 0.0:
-                    v = min(max((variance[s, j] - var_lo[j]) / span, 0.0), 1.0)
-                    lj = v * (l_max[j] - l_min[j]) + l_min[j]
-            r = lj / res
-            i0 = np.int64(np.floor(p - r - 0.5)) + 1
-            i1 = np.int64(np.ceil(p + r - 0.5)) - 1
-            lo[j] = i0 >> CHUNK_SHIFT
-            hi[j] = max(i0, i1) >> CHUNK_SHIFT
+            hi[j] = (lo[j] + cnt[j] - 1) >> CHUNK_SHIFT
+            lo[j] = lo[j] >> CHUNK_SHIFT
         for cx in range(lo[0], hi[0] + 1):
             for cy in range(lo[1], hi[1] + 1):
                 for cz in range(lo[2], hi[2] + 1):

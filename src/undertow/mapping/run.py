@@ -49,8 +49,16 @@ def map_log(
         occupancy,
         metadata={**occupancy.metadata, "occupied_threshold": config.occupied_threshold},
     )
-    metadata = {
-        "mapper": mapper.metadata(),
+    metadata = map_metadata(mapper.metadata(), samples, occupancy, config, trajectory, log)
+    return MappingResult(occupancy, config, metadata)
+
+
+def map_metadata(mapper: dict, samples, occupancy: OccupancyMap, config: MappingConfig,
+                 trajectory: Trajectory, log: Log) -> dict:  # fmt: skip
+    """What a map records of how it was made: the mapper's settings, the samples (hits, free,
+    dropped), its cells and where the poses and ranges came from."""
+    return {
+        "mapper": mapper,
         "samples": {
             "hits": int((samples.label == 1).sum()),
             "free": int((samples.label == 0).sum()),
@@ -61,7 +69,6 @@ def map_log(
         "trajectory_variant": trajectory.variant,
         "source": log.source,
     }
-    return MappingResult(occupancy, config, metadata)
 
 
 # no underwater vehicle this package maps with moves faster than this (m/s)

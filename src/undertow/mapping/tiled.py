@@ -37,7 +37,6 @@ import logging
 import math
 import os
 import time
-import traceback
 import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -46,6 +45,7 @@ from typing import Any
 
 import numpy as np
 
+from .._util.dask import check_scheduler, describe_exception
 from ..errors import ConfigError, DataError, ReaderError
 from ..occupancy import OccupancyMap
 from .config import MappingConfig
@@ -54,7 +54,6 @@ from .mappers import mapper_from_config
 from .samples import Samples
 
 TileId = tuple[int, int]
-NAMED_SCHEDULERS = ("local", "threads", "sync")
 INDEX_FILE = "tiles.json"
 DEFAULT_RETRIES = 1
 
@@ -191,33 +190,6 @@ def _tile_task(tile: TileId, source, config, tiling, bounds) -> TileResult:
     """The Dask task: ``source`` is the tile's Samples or a callable returning them."""
     samples = source(tile) if callable(source) else source
     return map_tile(tile, samples, config, tiling, bounds)
-
-
-def describe_exception(exc: BaseException) -> str:
-    """``"<Type>: <message> (at <file>:<line>)"`` on one line (last traceback frame)."""
-    message = " ".join(str(exc).split())
-    text = f"{type(exc).__name__}: {message}" if message else type(exc).__name__
-    frames = traceback.extract_tb(exc.__traceback__)
-    if frames:
-        text += f" (at {Path(frames[-1].filename).name}:{frames[-1].lineno})"
-    return text
-
-
-def check_scheduler(scheduler: str | None) -> str:
-    """The mode for ``scheduler`` (None -> "local"): a name of :data:`NAMED_SCHEDULERS` or an
-    address ``tcp://host:port``; Dask must be installed for every mode but "sync"."""
-    mode = "local" if scheduler is None else scheduler
-    if not isinstance(mode, str) or (mode not in NAMED_SCHEDULERS and "://" not in mode):
-        raise ConfigError(
-            f"unknown scheduler {scheduler!r}: use 'local', 'threads', 'sync' or an address "
-            "tcp://host:port"
-        )
-    if mode != "sync":
-        try:
-            import distributed  # noqa: F401
-        except ImportError:
-            raise ConfigError("Dask is not installed: pip install 'undertow[dask]'") from None
-    return mode
 
 
 @dataclass

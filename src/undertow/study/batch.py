@@ -20,18 +20,18 @@ import logging
 import os
 import sys
 import time
-import traceback
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
+from .._util.dask import (
+    CONNECT_TIMEOUT_S,
+    check_scheduler,
+    describe_exception,
+    import_dask,
+)
 from ..errors import ConfigError
-
-NAMED_SCHEDULERS = ("local", "threads", "sync")
-CONNECT_TIMEOUT_S = 3.0
-_INSTALL_HINT = "Dask is not installed: pip install 'undertow[dask]'"
 
 
 @dataclass(frozen=True)
@@ -103,46 +103,6 @@ def run_batch(
     return BatchResult(results, failures, label, wall_s, workers, tuple(unique))
 
 
-def check_scheduler(
-    scheduler: str | None, reach: bool = False, timeout_s: float = CONNECT_TIMEOUT_S
-) -> str:
-    """The scheduler mode for ``scheduler`` (None -> "local"), checked before any work.
-
-    Raises :class:`ConfigError` for a name that is neither one of :data:`NAMED_SCHEDULERS` nor
-    an address (``scheme://host:port`` or ``host:port``), for a missing Dask install (every mode
-    but "sync" needs it) and, with ``reach``, for a ``tcp://`` address where nothing listens
-    (a plain TCP connection within ``timeout_s``; whether it is a Dask scheduler is found out
-    when connecting to it)."""
-    mode = "local" if scheduler is None else scheduler
-    if not isinstance(mode, str) or (mode not in NAMED_SCHEDULERS and ":" not in mode):
-        raise ConfigError(
-            f"unknown scheduler {scheduler!r}: use 'local', 'threads', 'sync' or an address "
-            "tcp://host:port"
-        )
-    if mode != "sync":
-        _import_dask()
-    if reach and mode not in NAMED_SCHEDULERS:
-        _check_reachable(mode, timeout_s)
-    return mode
-
-
-def _check_reachable(address: str, timeout_s: float) -> None:
-    import socket
-
-    scheme, _, rest = address.rpartition("://")
-    if scheme not in ("", "tcp"):
-        return  # tls, ucx, inproc: left to Dask
-    host, _, port = rest.rstrip("/").rpartition(":")
-    try:
-        with socket.create_connection((host.strip("[]") or "localhost", int(port)), timeout_s):
-            pass
-    except ValueError:
-        raise ConfigError(f"scheduler address {address!r}: expected tcp://host:port") from None
-    except OSError as exc:
-        reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise ConfigError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
-
-
 def _run_one(fn: Callable[..., Any], seed: int, args: tuple) -> tuple[bool, Any]:
     """One task: ``(True, fn(seed, *args))``, or ``(False, one-line description)`` if it raised."""
     try:
@@ -151,20 +111,9 @@ def _run_one(fn: Callable[..., Any], seed: int, args: tuple) -> tuple[bool, Any]
         return False, describe_exception(exc)
 
 
-def describe_exception(exc: BaseException) -> str:
-    """``"<Type>: <message> (at <file>:<line> in <func>)"`` on one line (last traceback frame)."""
-    message = " ".join(str(exc).split())
-    text = f"{type(exc).__name__}: {message}" if message else type(exc).__name__
-    frames = traceback.extract_tb(exc.__traceback__)
-    if frames:
-        last = frames[-1]
-        text += f" (at {Path(last.filename).name}:{last.lineno} in {last.name})"
-    return text
-
-
 def _run_threads(fn, seeds: list[int], args: tuple, record) -> int:
     """dask.delayed tasks on the local threaded scheduler; ``record`` called as each one ends."""
-    dask = _import_dask()
+    dask = import_dask()
     from dask.callbacks import Callback
 
     tasks = [dask.delayed(_run_one, pure=False)(fn, seed, args) for seed in seeds]
@@ -182,7 +131,7 @@ def _run_threads(fn, seeds: list[int], args: tuple, record) -> int:
 
 def _run_distributed(fn, seeds: list[int], args: tuple, record, mode: str, timeout_s: float):
     """Futures on a fresh LocalCluster (``mode == "local"``) or on the scheduler at ``mode``."""
-    _import_dask()
+    import_dask()
     from distributed import Client, LocalCluster, as_completed
 
     if mode == "local":
@@ -226,15 +175,6 @@ def _gather(client, fn, seeds: list[int], args: tuple, record, as_completed) -> 
             outcome = (False, describe_exception(exc))
         record(seed_of[future.key], outcome)
         future.release()
-
-
-def _import_dask():
-    try:
-        import dask
-        import distributed  # noqa: F401 - needed by every Dask scheduler mode here
-    except ImportError:
-        raise ConfigError(_INSTALL_HINT) from None
-    return dask
 
 
 def _check_importable(fn) -> None:

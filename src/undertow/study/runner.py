@@ -109,7 +109,7 @@ def check_study_inputs(out_dir, seeds, scheduler) -> list[int]:
     """The seeds to run (default [0]), after checking every input before any work: distinct
     integer seeds >= 0, ``out_dir`` not an existing file, the scheduler valid (and reachable if
     an address) when more than one seed runs; with one seed a scheduler is unused (warning)."""
-    from .batch import check_scheduler
+    from .._util.dask import check_scheduler
 
     seeds = list(seeds if seeds is not None else [0])
     if not seeds:
@@ -136,7 +136,7 @@ def _first_seed(seeds: list[int], settings: StudySettings, note):
     """Run seeds in this process, in order, until one succeeds (its artifacts make the figures
     and runs); a seed that raises is recorded as a failure, as a Dask task's would be.
     Returns (results, failures, artifacts, the seeds left for Dask)."""
-    from .batch import describe_exception
+    from .._util.dask import describe_exception
 
     results: dict[int, dict] = {}
     failures: dict[int, str] = {}

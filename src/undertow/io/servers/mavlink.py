@@ -32,7 +32,7 @@ import numpy as np
 from ...errors import ConfigError
 from ...log import G0, Log
 from ...rotations import quaternion_to_rpy
-from .player import Faults, Manifest, PlayClock, Served
+from .player import Faults, Manifest, PlayClock, Served, flip_one_byte
 
 DEFAULT_ADDRESS = "udpout:127.0.0.1:14550"
 MAV_TYPE_SUBMARINE = 12
@@ -63,10 +63,7 @@ def _attitude_rpy(log: Log) -> np.ndarray | None:
 def corrupt_packet(packet: bytes, rng: np.random.Generator) -> bytes:
     """``packet`` with one payload or CRC byte changed (the CRC-16/MCRF4XX check then fails;
     the length field is untouched, so the next packet parses)."""
-    out = bytearray(packet)
-    k = int(rng.integers(min(HEADER_V2, len(out) - 1), len(out)))
-    out[k] ^= int(rng.integers(1, 256))
-    return bytes(out)
+    return flip_one_byte(packet, HEADER_V2, rng)
 
 
 class MavlinkSender:

@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from ...log import Log
-from .player import Faults, Manifest, PlayClock, Served
+from .player import Faults, Manifest, PlayClock, Served, flip_one_byte
 
 DEFAULT_PORT = 9090
 #: field values of the informational messages a Ping1D answers (others: zeros)
@@ -85,10 +85,7 @@ def distance_fields(r: float, c: float) -> tuple[int, int]:
 def corrupt_frame(frame: bytes, rng: np.random.Generator) -> bytes:
     """``frame`` with one payload or checksum byte changed: the checksum no longer matches
     (a one-byte change alters the byte sum by 1..255, never 0 mod 2^16), the length is kept."""
-    out = bytearray(frame)
-    k = int(rng.integers(8, len(out)))
-    out[k] ^= int(rng.integers(1, 256))
-    return bytes(out)
+    return flip_one_byte(frame, 8, rng)
 
 
 class Ping1DServer:

@@ -141,6 +141,16 @@ class Faults:
         )
 
 
+def flip_one_byte(data: bytes, first: int, rng: np.random.Generator) -> bytes:
+    """``data`` with one byte at or after ``first`` XORed with 1..255 (the corrupt fault of
+    the binary protocols: the length fields before ``first`` are kept, so the stream stays in
+    step, and the checksum no longer matches)."""
+    out = bytearray(data)
+    k = int(rng.integers(min(first, len(out) - 1), len(out)))
+    out[k] ^= int(rng.integers(1, 256))
+    return bytes(out)
+
+
 @dataclass(frozen=True)
 class Served:
     """One message served: ``protocol`` (a50, ping1d, mavlink), ``message`` (velocity,
