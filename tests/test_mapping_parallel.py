@@ -11,7 +11,7 @@ import pytest
 
 from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
-from undertow.mapping.kernels import _slab_splits
+from undertow.mapping.kernels import _extent, _slab_splits
 from undertow.mapping.samples import Samples
 
 BOUNDS = ((1e-4, 1e-4, 1e-4), (1.1e-3, 1.1e-3, 2e-4))
@@ -70,7 +70,7 @@ def test_any_slabs_give_the_same_map(monkeypatch, parts):
 def test_slab_splits_balance_the_samples():
     rng = np.random.default_rng(3)
     points = np.column_stack([rng.normal(0, 5, 20000), rng.normal(0, 1, 20000), np.zeros(20000)])
-    axis, splits = _slab_splits(points, 0.1, 4)
+    axis, splits = _slab_splits(points, 0.1, 4, *_extent(points)[:2])
     assert axis == 0 and splits[0] < -(1 << 60) and splits[-1] > 1 << 60
     index = np.floor(points[:, 0] / 0.1)
     counts = [
@@ -79,7 +79,7 @@ def test_slab_splits_balance_the_samples():
     assert sum(counts) == 20000 and max(counts) - min(counts) < 0.02 * 20000
     # sparse spread (wider than 4 n + 4096 cells): the sorted path, same balance
     far = np.column_stack([np.arange(100) * 1e3, np.zeros(100), np.zeros(100)])
-    axis, splits = _slab_splits(far, 0.1, 2)
+    axis, splits = _slab_splits(far, 0.1, 2, *_extent(far)[:2])
     index = np.floor(far[:, 0] / 0.1)
     assert axis == 0 and np.sum(index < splits[1]) == 50
 
@@ -100,3 +100,25 @@ def test_concurrent_integrations_each_get_their_serial_map():
     for t in threads:
         t.join()
     assert all(_same(got[k], expected[k]) for k in range(2))
+
+
+@pytest.mark.parametrize("parts", [2, 3, 7])
+def test_parallel_expand_gives_the_serial_samples(monkeypatch, parts):
+    """The rays' samples built on several threads (each ray writing its own rows) are the
+    serial ones, row for row, with rays of very different lengths and rays with no free
+    samples."""
+    from undertow.mapping.samples import expand
+
+    rng = np.random.default_rng(parts)
+    n = 500
+    rays = {"origin": rng.normal(0, 3, (n, 3)), "direction": rng.normal(0, 1, (n, 3)),
+            "r": rng.choice([0.05, 0.3, 2.0, 9.0], n), "var": rng.uniform(0, 1e-3, (n, 3)),
+            "sig": rng.uniform(0.5, 1, n),
+            "sensor": rng.integers(0, 3, n).astype(np.int8)}  # fmt: skip
+    monkeypatch.setattr(grid_module, "parallel_parts", lambda n: 1)
+    serial = expand(**rays, f=0.1, dropped={})
+    monkeypatch.setattr(grid_module, "parallel_parts", lambda n: parts)
+    threaded = expand(**rays, f=0.1, dropped={})
+    assert len(serial) > 2048
+    for name in ("points", "label", "sigma0", "pose_variance", "ray", "sensor"):
+        assert np.array_equal(getattr(serial, name), getattr(threaded, name)), name

@@ -122,3 +122,29 @@ def test_a_trajectory_that_does_not_overlap_the_log_is_an_error_naming_both_span
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a full overlap warns of nothing
         assert build_samples(log, overlapping).n_hits == 13
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [("var", np.nan, "pose_variance"), ("var", -1.0, "pose_variance"), ("sig", 0.0, "sigma0"),
+     ("origin", np.inf, "points"), ("r", np.nan, "points")],
+)  # fmt: skip
+def test_expand_checks_its_rays_as_samples_checks_samples(field, value, message):
+    """expand() skips the per-sample checks only for rays that pass them: a bad ray still
+    gets the one-line error naming the field, and good rays give the same Samples as the
+    checked constructor."""
+    from undertow.mapping.samples import Samples, expand
+
+    rays = {"origin": np.zeros((3, 3)), "direction": np.tile([0.0, 0.0, 1.0], (3, 1)),
+            "r": np.array([1.0, 0.5, 2.0]), "var": np.full((3, 3), 1e-3),
+            "sig": np.full(3, 0.9)}  # fmt: skip
+    good = expand(**rays, sensor=np.zeros(3, np.int8), f=0.1, dropped={})
+    checked = Samples(good.points, good.label, good.sigma0, good.pose_variance, good.ray,
+                      good.sensor, good.origins)  # fmt: skip
+    for name in ("points", "label", "sigma0", "pose_variance", "ray", "sensor", "origins"):
+        got, want = getattr(good, name), getattr(checked, name)
+        assert got.dtype == want.dtype and np.array_equal(got, want), name
+    bad = {k: v.copy() for k, v in rays.items()}
+    bad[field].flat[1] = value
+    with pytest.raises(DataError, match=message):
+        expand(**bad, sensor=np.zeros(3, np.int8), f=0.1, dropped={})

@@ -28,7 +28,6 @@ from .kernels import (
     _count_chunks,
     _extent,
     _insert_chunks,
-    _max_abs,
     _rehash,
     _scatter_parallel,
     _scatter_slab,
@@ -53,12 +52,32 @@ def scatter_threads(n: int):
         numba.set_num_threads(before)
 
 
+@contextmanager
+def parallel_slot(n_samples: int):
+    """Yields how many parts (threads) a kernel over ``n_samples`` may use now: 1 when small
+    (:func:`parallel_parts`) or while another thread holds the process's parallel slot."""
+    parts = parallel_parts(n_samples)
+    if parts > 1 and _PARALLEL.acquire(blocking=False):
+        try:
+            yield parts
+        finally:
+            _PARALLEL.release()
+    else:
+        yield 1
+
+
 def parallel_parts(n_samples: int) -> int:
     """Threads a scatter of ``n_samples`` uses: numba's thread count for the calling thread
     (``numba.set_num_threads``, ``NUMBA_NUM_THREADS``), 1 under :data:`PARALLEL_MIN_SAMPLES`."""
     if n_samples < PARALLEL_MIN_SAMPLES:
         return 1
     return int(numba.get_num_threads())
+
+
+def points_extent(points: np.ndarray):
+    """(min (3,), max (3,), all finite) of non-empty (N, 3) ``points``: computed once per
+    integrate and shared by the memory estimate, the range check and the slab split."""
+    return _extent(np.ascontiguousarray(points, dtype=float))
 
 
 # bytes per chunk: alpha and beta (float32), its key, two hash slots (key, value)
@@ -103,12 +122,17 @@ class ChunkedGrid:
     def _tables(self):
         return (self._table_keys, self._table_vals, self._keys, self._n, self._alpha, self._beta)
 
-    def scatter(self, mode, points, label, sigma0, variance, var_bounds, l_min, l_max) -> None:
+    def scatter(self, mode, points, label, sigma0, variance, var_bounds, l_min, l_max,
+                extent=None) -> None:  # fmt: skip
         """Place every chunk the samples touch (growing the arrays as needed), then run the
         scatter kernel: on numba's threads, one slab of cells each, when there are enough
-        samples (:func:`parallel_parts`); the map is the same either way, bit for bit."""
+        samples (:func:`parallel_parts`); the map is the same either way, bit for bit.
+        ``extent``: :func:`points_extent` of ``points`` when the caller has it."""
         start, n = 0, points.shape[0]
-        self._check_extent(points)
+        if n == 0:
+            return
+        extent = extent or points_extent(points)
+        self._check_extent(extent)
         lo, hi = var_bounds
         res = self.resolution
         while start < n:
@@ -119,23 +143,22 @@ class ChunkedGrid:
         tk, tv, _, _, alpha, beta = self._tables()
         args = (mode, points, label, sigma0, variance, lo, hi, l_min, l_max, res, tk, tv, alpha,
                 beta)  # fmt: skip
-        parts = parallel_parts(n)
-        if parts > 1 and _PARALLEL.acquire(blocking=False):
-            try:
-                _scatter_parallel(*_slab_splits(points, res, parts), *args)
-            finally:
-                _PARALLEL.release()
-        else:
-            _scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
+        with parallel_slot(n) as parts:
+            if parts > 1:
+                _scatter_parallel(*_slab_splits(points, res, parts, *extent[:2]), *args)
+            else:
+                _scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
 
-    def _check_extent(self, points: np.ndarray) -> None:
-        """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range."""
+    def _check_extent(self, extent) -> None:
+        """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range (and
+        finite); ``extent`` as :func:`points_extent`."""
         limit = (_CHUNK_LIMIT - 2) * CHUNK * self.resolution
-        if points.size and not _max_abs(points) < limit:
+        lo, hi, finite = extent
+        if not (finite and max(-lo.min(), hi.max()) < limit):
             raise DataError(f"map coordinates beyond +-{limit:.0f} m: shift the origin closer")
 
     def estimate_bytes(self, mode, points, variance, var_bounds, l_min, l_max,
-                       limit_bytes: float) -> int:  # fmt: skip
+                       limit_bytes: float, extent=None) -> int:  # fmt: skip
         """Peak bytes that scattering ``points`` (same arguments as :meth:`scatter`) and reading
         the map out would need: distinct chunks touched by the samples' supports (counting those
         already held) x :data:`CHUNK_BYTES`, with the growth copy, or the readout of every cell
@@ -166,7 +189,7 @@ class ChunkedGrid:
         if peak(held + n * chunks_per_sample) <= limit_bytes:
             return int(peak(held + n * chunks_per_sample))  # cheapest upper bound
         cells_per_axis = np.asarray(cells_per_axis)
-        p_lo, p_hi = _extent(points)
+        p_lo, p_hi, _ = extent or points_extent(points)
         extent = (p_hi - p_lo) / self.resolution + cells_per_axis
         box = float(np.prod(np.ceil(extent / CHUNK) + 1))
         if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:
@@ -184,7 +207,9 @@ class ChunkedGrid:
     def add_mass(self, cells, d_alpha, d_beta) -> None:
         """Add evidence mass to given cells (seeding from a prior map)."""
         start, n = 0, cells.shape[0]
-        self._check_extent((cells + 0.5) * self.resolution)
+        if n == 0:
+            return
+        self._check_extent(points_extent((cells + 0.5) * self.resolution))
         while start < n:
             start = _add_mass(start, cells, d_alpha, d_beta, *self._tables())
             if start < n:

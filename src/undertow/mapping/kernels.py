@@ -55,31 +55,22 @@ def product_kernel(delta, length_scales, sigma0: float = 1.0) -> np.ndarray:
 
 
 @njit(cache=True)
-def _max_abs(points) -> float:
-    """max |p_ij| over all coordinates (NaN propagates), without a temporary array."""
-    m = 0.0
-    for i in range(points.shape[0]):
-        for j in range(points.shape[1]):
-            a = abs(points[i, j])
-            if not a <= m:
-                m = a
-    return m
-
-
-@njit(cache=True)
 def _extent(points):
-    """(min (3,), max (3,)) over the rows of ``points`` (N, 3), N > 0, in one pass (numpy's
-    axis-0 reductions of an (N, 3) array are many times slower)."""
+    """(min (3,), max (3,), all finite) over the rows of ``points`` (N, 3), N > 0, in one pass
+    (numpy's axis-0 reductions of an (N, 3) array are many times slower)."""
     lo = points[0].copy()
     hi = points[0].copy()
-    for i in range(1, points.shape[0]):
+    finite = True
+    for i in range(points.shape[0]):
         for j in range(3):
             v = points[i, j]
             if v < lo[j]:
                 lo[j] = v
             elif v > hi[j]:
                 hi[j] = v
-    return lo, hi
+            elif v != v:
+                finite = False
+    return lo, hi, finite
 
 
 @njit(cache=True, inline="always")
@@ -214,22 +205,22 @@ def _chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals):
 
 
 @njit(cache=True, inline="always")
-def _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt):
-    """Sample s's support box (first cell ``lo``, cells ``cnt`` per axis); ``lengths`` gets
-    l_ij of ``eq:lengthscale_1`` (l_min in the other modes)."""
-    for j in range(3):
+def _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt,
+             j0=0, j1=3):  # fmt: skip
+    """Sample s's support box along axes j0 .. j1 - 1 (first cell ``lo[j]``, cells ``cnt[j]``);
+    ``lengths[j]`` gets l_ij of ``eq:lengthscale_1`` (l_min in the other modes)."""
+    for j in range(j0, j1):
         lengths[j] = l_min[j]
         span = var_hi[j] - var_lo[j]
         if mode == MODE_PRODUCT and span > 0.0:
             v = min(max((variance[s, j] - var_lo[j]) / span, 0.0), 1.0)
             lengths[j] = v * (l_max[j] - l_min[j]) + l_min[j]
-    for j in range(3):
         p = points[s, j] / res
         if mode == MODE_CELL:
             lo[j] = np.int64(np.floor(p))
             cnt[j] = 1
             continue
-        lj = lengths[j] if mode == MODE_PRODUCT else lengths[0]
+        lj = lengths[j] if mode == MODE_PRODUCT else l_min[0]
         r = lj / res
         i0 = np.int64(np.floor(p - r - 0.5)) + 1
         i1 = np.int64(np.ceil(p + r - 0.5)) - 1
@@ -353,11 +344,14 @@ def _scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_
     alpha = alpha.reshape(alpha.shape[0], CHUNK**3)
     beta = beta.reshape(beta.shape[0], CHUNK**3)
     for s in range(points.shape[0]):
-        _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt)
-        u0 = max(first - lo[axis], 0)  # the slab's part of the support along `axis`
+        # the slab's part of the support along `axis` first: the other axes only when in it
+        _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt,
+                 axis, axis + 1)  # fmt: skip
+        u0 = max(first - lo[axis], 0)
         u1 = min(stop - lo[axis], cnt[axis])
         if u0 >= u1:
             continue
+        _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt)
         _support_weights(s, mode, points, res, lo, cnt, w)
         _chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals)
         a0, a1, b0, b1 = (u0, u1, 0, cnt[1]) if axis == 0 else (0, cnt[0], u0, u1)
@@ -376,11 +370,13 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
     beta = beta.reshape(beta.shape[0], CHUNK**3)
     for s in range(points.shape[0]):
         _support(s, MODE_PRODUCT, points, variance, var_lo, var_hi, l_min, l_max, res, lengths,
-                 lo, cnt)  # fmt: skip
-        u0 = max(first - lo[axis], 0)
+                 lo, cnt, axis, axis + 1)  # fmt: skip
+        u0 = max(first - lo[axis], 0)  # the slab's part of the support along `axis`
         u1 = min(stop - lo[axis], cnt[axis])
         if u0 >= u1:
             continue
+        _support(s, MODE_PRODUCT, points, variance, var_lo, var_hi, l_min, l_max, res, lengths,
+                 lo, cnt)  # fmt: skip
         # w[j, a] = k(|d_a|; l_j) (``eq:kernel``, unit sigma_0) at the support's cell centres
         # along axis j, d_a = d_0 + a res. The angles 2 pi d_a / l_j are equally spaced, so
         # cos and sin follow by the angle-addition recurrence from those of the first angle
@@ -460,15 +456,13 @@ def _scatter_parallel(axis, splits, mode, points, label, sigma0, variance, var_l
 
 
 @njit(cache=True)
-def _slab_splits(points, res, parts):
+def _slab_splits(points, res, parts, p_lo, p_hi):
     """(axis, splits) for :func:`_scatter_parallel`: the horizontal axis along which the
     samples' cells spread most, and ``parts`` + 1 cell-index boundaries along it (open at both
-    ends) at the quantiles of the samples' cells, so each slab gets about as many samples."""
+    ends) at the quantiles of the samples' cells, so each slab gets about as many samples;
+    ``p_lo``, ``p_hi``: the points' extent (:func:`_extent`)."""
     n = points.shape[0]
-    lo0, hi0, lo1, hi1 = np.inf, -np.inf, np.inf, -np.inf
-    for s in range(n):
-        lo0, hi0 = min(lo0, points[s, 0]), max(hi0, points[s, 0])
-        lo1, hi1 = min(lo1, points[s, 1]), max(hi1, points[s, 1])
+    lo0, hi0, lo1, hi1 = p_lo[0], p_hi[0], p_lo[1], p_hi[1]
     axis = 0 if hi0 - lo0 >= hi1 - lo1 else 1
     first = np.int64(np.floor((lo0 if axis == 0 else lo1) / res))
     width = np.int64(np.floor((hi0 if axis == 0 else hi1) / res)) - first + 1
@@ -537,21 +531,14 @@ def _add_mass(start, cells, d_alpha, d_beta, table_keys, table_vals, chunk_keys,
     return cells.shape[0]
 
 
-@njit(cache=True)
-def _expand_rays(origin, direction, r, var, sig, sensor, n_free, f):
-    """Training samples of rays (see ``samples.py``): first one hit per ray at o + r v (label
-    1), then each ray's free samples at o + k f v, k = 0 .. n_free - 1 (label 0), in ray order;
-    every sample carries its ray's variance, sigma_0, index and sensor. One pass, no
-    temporaries (the numpy version gathered every per-ray array once per sample)."""
-    n_rays = r.shape[0]
-    total = n_rays + int(n_free.sum())
-    points = np.empty((total, 3))
-    label = np.zeros(total)
-    sigma0 = np.empty(total)
-    pose_variance = np.empty((total, 3))
-    ray = np.empty(total, np.int64)
-    sensor_out = np.empty(total, np.int8)
-    for i in range(n_rays):
+@njit(cache=True, nogil=True)
+def _expand_part(i0, i1, origin, direction, r, var, sig, sensor, first, f, points, label, sigma0,
+                 pose_variance, ray, sensor_out):  # fmt: skip
+    """Training samples of rays i0 .. i1 - 1 (see ``samples.py``): ray i's hit at o + r v (label
+    1) in row i, its free samples at o + k f v, k = 0 .. (label 0), in rows first[i] ..
+    first[i + 1] - 1; every sample carries its ray's variance, sigma_0, index and sensor. Each
+    ray writes only its own rows, so parts run on separate threads."""
+    for i in range(i0, i1):
         for j in range(3):
             points[i, j] = origin[i, j] + r[i] * direction[i, j]
             pose_variance[i, j] = var[i, j]
@@ -559,15 +546,21 @@ def _expand_rays(origin, direction, r, var, sig, sensor, n_free, f):
         sigma0[i] = sig[i]
         ray[i] = i
         sensor_out[i] = sensor[i]
-    k = n_rays
-    for i in range(n_rays):
-        for q in range(n_free[i]):
-            s = q * f
+        for k in range(first[i], first[i + 1]):
+            s = (k - first[i]) * f
             for j in range(3):
                 points[k, j] = origin[i, j] + s * direction[i, j]
                 pose_variance[k, j] = var[i, j]
+            label[k] = 0.0
             sigma0[k] = sig[i]
             ray[k] = i
             sensor_out[k] = sensor[i]
-            k += 1
-    return points, label, sigma0, pose_variance, ray, sensor_out
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _expand_parallel(splits, origin, direction, r, var, sig, sensor, first, f, points, label,
+                     sigma0, pose_variance, ray, sensor_out):  # fmt: skip
+    """:func:`_expand_part` for the rays [splits[t], splits[t + 1]) on numba's threads."""
+    for part in prange(splits.shape[0] - 1):
+        _expand_part(splits[part], splits[part + 1], origin, direction, r, var, sig, sensor,
+                     first, f, points, label, sigma0, pose_variance, ray, sensor_out)  # fmt: skip

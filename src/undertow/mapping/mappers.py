@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import ConfigError, DataError
 from ..occupancy import OccupancyMap
 from .config import MappingConfig, Method
-from .grid import ChunkedGrid
+from .grid import ChunkedGrid, points_extent
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
 from .samples import Samples
 
@@ -93,8 +93,9 @@ class Mapper:
         then scatter; running out of memory anyway is the same one line, not a traceback."""
         limit_gb = self.max_memory_gb or default_max_memory_gb()
         args = (mode, samples.points, samples.label, samples.sigma0, samples.pose_variance)
+        extent = points_extent(samples.points)  # integrate() calls this with samples only
         need = self.grid.estimate_bytes(mode, samples.points, samples.pose_variance, bounds,
-                                        l_min, l_max, limit_gb * 1e9)  # fmt: skip
+                                        l_min, l_max, limit_gb * 1e9, extent)  # fmt: skip
         if need > limit_gb * 1e9:
             raise ConfigError(
                 f"mapping {len(samples)} samples at resolution {self.resolution:g} m would need "
@@ -102,7 +103,7 @@ class Mapper:
                 "mapping.max_memory_gb): use a coarser resolution or raise the limit"
             )
         try:
-            self.grid.scatter(*args, bounds, l_min, l_max)
+            self.grid.scatter(*args, bounds, l_min, l_max, extent)
         except MemoryError:
             raise out_of_memory(self.resolution) from None
 

@@ -30,7 +30,8 @@ from ..log import Log
 from ..rotations import rpy_to_matrix, wrap_angle
 from ..trajectory import Trajectory
 from .config import MappingConfig
-from .kernels import _expand_rays
+from .grid import parallel_slot
+from .kernels import _expand_parallel, _expand_part
 
 SENSOR_DVL, SENSOR_SONAR, SENSOR_MULTIBEAM = 0, 1, 2
 DVL_MIN_RANGE, DVL_MAX_RANGE = 0.05, 50.0
@@ -82,6 +83,18 @@ class Samples:
         if not np.all(np.isfinite(self.pose_variance) & (self.pose_variance >= 0)):
             raise DataError("Samples.pose_variance: must be finite and >= 0")
         object.__setattr__(self, "origins", np.asarray(self.origins, dtype=float).reshape(-1, 3))
+
+    @classmethod
+    def _checked_rays(cls, points, label, sigma0, pose_variance, ray, sensor, origins,
+                      dropped) -> Samples:  # fmt: skip
+        """Samples from :func:`expand`, whose arrays have the types and shapes above and whose
+        values come from rays already checked (finite, sigma_0 > 0, variance >= 0): the
+        per-sample checks of ``__post_init__`` (a pass over every sample's memory) skipped."""
+        obj = object.__new__(cls)
+        values = (points, label, sigma0, pose_variance, ray, sensor, origins, dropped)
+        for name, value in zip(cls.__dataclass_fields__, values, strict=True):
+            object.__setattr__(obj, name, value)
+        return obj
 
     @classmethod
     def from_points(cls, points, label, sigma0=1.0, pose_variance=0.0) -> Samples:
@@ -228,14 +241,35 @@ def _check_time_overlap(log: Log, span, dropped: dict, kept: int, streams: list[
         )
 
 
+def _ray_splits(first: np.ndarray, parts: int) -> np.ndarray:
+    """``parts`` + 1 ray boundaries (0 .. R) giving each part about as many samples: ray i has
+    its hit and first[i + 1] - first[i] free samples."""
+    done = np.arange(len(first)) + first - first[0]  # samples of the rays before ray i
+    splits = np.searchsorted(done, np.linspace(0, done[-1], parts + 1))
+    splits[0], splits[-1] = 0, len(first) - 1
+    return splits.astype(np.int64)
+
+
 def expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
     """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f (numba kernel
-    :func:`~undertow.mapping.kernels._expand_rays`: hits first, then free samples ray by ray)."""
+    :func:`~undertow.mapping.kernels._expand_part`: hits first, then free samples ray by ray,
+    on numba's threads for large batches)."""
+    origin, direction, r, var, sig = (np.ascontiguousarray(a, float)
+                                      for a in (origin, direction, r, var, sig))  # fmt: skip
     n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
-    points, label, sigma0, pose_variance, ray, sensor_out = _expand_rays(
-        np.ascontiguousarray(origin, float), np.ascontiguousarray(direction, float),
-        np.ascontiguousarray(r, float), np.ascontiguousarray(var, float),
-        np.ascontiguousarray(sig, float), np.ascontiguousarray(sensor, np.int8),
-        n_free.astype(np.int64), float(f),
-    )  # fmt: skip
-    return Samples(points, label, sigma0, pose_variance, ray, sensor_out, origin, dropped)
+    rays_ok = (np.isfinite(origin).all() and np.isfinite(direction).all()
+               and np.isfinite(r).all() and np.all((sig > 0) & (sig < np.inf))
+               and np.all((var >= 0) & (var < np.inf)))  # fmt: skip
+    first = len(r) + np.concatenate([[0], np.cumsum(n_free)])  # rows of each ray's free samples
+    total = int(first[-1])
+    arrays = (np.empty((total, 3)), np.empty(total), np.empty(total), np.empty((total, 3)),
+              np.empty(total, np.int64), np.empty(total, np.int8))  # fmt: skip
+    rays = (origin, direction, r, var, sig, np.ascontiguousarray(sensor, np.int8), first, float(f))
+    with parallel_slot(total) as parts:  # hits first, then free samples ray by ray
+        if parts > 1:
+            _expand_parallel(_ray_splits(first, parts), *rays, *arrays)
+        else:
+            _expand_part(0, len(r), *rays, *arrays)
+    if rays_ok:  # every sample is finite, labelled 0 or 1, with its ray's sigma_0 and variance
+        return Samples._checked_rays(*arrays, origin, dropped)
+    return Samples(*arrays, origin, dropped)  # names the bad field
