@@ -123,6 +123,23 @@ def test_local_cluster_equals_single_process(survey, tmp_path):
     assert_same_map(read_tiles(tmp_path / "tiles"), result.map, rtol=0)
 
 
+def test_local_workers_keep_glibc_malloc_defaults():
+    """The local cluster's worker processes run without Dask's MALLOC_TRIM_THRESHOLD_ (which
+    fixes glibc's thresholds, so every large array is faulted in anew), keeping Dask's other
+    pre-spawn settings; the caller's Dask configuration is left as it was."""
+    import os
+
+    import dask
+
+    before = dict(dask.config.get("distributed.nanny.pre-spawn-environ"))
+    got = []
+    jobs = {"MALLOC_TRIM_THRESHOLD_": ("unset",), "OMP_NUM_THREADS": ("unset",)}
+    run = tiled.run_tiles(os.environ.get, jobs, got.append, scheduler="local", n_workers=1)
+    assert not run.failures and sorted(got) == ["1", "unset"]
+    assert "MALLOC_TRIM_THRESHOLD_" in before
+    assert dict(dask.config.get("distributed.nanny.pre-spawn-environ")) == before
+
+
 def test_failed_tile_is_retried_then_reported(survey, monkeypatch):
     config = MappingConfig()
     full = map_tiled(survey, config, TILE_M, scheduler="sync").map

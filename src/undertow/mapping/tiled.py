@@ -39,6 +39,7 @@ import os
 import time
 import warnings
 from collections.abc import Callable, Iterable
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -230,6 +231,22 @@ def run_tiles(task: Callable[..., Any], jobs, on_result,
     return run
 
 
+@contextmanager
+def _default_malloc():
+    """Worker processes started inside keep glibc's default, adaptive malloc thresholds. Dask
+    sets ``MALLOC_TRIM_THRESHOLD_`` for its workers (to hand freed memory back to the system at
+    once), which also fixes glibc's mmap threshold: then every large array a tile allocates
+    (samples, grid growth) is mapped and faulted in anew, which slowed the tiles measurably
+    (docs/benchmarks.md). A worker's memory stays bounded by its largest tile either way
+    (glibc keeps at most what a tile used)."""
+    import dask
+
+    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
+        yield
+
+
 def _run_distributed(task, jobs, on_result, mode, retries, n_workers, run: TileRun) -> None:
     from distributed import Client, LocalCluster
 
@@ -237,7 +254,8 @@ def _run_distributed(task, jobs, on_result, mode, retries, n_workers, run: TileR
         cpus = os.cpu_count() or 1
         n = max(1, min(n_workers or cpus, len(jobs)))
         processes = mode == "local"
-        with warnings.catch_warnings():  # the health-check HTTP server falls back from 8787
+        with warnings.catch_warnings(), _default_malloc():
+            # the health-check HTTP server falls back from 8787
             warnings.filterwarnings("ignore", message="Port .* is already in use")
             cluster = LocalCluster(
                 n_workers=n if processes else 1, threads_per_worker=1 if processes else n,
