@@ -123,21 +123,29 @@ def test_local_cluster_equals_single_process(survey, tmp_path):
     assert_same_map(read_tiles(tmp_path / "tiles"), result.map, rtol=0)
 
 
-def test_local_workers_keep_glibc_malloc_defaults():
+def test_local_workers_keep_glibc_malloc_defaults(monkeypatch):
     """The local cluster's worker processes run without Dask's MALLOC_TRIM_THRESHOLD_ (which
     fixes glibc's thresholds, so every large array is faulted in anew), keeping Dask's other
     pre-spawn settings; the caller's Dask configuration is left as it was."""
     import os
 
     import dask
+    import distributed  # noqa: F401 (loads Dask's distributed defaults)
 
     before = dict(dask.config.get("distributed.nanny.pre-spawn-environ"))
+    # as an earlier default Dask cluster in this process leaves it (its nanny copies it here)
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", str(before["MALLOC_TRIM_THRESHOLD_"]))
     got = []
+
+    def worker_env(name, default):  # nested: pickled by value, runs on the worker
+        return os.environ.get(name, default)
+
     jobs = {"MALLOC_TRIM_THRESHOLD_": ("unset",), "OMP_NUM_THREADS": ("unset",)}
-    run = tiled.run_tiles(os.environ.get, jobs, got.append, scheduler="local", n_workers=1)
+    run = tiled.run_tiles(worker_env, jobs, got.append, scheduler="local", n_workers=1)
     assert not run.failures and sorted(got) == ["1", "unset"]
     assert "MALLOC_TRIM_THRESHOLD_" in before
     assert dict(dask.config.get("distributed.nanny.pre-spawn-environ")) == before
+    assert os.environ["MALLOC_TRIM_THRESHOLD_"] == str(before["MALLOC_TRIM_THRESHOLD_"])
 
 
 def test_failed_tile_is_retried_then_reported(survey, monkeypatch):

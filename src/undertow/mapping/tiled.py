@@ -238,13 +238,23 @@ def _default_malloc():
     once), which also fixes glibc's mmap threshold: then every large array a tile allocates
     (samples, grid growth) is mapped and faulted in anew, which slowed the tiles measurably
     (docs/benchmarks.md). A worker's memory stays bounded by its largest tile either way
-    (glibc keeps at most what a tile used)."""
+    (glibc keeps at most what a tile used). A nanny also copies its settings into this
+    process's environment, which later workers inherit: that copy is lifted while the cluster
+    starts (a value the user set is kept)."""
     import dask
 
+    name = "MALLOC_TRIM_THRESHOLD_"
     env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-    env.pop("MALLOC_TRIM_THRESHOLD_", None)
+    dask_value = env.pop(name, None)
+    inherited = dask_value is not None and os.environ.get(name) == str(dask_value)
     with dask.config.set({"distributed.nanny.pre-spawn-environ": env}):
-        yield
+        if inherited:
+            del os.environ[name]
+        try:
+            yield
+        finally:
+            if inherited:
+                os.environ[name] = str(dask_value)
 
 
 def _run_distributed(task, jobs, on_result, mode, retries, n_workers, run: TileRun) -> None:
