@@ -1,6 +1,7 @@
 """The live pipeline's fast paths give what the general paths give: the recorder's CDR templates
 are the bytes rosbags serializes, records_to_log's whole-column conversion the row-by-row one,
-and a preview advanced by the new records only the fresh preview over the whole buffer."""
+and a preview advanced by the new records only (or continued from a checkpoint) the fresh
+preview over the whole buffer."""
 
 from __future__ import annotations
 
@@ -173,3 +174,78 @@ def test_a_resumed_preview_is_the_fresh_preview():
             assert np.array_equal(a.x[-1], b.x[-1]) and np.array_equal(a.P[-1], b.P[-1])
             compared += 1
     assert compared > 50
+
+
+def test_a_preview_from_a_checkpoint_is_the_fresh_preview():
+    """DVL reports arrive 30 ms after their time (the A50 stamps the time of validity) and
+    dead-reckoning reports 150 ms after (later than the preview before them), IMU and pressure
+    on time; a preview at every DVL arrival continues from the newest checkpoint the arrivals
+    left valid (PreviewCheckpoints) over the buffered records after it, and gives bit for bit
+    the committed filter run over the whole buffer. Most previews continue, and the late
+    reports invalidate some checkpoints."""
+    from undertow.jobs.live.preview import PreviewCheckpoints
+
+    recs, mounting = _sim_records(12.0)
+    lag = {"dvl": 0.03, "dead_reckoning": 0.15}
+    arrival = np.array([r.t + lag.get(r.stream, 0.0) for r in recs])
+    order = np.argsort(arrival, kind="stable")
+    kw = dict(wave=(0.1, 1.0), mounting=mounting, expected={"imu", "dvl", "pressure"})
+    fresh, cont = OnlineLocalizer("proposed", **kw), OnlineLocalizer("proposed", **kw)
+    checkpoints = PreviewCheckpoints(resync_s=1.0)
+    buffered: list = []
+    horizon, compared, continued, dropped = -math.inf, 0, 0, 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for k in order:
+            record, now = recs[k], arrival[k]
+            if now - 0.25 > horizon:  # release behind the horizon, as the pipeline's commit
+                horizon = now - 0.25
+                out = [r for r in buffered if r.t < horizon]
+                buffered = [r for r in buffered if r.t >= horizon]
+                if out:
+                    out.sort(key=lambda r: r.t)
+                    for online in (fresh, cont):
+                        online.push(records_to_log(out))
+                checkpoints.released(horizon)
+            kept = len(checkpoints._kept)
+            checkpoints.arrived(record.t)
+            dropped += kept - len(checkpoints._kept)
+            buffered.append(record)
+            if record.stream != "dvl" or not fresh.ready:
+                continue
+            pending = sorted(buffered, key=lambda r: r.t)
+            start = checkpoints.start()
+            after = -math.inf if start is None else start[0]
+            mine = [r for r in pending if r.t > after]
+            a = fresh.peek(records_to_log(pending))
+            b = cont.peek(records_to_log(mine), start=None if start is None else start[1])
+            checkpoints.reached(mine[-1].t, cont.preview_state, fresh=start is None)
+            continued += start is not None
+            if a is None or b is None:
+                continue
+            assert a.t[-1] == b.t[-1]
+            assert np.array_equal(a.x[-1], b.x[-1]) and np.array_equal(a.P[-1], b.P[-1])
+            compared += 1
+    assert compared > 50 and continued > 20 and dropped > 0
+
+
+def test_preview_checkpoints_rules():
+    from undertow.jobs.live.preview import PreviewCheckpoints
+
+    c = PreviewCheckpoints(resync_s=1.0)
+    assert c.start() is None
+    c.reached(10.0, "s10", fresh=True)  # resync due at 11.0
+    c.reached(10.2, "s10.2", fresh=False)
+    c.reached(10.4, "s10.4", fresh=False)
+    assert c.start() == (10.4, "s10.4")
+    c.arrived(10.3)  # a record at 10.3 arrived after the previews that reached 10.4
+    assert c.start() == (10.2, "s10.2")
+    c.arrived(10.2)  # at the time reached: not taken by that preview either
+    assert c.start() == (10.0, "s10")
+    c.reached(10.5, "s10.5", fresh=False)
+    c.released(10.3)  # records before 10.3 left the buffer: 10.0 cannot be continued
+    assert c.start() == (10.5, "s10.5")
+    c.reached(11.2, "s11.2", fresh=False)
+    assert c.start() is None  # past the resync time: a fresh preview
+    c.reached(11.3, "s11.3", fresh=True)
+    assert c.start() == (11.3, "s11.3") and len(c._kept) == 1

@@ -133,7 +133,7 @@ class OnlineLocalizer:
             return None
         return self._run.states(n_kept)
 
-    def peek(self, chunk: Log, *, resume: bool = False) -> Trajectory | None:
+    def peek(self, chunk: Log, *, resume: bool = False, start=None) -> Trajectory | None:
         """The states the chunk would give if pushed now, computed on a copy (the filter is
         not changed: a preview of records not yet released); None before the start.
 
@@ -143,12 +143,21 @@ class OnlineLocalizer:
         a preview advanced by the new records only, O(new rows)). Its pressure rows are judged
         by the depth-rate check with the committed depths and its own (not the previous
         peeks'), so it may differ from a fresh peek: a display, resynchronized by a fresh one.
-        Without a previous peek it starts from the committed state."""
+        Without a previous peek it starts from the committed state. ``start``: continue from
+        that state instead (one :attr:`preview_state` gave; the same guarantees as ``resume``
+        for the records after it)."""
         if self._run is None:
             return None
-        start = self._preview if resume else None
+        if start is None and resume:
+            start = self._preview
         t, x, P, self._preview = self._run.peek(chunk.replace(mounting=self.mounting), start)
         return Trajectory(t, x, P, variant=self.config.variant) if t.size else None
+
+    @property
+    def preview_state(self):
+        """The filter state the last peek reached (None before one); pass it back as
+        ``peek(start=...)``. Not changed by later peeks (each works on its own copy)."""
+        return self._preview
 
     def latest(self) -> Trajectory | None:
         """The last state recorded (one), or None."""

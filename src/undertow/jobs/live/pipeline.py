@@ -8,10 +8,10 @@ Data flow (one thread does the work; each link has its own thread that only queu
              the pings the trajectory covers)
           -> OnlineSeaState (--wave auto: a new condition for the filter every update)
     each DVL report -> a preview pose (before the commit of the same step): the committed
-                       filter run on a copy over the records still in the buffer, or the last
-                       preview's state advanced by the records since (same states when the
-                       depth-rate check agrees; a fresh one every PREVIEW_RESYNC_S), published
-                       to the live view at once
+                       filter run on a copy over the records still in the buffer, or an
+                       earlier preview's state advanced by the buffered records after it
+                       (:mod:`.preview`: same states when the depth-rate check agrees; a fresh
+                       one every PREVIEW_RESYNC_S), published to the live view at once
 
 The committed estimate lags real time by the reorder buffer (``reorder_s``); it is what a replay
 of the recording reproduces exactly (``undertow localize``/``map`` on the recording, same
@@ -58,6 +58,7 @@ from ...mapping.online import OnlineMapper
 from ...mapping.samples import rays_from_pose
 from ...settings import LIVE_VARIANCE_BOUNDS, Settings
 from .links import expected_streams, open_links
+from .preview import PreviewCheckpoints
 from .reorder import ReorderBuffer
 
 #: wall seconds between status updates (status line, /undertow/status, the view's map)
@@ -67,10 +68,8 @@ POLL_S = 0.02
 #: every n-th committed state goes into the path shown in the view
 PATH_DECIMATION = 10
 #: sensor seconds between fresh previews (the committed filter over the whole buffer); between
-#: them a preview advances the last one's state by the records that came since
+#: them a preview continues from an earlier one's state (:mod:`.preview`)
 PREVIEW_RESYNC_S = 1.0
-#: records kept for the next preview at most (past it, the next preview is a fresh one)
-MAX_UNPREVIEWED = 2000
 #: sensor seconds between online map updates (the chunks released meanwhile at once: the map
 #: is the same to rounding, module :mod:`undertow.mapping.online`, for a tenth of the calls)
 MAP_EVERY_S = 1.0
@@ -150,9 +149,8 @@ class LiveSession:
         self.recorder: Recorder | None = None
         self._stop = threading.Event()
         self._pending_dvl: list[float] = []
-        self._unpreviewed: list[Record] = []  # filter records buffered since the last preview
-        self._preview_t: float | None = None  # the newest record time the preview state took
-        self._resync_at = -math.inf
+        self._checkpoints = PreviewCheckpoints(PREVIEW_RESYNC_S)  # where a preview may start
+        self._last_preview = None  # the states of the last preview
         self._first_wall: float | None = None
         self._last_wall: float | None = None
         self._next_status = 0.0
@@ -265,16 +263,14 @@ class LiveSession:
             self.stats.late += 1
             self.recorder.write_late(record)
             return
-        if record.stream in FILTER_STREAMS and self._preview_t is not None:
-            if len(self._unpreviewed) >= MAX_UNPREVIEWED:  # no DVL for long: resync later
-                self._unpreviewed, self._preview_t = [], None
-            else:
-                self._unpreviewed.append(record)
+        if record.stream in FILTER_STREAMS:
+            self._checkpoints.arrived(record.t)
         if record.stream == "dvl":
             self._pending_dvl.append(wall)
 
     def _commit(self, horizon: float) -> None:
         released = self.buffer.release(horizon)
+        self._checkpoints.released(self.buffer.horizon)
         if not released:
             return
         if self.sea is not None:
@@ -358,30 +354,27 @@ class LiveSession:
 
     def _preview(self) -> None:
         """The pose at the newest DVL report: the committed filter, on a copy, over the
-        records still waiting in the buffer, published to the view; latency measured. Between
-        fresh previews (every PREVIEW_RESYNC_S, and whenever a record came out of order) the
-        last preview's state is advanced by the records that came since (O(new records));
-        the preview is a display (not recorded), so this does not touch the results."""
+        records still waiting in the buffer, published to the view; latency measured. When an
+        earlier preview's state may be continued from (:mod:`.preview`), only the buffered
+        records after it are filtered; a fresh preview every PREVIEW_RESYNC_S. The preview is
+        a display (not recorded), so this does not touch the results."""
         arrivals, self._pending_dvl = self._pending_dvl, []
-        new, self._unpreviewed = self._unpreviewed, []
         if not self.localizer.ready:
-            self._preview_t = None
+            self._checkpoints.clear()
             return
-        first = min((r.t for r in new), default=math.inf)
-        last = max((r.t for r in new), default=-math.inf)
-        states, peek = None, self.localizer.peek
-        # resumed: only the records since, when fewer than a fresh preview would take
-        resume = self._preview_t is not None and first > self._preview_t
-        if new and resume and last < self._resync_at and len(new) <= len(self.buffer):
-            states = peek(records_to_log(new).replace(mounting=self.mounting), resume=True)
-            self._preview_t = max(self._preview_t, last)
-        else:
-            pending = [r for r in self.buffer.pending() if r.stream in FILTER_STREAMS]
-            self._preview_t = None
-            if pending:
-                states = peek(records_to_log(pending).replace(mounting=self.mounting))
-                self._preview_t = pending[-1].t
-                self._resync_at = self._preview_t + PREVIEW_RESYNC_S
+        start = self._checkpoints.start()
+        after = -math.inf if start is None else start[0]
+        pending = [r for r in self.buffer.pending() if r.stream in FILTER_STREAMS and r.t > after]
+        states = None
+        if pending:
+            chunk = records_to_log(pending).replace(mounting=self.mounting)
+            states = self.localizer.peek(chunk, start=None if start is None else start[1])
+            self._checkpoints.reached(pending[-1].t, self.localizer.preview_state,
+                                      fresh=start is None)  # fmt: skip
+            if states is not None and len(states.t):
+                self._last_preview = states
+        elif start is not None:  # nothing new since the state continued from
+            states = self._last_preview
         if states is None or not len(states.t):
             states = self.localizer.latest()
         if states is None or not len(states.t):
