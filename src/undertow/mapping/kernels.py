@@ -244,6 +244,16 @@ def _support_weights(s, mode, points, res, lo, cnt, w):
 
 
 @njit(cache=True, inline="always")
+def _add_cell(alpha, beta, ci, offset, k, y):
+    """k y to alpha and k (1 - y) to beta of cell ``offset`` of chunk ``ci`` (hits, y = 1, touch
+    only alpha; free samples, y = 0, only beta)."""
+    if y != 0.0:
+        alpha[ci, offset] += k * y
+    if y != 1.0:
+        beta[ci, offset] += k * (1.0 - y)
+
+
+@njit(cache=True, inline="always")
 def _add_sample(s, mode, label, sigma0, l0, lo, cnt, w, a0, a1, b0, b1, chunks, c0, alpha, beta):
     """Add sample s's weighted label (radial or cell mode, weights of :func:`_support_weights`)
     to the cells lo + (a, b, c) of its support with a in [a0, a1), b in [b0, b1) (the whole
@@ -268,13 +278,9 @@ def _add_sample(s, mode, label, sigma0, l0, lo, cnt, w, a0, a1, b0, b1, chunks, 
                 k = _k1(np.sqrt(wa * wa + wb * wb + wc * wc), l0) if mode == MODE_RADIAL else 1.0
                 if k <= 0.0:
                     continue
-                k *= sig
                 iz = lz + c
-                ci = chunks[cx, cy, (iz >> CHUNK_SHIFT) - c0z]
-                if y != 0.0:
-                    alpha[ci, oxy | (iz & 7)] += k * y
-                if y != 1.0:
-                    beta[ci, oxy | (iz & 7)] += k * (1.0 - y)
+                _add_cell(alpha, beta, chunks[cx, cy, (iz >> CHUNK_SHIFT) - c0z], oxy | (iz & 7),
+                          k * sig, y)  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
@@ -362,10 +368,11 @@ def _scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_
 @njit(cache=True, nogil=True)
 def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo, var_hi, l_min,
                      l_max, res, table_keys, table_vals, alpha, beta):  # fmt: skip
-    """:func:`_scatter_slab` in product mode (the adaptive kernel), written out in one body:
-    numba neither specializes the shared loop on a constant mode nor inlines helpers that take
-    arrays as tightly, and this runs about twice as fast as the shared loop did."""
-    w, lo, cnt, lengths, chunks, _, box, rot = _scratch(l_min, l_max, res)
+    """:func:`_scatter_slab` in product mode (the adaptive kernel), in its own loop: numba did
+    not specialize the shared loop on a constant mode, and this runs about twice as fast as the
+    shared loop did. The per-axis kernels are written out here: as an inlined helper writing
+    ``w`` they ran about 1.5x slower."""
+    w, lo, cnt, lengths, chunks, c0, box, rot = _scratch(l_min, l_max, res)
     alpha = alpha.reshape(alpha.shape[0], CHUNK**3)
     beta = beta.reshape(beta.shape[0], CHUNK**3)
     for s in range(points.shape[0]):
@@ -400,20 +407,11 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
                 else:
                     w[j, a] = (2.0 + cs) * (1.0 - r) * _THIRD + (sn if d >= 0.0 else -sn) * _INV_2PI
                 cs, sn = cs * cd - sn * sd, sn * cd + cs * sd
-        c0x, c0y, c0z = lo[0] >> CHUNK_SHIFT, lo[1] >> CHUNK_SHIFT, lo[2] >> CHUNK_SHIFT
-        ncx = ((lo[0] + cnt[0] - 1) >> CHUNK_SHIFT) - c0x + 1
-        ncy = ((lo[1] + cnt[1] - 1) >> CHUNK_SHIFT) - c0y + 1
-        ncz = ((lo[2] + cnt[2] - 1) >> CHUNK_SHIFT) - c0z + 1
-        if not _same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):  # neighbours share chunks
-            for a in range(ncx):
-                for b in range(ncy):
-                    for c in range(ncz):
-                        chunks[a, b, c] = _lookup(c0x + a, c0y + b, c0z + c, table_keys,
-                                                  table_vals)  # fmt: skip
-            _set_box(box, c0x, c0y, c0z, ncx, ncy, ncz)
+        _chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals)
         a0, a1, b0, b1 = (u0, u1, 0, cnt[1]) if axis == 0 else (0, cnt[0], u0, u1)
         # scalars, not array reads, in the loops: the stores to alpha/beta could alias them
         y, sig, lx, ly, lz, nz = label[s], sigma0[s], lo[0], lo[1], lo[2], cnt[2]
+        c0x, c0y, c0z = c0[0], c0[1], c0[2]
         for a in range(a0, a1):
             wa = w[0, a]
             if wa <= 0.0:
@@ -433,13 +431,9 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
                     k = wab * w[2, c]
                     if k <= 0.0:
                         continue
-                    k *= sig
                     iz = lz + c
-                    ci = chunks[cx, cy, (iz >> CHUNK_SHIFT) - c0z]
-                    if y != 0.0:
-                        alpha[ci, oxy | (iz & 7)] += k * y
-                    if y != 1.0:
-                        beta[ci, oxy | (iz & 7)] += k * (1.0 - y)
+                    _add_cell(alpha, beta, chunks[cx, cy, (iz >> CHUNK_SHIFT) - c0z],
+                              oxy | (iz & 7), k * sig, y)  # fmt: skip
 
 
 @njit(cache=True, parallel=True, nogil=True)
