@@ -9,8 +9,8 @@ import numba
 import numpy as np
 import pytest
 
-from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
+from undertow.mapping import threads as threads_module
 from undertow.mapping.kernels import _extent, _slab_splits
 from undertow.mapping.samples import Samples
 
@@ -63,7 +63,7 @@ def test_any_slabs_give_the_same_map(monkeypatch, parts):
     """More slabs than threads are run in turn by the threads; still the same map."""
     batches = [_samples(7)]
     serial = _map("adaptive", batches, 1)
-    monkeypatch.setattr(grid_module, "parallel_parts", lambda n: parts)
+    monkeypatch.setattr(threads_module, "parallel_parts", lambda n: parts)
     assert _same(serial, _map("adaptive", batches, 1))
 
 
@@ -115,9 +115,9 @@ def test_parallel_expand_gives_the_serial_samples(monkeypatch, parts):
             "r": rng.choice([0.05, 0.3, 2.0, 9.0], n), "var": rng.uniform(0, 1e-3, (n, 3)),
             "sig": rng.uniform(0.5, 1, n),
             "sensor": rng.integers(0, 3, n).astype(np.int8)}  # fmt: skip
-    monkeypatch.setattr(grid_module, "parallel_parts", lambda n: 1)
+    monkeypatch.setattr(threads_module, "parallel_parts", lambda n: 1)
     serial = expand(**rays, f=0.1, dropped={})
-    monkeypatch.setattr(grid_module, "parallel_parts", lambda n: parts)
+    monkeypatch.setattr(threads_module, "parallel_parts", lambda n: parts)
     threaded = expand(**rays, f=0.1, dropped={})
     assert len(serial) > 2048
     for name in ("points", "label", "sigma0", "pose_variance", "ray", "sensor"):

@@ -84,7 +84,7 @@ import numpy as np
 import yaml
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from .._util.plain import to_plain
+from .._util.plain import json_safe, to_plain
 from ..errors import ConfigError, DataError
 from ..log import Mounting, SonarRange
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
@@ -132,17 +132,6 @@ def _floats(value, n: int) -> tuple[float, ...]:
 
 def _float(value) -> float:
     return math.nan if value is None else float(value)
-
-
-def _strict_json(value):
-    """Non-finite floats -> None, in nested dicts and lists."""
-    if isinstance(value, dict):
-        return {k: _strict_json(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_strict_json(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 _STAMP = struct.Struct("<iI")
@@ -301,7 +290,7 @@ class Recorder:
     def write_status(self, t: float, status: dict) -> None:
         """``status`` as one JSON object (``std_msgs/String``) on ``/undertow/status``; NaN and
         infinities become null (strict JSON)."""
-        text = json.dumps(_strict_json(to_plain(status)), default=str, allow_nan=False)
+        text = json.dumps(json_safe(status), default=str, allow_nan=False)
         with self._lock:
             self._check_open()
             t = self._time(t, "status")

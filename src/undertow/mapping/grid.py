@@ -11,10 +11,7 @@ reported.
 from __future__ import annotations
 
 import math
-import threading
-from contextlib import contextmanager
 
-import numba
 import numpy as np
 
 from ..errors import DataError
@@ -33,45 +30,7 @@ from .kernels import (
     _scatter_slab,
     _slab_splits,
 )
-
-PARALLEL_MIN_SAMPLES = 2048  # below this a scatter stays on the calling thread
-# one parallel scatter at a time per process: a second caller (a Dask thread, the live view)
-# runs the serial kernel instead of nesting numba's thread pool (its workqueue layer aborts then)
-_PARALLEL = threading.Lock()
-
-
-@contextmanager
-def scatter_threads(n: int):
-    """Scatters on this thread use at most ``n`` numba threads inside the block (1: serial;
-    the setting is per calling thread, as ``numba.set_num_threads``)."""
-    before = numba.get_num_threads()
-    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)
-
-
-@contextmanager
-def parallel_slot(n_samples: int):
-    """Yields how many parts (threads) a kernel over ``n_samples`` may use now: 1 when small
-    (:func:`parallel_parts`) or while another thread holds the process's parallel slot."""
-    parts = parallel_parts(n_samples)
-    if parts > 1 and _PARALLEL.acquire(blocking=False):
-        try:
-            yield parts
-        finally:
-            _PARALLEL.release()
-    else:
-        yield 1
-
-
-def parallel_parts(n_samples: int) -> int:
-    """Threads a scatter of ``n_samples`` uses: numba's thread count for the calling thread
-    (``numba.set_num_threads``, ``NUMBA_NUM_THREADS``), 1 under :data:`PARALLEL_MIN_SAMPLES`."""
-    if n_samples < PARALLEL_MIN_SAMPLES:
-        return 1
-    return int(numba.get_num_threads())
+from .threads import parallel_slot
 
 
 def points_extent(points: np.ndarray):
@@ -126,12 +85,14 @@ class ChunkedGrid:
                 extent=None) -> None:  # fmt: skip
         """Place every chunk the samples touch (growing the arrays as needed), then run the
         scatter kernel: on numba's threads, one slab of cells each, when there are enough
-        samples (:func:`parallel_parts`); the map is the same either way, bit for bit.
+        samples (:func:`~undertow.mapping.threads.parallel_slot`); the map is the same either
+        way, bit for bit.
         ``extent``: :func:`points_extent` of ``points`` when the caller has it."""
         start, n = 0, points.shape[0]
         if n == 0:
             return
-        extent = extent or points_extent(points)
+        if extent is None:
+            extent = points_extent(points)
         self._check_extent(extent)
         lo, hi = var_bounds
         res = self.resolution
@@ -189,7 +150,7 @@ class ChunkedGrid:
         if peak(held + n * chunks_per_sample) <= limit_bytes:
             return int(peak(held + n * chunks_per_sample))  # cheapest upper bound
         cells_per_axis = np.asarray(cells_per_axis)
-        p_lo, p_hi, _ = extent or points_extent(points)
+        p_lo, p_hi, _ = points_extent(points) if extent is None else extent
         extent = (p_hi - p_lo) / self.resolution + cells_per_axis
         box = float(np.prod(np.ceil(extent / CHUNK) + 1))
         if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:

@@ -93,7 +93,7 @@ class Mapper:
         then scatter; running out of memory anyway is the same one line, not a traceback."""
         limit_gb = self.max_memory_gb or default_max_memory_gb()
         args = (mode, samples.points, samples.label, samples.sigma0, samples.pose_variance)
-        extent = points_extent(samples.points)  # integrate() calls this with samples only
+        extent = points_extent(samples.points)  # non-empty: integrate() skips empty samples
         need = self.grid.estimate_bytes(mode, samples.points, samples.pose_variance, bounds,
                                         l_min, l_max, limit_gb * 1e9, extent)  # fmt: skip
         if need > limit_gb * 1e9:

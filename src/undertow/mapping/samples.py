@@ -30,8 +30,8 @@ from ..log import Log
 from ..rotations import rpy_to_matrix, wrap_angle
 from ..trajectory import Trajectory
 from .config import MappingConfig
-from .grid import parallel_slot
 from .kernels import _expand_parallel, _expand_part
+from .threads import parallel_slot
 
 SENSOR_DVL, SENSOR_SONAR, SENSOR_MULTIBEAM = 0, 1, 2
 DVL_MIN_RANGE, DVL_MAX_RANGE = 0.05, 50.0

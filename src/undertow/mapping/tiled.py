@@ -26,7 +26,7 @@ address of a running scheduler (``tcp://host:8786``). A task that raises is retr
 one task per worker is in flight, so a worker holds one tile's samples and grid at a time;
 finished tiles can be written one by one to a tile directory (:func:`write_tile`) and read back
 as one map (:func:`read_tiles`).
-Each tile's scatter runs on one numba thread (:func:`~undertow.mapping.grid.scatter_threads`):
+Each tile's scatter runs on one numba thread (:func:`~undertow.mapping.threads.scatter_threads`):
 the tiles are the parallelism.
 """
 
@@ -50,9 +50,9 @@ from .._util.dask import check_scheduler, describe_exception
 from ..errors import ConfigError, DataError, ReaderError
 from ..occupancy import OccupancyMap
 from .config import MappingConfig
-from .grid import scatter_threads
 from .mappers import mapper_from_config
 from .samples import Samples
+from .threads import scatter_threads
 
 TileId = tuple[int, int]
 INDEX_FILE = "tiles.json"
