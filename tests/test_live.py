@@ -149,8 +149,12 @@ def test_live_agrees_with_the_original_log_within_the_arrival_jitter(clean_run):
     """The live run differs from the original log only in the times of the streams stamped on
     arrival (MAVLink IMU and pressure; the Ping, which only the map uses): each is the
     measurement of the vehicle at most delta = max |arrival lag - its median| away in time, so
-    the estimate can differ by at most the distance and the angle the vehicle covers in delta:
-    v_max delta and omega_max delta (plus 1 cm / 1 mrad for the filter's own rounding)."""
+    the position can differ by at most the distance the vehicle covers in delta, v_max delta
+    (plus 1 cm for the filter's own rounding). The attitude integrates the gyro over the stamped
+    intervals: with stamp errors e_k (|e_k| <= delta) the integral over an interval changes by
+    sum_k omega_k (e_(k+1) - e_k), whose end terms give 2 omega_max delta; the rest,
+    -sum_k e_k (omega_k - omega_(k-1)), the DVL and DR updates keep within the 1 mrad allowed
+    for rounding. (omega_max delta alone was exceeded by 2 % in one clean-clone run.)"""
     source, session, _, result = clean_run
     recorded = read_log(result.recording)
     served = session.served_log()
@@ -175,7 +179,7 @@ def test_live_agrees_with_the_original_log_within_the_arrival_jitter(clean_run):
     v_max = float(np.max(np.linalg.norm(gt.velocity, axis=1)))
     w_max = float(np.max(np.abs(source.imu.angular_velocity)))
     assert dp.max() <= v_max * delta + 0.01, (dp.max(), delta)
-    assert da.max() <= w_max * delta + 1e-3, (da.max(axis=0), delta)
+    assert da.max() <= 2 * w_max * delta + 1e-3, (da.max(axis=0), delta)
 
 
 DROP = (6.0, 3.0)  # the A50 link is down for 3 s from 6 s into the log
