@@ -124,6 +124,10 @@ def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | Non
         client.start()
     with tempfile.TemporaryDirectory() as tmp:
         session = LiveSession(Settings(live=live), Path(tmp) / "out", view=view_server).start()
+        # set-up (each link thread imports its protocol library and connects) is not the
+        # pipeline's steady work: measured from when every link is up (serve then plays)
+        if not session.wait_connected(timeout=30.0):
+            raise RuntimeError("bench_live: a link did not connect to serve within 30 s")
         loop_end, threads = [], {}
         finish = session.finish
 

@@ -270,6 +270,33 @@ def test_estimates_and_late_records_have_their_own_topics(tmp_path):
     assert got[STATUS_TOPIC][0][1].data == '{"rates": {"dvl": 4.0, "imu": null}, "late": 2}'
 
 
+def test_declared_topics_exist_before_their_first_message(tmp_path):
+    """declare() adds the topics up front: a stream that never sends is an empty topic the
+    reader skips, the mounting still goes first (at the first message's time), and the bag
+    reads back as one recorded without the declaration."""
+    mounting = Mounting.from_dict({"dvl": {"translation": [0.1, 0.0, 0.2]}})
+    records = [Record("imu", 50.0 + 0.01 * k, {"angular_velocity": (0.01 * k, 0.0, 0.0)})
+               for k in range(5)]  # fmt: skip
+    for name, declare in (("declared", True), ("plain", False)):
+        with Recorder(tmp_path / name, mounting) as rec:
+            if declare:
+                rec.declare(["imu", "dvl", "sonar"], wave=True)
+                with pytest.raises(DataError, match="stream 'gps'"):
+                    rec.declare(["gps"])
+            for r in records:
+                rec.write_record(r)
+    with AnyReader([tmp_path / "declared"], default_typestore=dvl_typestore()) as reader:
+        topics = {c.topic: c.msgcount for c in reader.connections}
+        first = next(iter(reader.messages()))[0].topic
+    assert {"/dvl/data", "/dvl/json_data", POSE_TOPIC, STATUS_TOPIC, WAVE_TOPIC} <= set(topics)
+    assert topics["/dvl/data"] == 0 and first == "/tf_static"
+    declared, plain = read_log(tmp_path / "declared"), read_log(tmp_path / "plain")
+    assert declared.dvl is None and declared.sonar is None
+    assert np.array_equal(declared.imu.angular_velocity, plain.imu.angular_velocity)
+    assert declared.mounting.to_dict() == plain.mounting.to_dict()
+    assert declared.mounting.dvl.translation == mounting.dvl.translation
+
+
 def test_abort_crash_and_misuse(tmp_path):
     rec = Recorder(tmp_path / "a")
     rec.write_record(Record("pressure", 1.0, {"pressure": 1e5}))

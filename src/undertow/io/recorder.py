@@ -112,6 +112,20 @@ STATUS_TOPIC = "/undertow/status"
 LATE_PREFIX = "/undertow/late/"
 #: builtin_interfaces/Time holds seconds in an int32 and the mcap record time is unsigned
 MAX_TIME_S = 2.0**31 - 1.0
+#: the message type of each raw stream's topic(s) (the DVL: its driver message and JSON line)
+_IMU_TYPE = "sensor_msgs/msg/Imu"
+_PRESSURE_TYPE = "sensor_msgs/msg/FluidPressure"
+_RANGE_TYPE = "sensor_msgs/msg/Range"
+_POSE_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"  # dead reckoning and the estimate
+_WAVE_TYPE = "geometry_msgs/msg/Vector3Stamped"
+_STRING_TYPE = "std_msgs/msg/String"  # the DVL's JSON line and the status
+_STREAM_TYPES: dict[str, tuple[tuple[str, str], ...]] = {
+    "imu": (("imu", _IMU_TYPE),),
+    "pressure": (("pressure", _PRESSURE_TYPE),),
+    "sonar": (("sonar", _RANGE_TYPE),),
+    "dead_reckoning": (("dead_reckoning", _POSE_TYPE),),
+    "dvl": (("dvl", A50_DVL), ("dvl_json", _STRING_TYPE)),
+}
 _SONAR_DEFAULTS = {
     "field_of_view": SonarRange.field_of_view,
     "min_range": SonarRange.min_range,
@@ -222,6 +236,7 @@ class Recorder:
             shutil.rmtree(self._holder, ignore_errors=True)
             raise ConfigError(f"{self.path}: cannot start the recording ({exc})") from None
         self._conns: dict[str, object] = {}
+        self._mounting_written = False
         self._lock = threading.Lock()
         self._state = "open"
         self._imu_parts: tuple[bool, bool] | None = None  # (acceleration, orientation)
@@ -230,6 +245,24 @@ class Recorder:
         self._dvl_keys: set[tuple] = set()
         self._last_flush: float | None = None
         self._templates: dict[tuple, _CdrTemplate | None] = {}
+
+    def declare(self, streams, wave: bool = False) -> None:
+        """Add the topics of ``streams`` (raw stream names) and of the estimates (pose, status;
+        the wave with ``wave``) now, before their first message: rosbags' ``add_connection``
+        takes milliseconds (the topic's QoS through a YAML dump), a stall the first record of
+        each stream would otherwise wait for. A declared topic without messages is an empty
+        topic of the bag (the readers skip it)."""
+        with self._lock:
+            self._check_open()
+            for stream in streams:
+                if stream not in _STREAM_TYPES:
+                    raise DataError(f"record stream '{stream}' is not one of {list(_STREAM_TYPES)}")
+                for name, msgtype in _STREAM_TYPES[stream]:
+                    self._connection(self.topics.first(name), msgtype)
+            self._connection(POSE_TOPIC, _POSE_TYPE)
+            self._connection(STATUS_TOPIC, _STRING_TYPE)
+            if wave:
+                self._connection(WAVE_TOPIC, _WAVE_TYPE)
 
     # -- raw records --------------------------------------------------------------------------
     def write_record(self, record: Record) -> Record:
@@ -264,7 +297,7 @@ class Recorder:
             self._check_open()
             t = self._time(t, "pose")
             cov = np.ascontiguousarray(P[:6, :6]).reshape(36)
-            msgtype = "geometry_msgs/msg/PoseWithCovarianceStamped"
+            msgtype = _POSE_TYPE
 
             def build():
                 h, ns = b.header(t, "world")
@@ -283,7 +316,7 @@ class Recorder:
             self._check_open()
             t = self._time(t, "wave")
             h, ns = b.header(t, "world")
-            msgtype = "geometry_msgs/msg/Vector3Stamped"
+            msgtype = _WAVE_TYPE
             msg = b.T[msgtype](header=h, vector=b.vec((amplitude_m, frequency_hz, 0.0)))
             self._write_all([(WAVE_TOPIC, ns, msgtype, msg)])
 
@@ -295,8 +328,8 @@ class Recorder:
             self._check_open()
             t = self._time(t, "status")
             _, ns = self._b.header(t, "")
-            msg = self._b.T["std_msgs/msg/String"](data=text)
-            self._write_all([(STATUS_TOPIC, ns, "std_msgs/msg/String", msg)])
+            msg = self._b.T[_STRING_TYPE](data=text)
+            self._write_all([(STATUS_TOPIC, ns, _STRING_TYPE, msg)])
 
     # -- finishing ----------------------------------------------------------------------------
     def flush(self) -> None:
@@ -384,7 +417,8 @@ class Recorder:
         return conn
 
     def _write_all(self, messages) -> None:
-        if not self._conns:  # the mounting first, at the first message's time
+        if not self._mounting_written:  # the mounting first, at the first message's time
+            self._mounting_written = True
             topic = self.topics.tf_static[0]
             ns, msg = tf_static_message(self._b, self.topics, self.mounting, messages[0][1] * 1e-9)
             messages = [(topic, ns, TF_MESSAGE, msg), *messages]
@@ -427,7 +461,7 @@ class Recorder:
             data["linear_acceleration"] = acc
         if has_q:
             data["orientation"] = q
-        topic, msgtype = self._topic("imu", late), "sensor_msgs/msg/Imu"
+        topic, msgtype = self._topic("imu", late), _IMU_TYPE
         values = (*q, *(_ZEROS9 if has_q else _NO_ESTIMATE9), *w, *_ZEROS9, *acc,
                   *(_ZEROS9 if has_a else _NO_ESTIMATE9))  # fmt: skip
 
@@ -439,7 +473,7 @@ class Recorder:
 
     def _pressure(self, t: float, record: Record, late: str):
         p = _float(record.data.get("pressure"))
-        topic, msgtype = self._topic("pressure", late), "sensor_msgs/msg/FluidPressure"
+        topic, msgtype = self._topic("pressure", late), _PRESSURE_TYPE
 
         def build():
             return pressure_message(self._b, t, self._frame["barometer"], p)
@@ -470,7 +504,7 @@ class Recorder:
         rng = _f32(_float(d.get("range")))
         ns, msg = sonar_message(self._b, t, self._frame["sonar"], limits, rng)
         data = {"range": rng, **dict(zip(_SONAR_DEFAULTS, limits, strict=True))}
-        return data, [(self._topic("sonar", late), ns, "sensor_msgs/msg/Range", msg)]
+        return data, [(self._topic("sonar", late), ns, _RANGE_TYPE, msg)]
 
     def _dead_reckoning(self, t: float, record: Record, late: str):
         d = record.data
@@ -486,7 +520,7 @@ class Recorder:
             "orientation": tuple(float(a) for a in rpy_read),
             "std": math.sqrt(var) if var >= 0 else math.nan,
         }
-        msgtype = "geometry_msgs/msg/PoseWithCovarianceStamped"
+        msgtype = _POSE_TYPE
         return data, [(self._topic("dead_reckoning", late), ns, msgtype, msg)]
 
     def _dvl(self, t: float, record: Record, late: str):
@@ -495,10 +529,10 @@ class Recorder:
         tov = record.sensor_time if math.isfinite(record.sensor_time) else t
         ns, msg = dvl_driver_message(self._b, dvl, 0, self._frame["dvl"], time_ms)
         line = velocity_report_line(dvl, 0, time_ms, tov)
-        string = self._b.T["std_msgs/msg/String"](data=line)
+        string = self._b.T[_STRING_TYPE](data=line)
         messages = [
             (self._topic("dvl", late), ns, A50_DVL, msg),
-            (self._topic("dvl_json", late), ns, "std_msgs/msg/String", string),
+            (self._topic("dvl_json", late), ns, _STRING_TYPE, string),
         ]
         return _dvl_read_back(dvl), messages
 

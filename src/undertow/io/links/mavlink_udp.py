@@ -17,6 +17,7 @@ A link silent for ``idle_timeout_s`` re-opens its connection (counted as a disco
 
 from __future__ import annotations
 
+import importlib
 import math
 import socket
 import time
@@ -77,6 +78,7 @@ class MavlinkLink(Link):
         except Exception as exc:  # pymavlink raises bare Exceptions for bad addresses
             raise OSError(f"{self.address}: {exc}") from None
         _grow_receive_buffer(conn)
+        _preload_mavlink2(mavutil.current_dialect)
         self._conn = conn
         return conn
 
@@ -154,6 +156,16 @@ class MavlinkLink(Link):
                     record.stream, t, record.data, arrival, record.sensor_time, record.source
                 )
             self._emit(record)
+
+
+def _preload_mavlink2(dialect: str) -> None:
+    """Import the MAVLink 2 module of ``dialect`` now: the connection starts in MAVLink 1 and
+    switches to 2 at the first MAVLink 2 packet (``auto_mavlink_version``), importing that
+    module then (tens of ms for the ``all`` dialect), which would stall the first messages."""
+    try:
+        importlib.import_module(f"pymavlink.dialects.v20.{dialect}")
+    except ImportError:  # a dialect pymavlink generates on demand: it does so at the switch
+        pass
 
 
 #: the UDP receive buffer asked for (the kernel caps it at twice net.core.rmem_max)

@@ -177,6 +177,7 @@ class LiveSession:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         self.recorder = Recorder(self.out_dir / "recording", self.mounting,
                                  metadata={"live": self.live.model_dump()})  # fmt: skip
+        self.recorder.declare(sorted(self.expected), wave=self.auto_wave)
         for link in self.links.values():
             link.start()
         return self
