@@ -283,3 +283,55 @@ def _frame_len(data: bytes, i: int) -> int:
     if data[i] == 0xFE:
         return 6 + data[i + 1] + 2
     return 10 + data[i + 1] + 2 + (13 if data[i + 2] & 1 else 0)
+
+
+def _tlog_frames() -> list[bytes]:
+    frames, k = [], 0
+    while k < len(TLOG):
+        length = _frame_len(TLOG, k + 8)
+        frames.append(TLOG[k + 8 : k + 8 + length])
+        k += 8 + length
+    return frames
+
+
+def test_unused_mavlink_frames_are_named_without_decoding():
+    """Intact frames of messages no stream reads are named; mapped ones, a bad CRC, a frame
+    after buffered bytes and a signed frame go to pymavlink's parser."""
+    from undertow.io.links.mavlink_udp import _UnusedFrames
+
+    mav = mavlink2.MAVLink(None)
+    used = MavlinkMapper().message_types
+    unused = _UnusedFrames(mav, used)
+    names = [unused.name(f) for f in _tlog_frames()[:6]]
+    assert names == [None, "SCALED_IMU2", None, None, None, "HEARTBEAT"]
+    imu = bytearray(_tlog_frames()[1])
+    imu[-1] ^= 0x01
+    assert unused.name(bytes(imu)) is None
+    signed = bytearray(_tlog_frames()[1])
+    signed[2] |= 0x01
+    assert unused.name(bytes(signed)) is None
+    mav.parse_buffer(_tlog_frames()[0][:5])  # half a frame waits in the parser's buffer
+    assert unused.name(_tlog_frames()[1]) is None
+
+
+@FAST
+@given(data=st.data())
+def test_unused_mavlink_frames_are_named_only_when_pymavlink_decodes_them(data):
+    """Any damage to a frame: the link names (and counts without decoding) a datagram only
+    when pymavlink's parser decodes exactly one message of that name from it, a message no
+    stream uses."""
+    from undertow.io.links.mavlink_udp import _UnusedFrames
+
+    frame = bytearray(data.draw(st.sampled_from(_tlog_frames())))
+    for _ in range(data.draw(st.integers(0, 3))):
+        i = data.draw(st.integers(0, len(frame) - 1))
+        frame[i] ^= 1 << data.draw(st.integers(0, 7))
+    cut = data.draw(st.integers(0, len(frame)))
+    frame = frame[:cut] + data.draw(st.binary(max_size=4)) + frame[cut:]
+    mav = mavlink2.MAVLink(None)
+    mav.robust_parsing = True
+    used = MavlinkMapper().message_types
+    name = _UnusedFrames(mav, used).name(bytes(frame))
+    decoded = [m.get_type() for m in mav.parse_buffer(bytes(frame)) or []]
+    if name is not None:
+        assert decoded == [name] and name not in used

@@ -85,7 +85,10 @@ class MavlinkConfig:
 
 
 def _finite(*values: float) -> bool:
-    return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
+    for v in values:  # (a loop, not all() over a generator: this runs for every message)
+        if not (isinstance(v, int | float) and math.isfinite(v)):
+            return False
+    return True
 
 
 def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:

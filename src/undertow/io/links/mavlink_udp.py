@@ -20,6 +20,7 @@ from __future__ import annotations
 import importlib
 import math
 import socket
+import sys
 import time
 
 from ...errors import ConfigError
@@ -113,6 +114,7 @@ class MavlinkLink(Link):
         """UDP: one blocking read per datagram, decoded by the connection's own parser
         (``recv_match`` polls, which costs several times the decoding at telemetry rates)."""
         sock.settimeout(0.2)
+        unused = _UnusedFrames(conn.mav, self.mapper.message_types)
         last = time.monotonic()
         while not self.stopping:
             try:
@@ -129,6 +131,11 @@ class MavlinkLink(Link):
             arrival = self.now()
             if conn.first_byte:  # MAVLink 1 or 2, from the first packet (as recv_match does)
                 conn.auto_mavlink_version(data)
+                unused = _UnusedFrames(conn.mav, self.mapper.message_types)
+            name = unused.name(data)
+            if name is not None:  # a valid frame of a message no stream uses: counted only
+                self.message_counts[name] = self.message_counts.get(name, 0) + 1
+                continue
             for msg in conn.mav.parse_buffer(data) or ():
                 self.handle(msg, arrival)
 
@@ -156,6 +163,40 @@ class MavlinkLink(Link):
                     record.stream, t, record.data, arrival, record.sensor_time, record.source
                 )
             self._emit(record)
+
+
+class _UnusedFrames:
+    """Recognizes a datagram that is exactly one unsigned MAVLink 2 frame of a message the
+    mapper does not use (an autopilot streams many: SCALED_IMU2 beside ATTITUDE, HEARTBEAT,
+    SYS_STATUS) and checks it as pymavlink's ``decode`` does: the length byte against the
+    datagram, the message id in the dialect, the CRC-16/MCRF4XX of the frame after the magic
+    byte, extended by the message's CRC_EXTRA (MAVLink serialization,
+    https://mavlink.io/en/guide/serialization.html). Such a frame is counted, not decoded
+    (decoding builds a message object no stream reads: most of the per-message time). Anything
+    else, a failed check included, goes to pymavlink's parser, which keeps its buffer and its
+    verdicts (BAD_DATA) for it; so pymavlink's own packet counters omit the frames skipped."""
+
+    def __init__(self, mav, used: tuple[str, ...]) -> None:
+        module = sys.modules[type(mav).__module__]
+        self.mav = mav
+        self.crc = module.x25crc
+        self.v2 = getattr(module, "WIRE_PROTOCOL_VERSION", "") == "2.0"
+        self.unused = {msgid: (cls.msgname, cls.crc_extra)
+                       for msgid, cls in module.mavlink_map.items()
+                       if cls.msgname not in used}  # fmt: skip
+
+    def name(self, data: bytes) -> str | None:
+        """The message name when ``data`` is one valid frame of an unused message, else None."""
+        n = len(data)
+        if (n < 12 or data[0] != 0xFD or data[2] != 0 or n != data[1] + 12 or not self.v2
+                or self.mav.buf_len() or self.mav.signing.secret_key is not None):  # fmt: skip
+            return None
+        known = self.unused.get(data[7] | data[8] << 8 | data[9] << 16)
+        if known is None:
+            return None
+        name, crc_extra = known
+        crc = self.crc(bytearray(data[1:-2]) + bytes((crc_extra,))).crc
+        return name if crc == data[-2] | data[-1] << 8 else None
 
 
 def _preload_mavlink2(dialect: str) -> None:
