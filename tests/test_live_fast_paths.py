@@ -5,12 +5,14 @@ preview over the whole buffer."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 
 import numpy as np
 import pytest
 
+from undertow.errors import DataError
 from undertow.estimation.online import OnlineLocalizer
 from undertow.io.links.common import RECORD_FIELDS, Record, records_to_log
 from undertow.io.recorder import Recorder
@@ -128,6 +130,30 @@ def test_records_to_log_columns_match_row_by_row():
     imu = [Record("imu", 0.01 * k, {"angular_velocity": (1.0, 2.0, float(k))}) for k in range(5)]
     assert records_to_log(imu).imu.linear_acceleration is None
     assert set(RECORD_FIELDS["dvl"]) >= set(shapes)
+
+
+def test_records_to_log_streams_are_the_checked_constructors_streams():
+    """records_to_log builds its streams without the constructors' checks and copies: every
+    field equal (dtype, shape, values) to the stream the checked constructor makes of the same
+    columns, read-only as those are; a non-finite time is still the one-line error."""
+    recs = list(_sim_records(2.0)[0])
+    recs += [Record("sonar", 0.05 * k, {"range": 2.0 + 0.01 * k, "confidence": 0.9,
+                                        "max_range": 30.0}) for k in range(20)]  # fmt: skip
+    log = records_to_log(recs)
+    for name, stream in log.streams().items():
+        fields = {f.name: getattr(stream, f.name) for f in dataclasses.fields(stream)}
+        checked = type(stream)(**fields)
+        for key, value in fields.items():
+            ref = getattr(checked, key)
+            if isinstance(ref, np.ndarray):
+                assert value.dtype == ref.dtype and value.shape == ref.shape, (name, key)
+                assert np.array_equal(value, ref, equal_nan=True), (name, key)
+                assert not value.flags.writeable, (name, key)
+            else:
+                assert value == ref, (name, key)
+    assert log.sonar.max_range == 30.0 and len(log.sonar) == 20
+    with pytest.raises(DataError, match=r"^imu\.t: non-finite timestamps$"):
+        records_to_log([*recs[:3], Record("imu", math.nan, {"angular_velocity": (0.0,) * 3})])
 
 
 def _sim_records(span_s: float):

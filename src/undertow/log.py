@@ -17,6 +17,7 @@ stages without copies or surprises.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -44,6 +45,11 @@ def _as_array(value, dtype, name: str, stream: str) -> np.ndarray:
         ) from exc
     arr.setflags(write=False)
     return arr
+
+
+@functools.cache
+def _field_defaults(cls) -> tuple[tuple[str, object], ...]:
+    return tuple((f.name, f.default) for f in dataclasses.fields(cls))
 
 
 class _Stream:
@@ -81,6 +87,24 @@ class _Stream:
         """Expected shape after the time axis, per array field (``_shapes`` unless a stream
         sizes a dimension from its data)."""
         return self._shapes
+
+    @classmethod
+    def _trusted(cls, **fields):
+        """The stream of ``fields`` without the constructor's checks and copies, for a builder
+        that made every array itself in this class's dtypes and shapes, with finite times in
+        order (:func:`undertow.io.links.common.records_to_log`, called for every few records
+        live); the arrays are made read-only, as the constructor makes its copies."""
+        obj = object.__new__(cls)
+        for name, default in _field_defaults(cls):
+            value = fields.pop(name, default)
+            if value is dataclasses.MISSING:
+                raise TypeError(f"{cls.__name__}._trusted: missing field {name}")
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(obj, name, value)
+        if fields:
+            raise TypeError(f"{cls.__name__}._trusted: unknown fields {sorted(fields)}")
+        return obj
 
     def __len__(self) -> int:
         return int(self.t.size)
@@ -200,9 +224,16 @@ class Dvl(_Stream):
     ) -> Dvl:
         """Build a Dvl stream with A50 beam geometry and NaN/False for what is not given."""
         t = np.asarray(t, dtype=np.float64).reshape(-1)
+        return cls(**cls._velocity_fields(t, velocity, valid, fom, covariance, altitude,
+                                          beam_range, beam_valid, beam_velocity))  # fmt: skip
+
+    @staticmethod
+    def _velocity_fields(t, velocity, valid, fom, covariance, altitude, beam_range, beam_valid,
+                         beam_velocity) -> dict:  # fmt: skip
+        """The fields of :meth:`from_velocity` (t a float64 array)."""
         n = t.size
         nan = np.full(n, np.nan)
-        return cls(
+        return dict(
             t=t,
             velocity=velocity,
             valid=np.ones(n, bool) if valid is None else valid,
@@ -210,7 +241,7 @@ class Dvl(_Stream):
             covariance=np.full((n, 3, 3), np.nan) if covariance is None else covariance,
             altitude=nan if altitude is None else altitude,
             beam_id=np.tile(np.arange(4), (n, 1)),
-            beam_unit=np.tile(a50_beam_units(), (n, 1, 1)),
+            beam_unit=np.tile(_A50_UNITS, (n, 1, 1)),
             beam_range=np.full((n, 4), np.nan) if beam_range is None else beam_range,
             beam_valid=np.zeros((n, 4), bool) if beam_valid is None else beam_valid,
             beam_velocity=np.full((n, 4), np.nan) if beam_velocity is None else beam_velocity,
@@ -471,6 +502,10 @@ def dvl_beam_units(tilt_deg: float, azimuths_deg) -> np.ndarray:
     return np.stack(
         [np.sin(tilt) * np.cos(az), np.sin(tilt) * np.sin(az), np.full(n, np.cos(tilt))], axis=1
     )
+
+
+_A50_UNITS = a50_beam_units()  # from_velocity's beams, made once
+_A50_UNITS.setflags(write=False)
 
 
 @dataclass(frozen=True)

@@ -49,7 +49,6 @@ from .localizer import (
     _imu_rows,
     _initial_state,
     _nis_summary,
-    _padded,
     _pressure_rows,
     sensor_coverage,
 )
@@ -433,32 +432,46 @@ class _Run:
 
     def _rows(self, chunk: Log, commit: bool = True):
         """(candidate rows merged in the offline order, their depth index, (t, depth) of the
-        new in-envelope depths); ``commit``: count them."""
-        cfg, floor2, rejected = self.cfg, self.cfg.std_floor**2, {}
-        parts = []
+        new in-envelope depths); ``commit``: count them. The rows are those of
+        :func:`~undertow.estimation.localizer._padded` (z and R zero-padded to three
+        dimensions, R's diagonal floored at std_floor^2), written into one array (a chunk is a
+        few records: fewer small arrays than padding each stream and concatenating)."""
+        cfg, rejected = self.cfg, {}
+        parts = []  # (t, kind, z, R, depth index) of each stream's accepted rows
         for name, build in (("imu", _imu_rows), ("dvl", _dvl_rows),
                             ("dead_reckoning", _dr_rows)):  # fmt: skip
             stream = getattr(chunk, name)
             if stream is not None and len(stream):
                 t, kind, z, R, ok = build(chunk, cfg, self.noise, rejected, warn=False)
-                parts.append((*_padded(t[ok], kind, z[ok], R[ok], floor2), np.full(ok.sum(), -1)))
+                parts.append((t[ok], kind, z[ok], R[ok], -1))
         depths = (np.zeros(0), np.zeros(0))
         if chunk.pressure is not None and len(chunk.pressure):
             t, kind, z, R, ok = _pressure_rows(chunk, cfg, self.noise, rejected, warn=False,
                                                jumps=False)  # fmt: skip
-            idx = self.depth.count + np.arange(int(ok.sum()))
-            parts.append((*_padded(t[ok], kind, z[ok], R[ok], floor2), idx))
+            n_ok = int(ok.sum())
+            parts.append((t[ok], kind, z[ok], R[ok], self.depth.count + np.arange(n_ok)))
             depths = (t[ok], z[ok, 0])
         for key, value in rejected.items() if commit else ():
             self.rejected[key] = self.rejected.get(key, 0) + value
-        if not parts:
-            return np.zeros(0, model.MEASUREMENT), np.zeros(0, np.int64), depths
-        t, kind, z, R, idx = (np.concatenate(c) for c in zip(*parts, strict=True))
-        order = np.lexsort((kind, t))
+        n = sum(part[0].size for part in parts)
+        rows = np.zeros(n, model.MEASUREMENT)
+        idx = np.empty(n, np.int64)
+        rt, rk, rz, rR = rows["t"], rows["kind"], rows["z"], rows["R"]
+        a = 0
+        for t, kind, z, R, depth_idx in parts:
+            b, d = a + t.size, z.shape[1]
+            rt[a:b], rk[a:b], idx[a:b] = t, kind, depth_idx
+            rz[a:b, :d] = z
+            rR[a:b, :d, :d] = R
+            a = b
+        i = np.arange(3)
+        rR[:, i, i] = np.maximum(rR[:, i, i], cfg.std_floor**2)
+        if n == 0:
+            return rows, idx, depths
+        order = np.lexsort((rk, rt))
         if commit:
-            np.add.at(self.candidates, kind, 1)
-        rows = model.pack_measurements(t[order], kind[order], z[order], R[order])
-        return rows, idx[order], depths
+            self.candidates += np.bincount(rk, minlength=self.candidates.size)
+        return rows[order], idx[order], depths
 
     def peek(self, chunk: Log, start=None) -> tuple:
         """(t, x, P, state reached) of the chunk filtered on a copy of the state (``start``,

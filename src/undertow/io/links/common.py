@@ -401,9 +401,18 @@ def records_to_log(records: Iterable[Record], source: str = "", metadata=None) -
         by_stream.setdefault(record.stream, []).append(record)
     streams = {}
     for name, recs in by_stream.items():
-        recs = sorted(recs, key=lambda r: r.t)
-        streams[name] = _BUILDERS[name]([r.t for r in recs], [r.data for r in recs])
+        recs = sorted(recs, key=_time)
+        t = np.array([r.t for r in recs], dtype=np.float64)
+        if not np.isfinite(t).all():
+            raise DataError(f"{name}.t: non-finite timestamps")
+        # every array below is made here in its stream's dtype and shape, the times are finite
+        # and sorted: the streams are built without the constructors' checks and copies
+        streams[name] = _BUILDERS[name](t, [r.data for r in recs])
     return Log(**streams, source=source, metadata=dict(metadata or {}))
+
+
+def _time(record: Record) -> float:
+    return record.t
 
 
 def _column(data: list[dict], key: str, shape: tuple, dtype=np.float64):
@@ -422,7 +431,7 @@ def _column(data: list[dict], key: str, shape: tuple, dtype=np.float64):
 
 
 def _imu(t, data) -> Imu:
-    return Imu(
+    return Imu._trusted(
         t=t,
         angular_velocity=_column(data, "angular_velocity", (3,)),
         linear_acceleration=_column(data, "linear_acceleration", (3,)),
@@ -434,7 +443,7 @@ def _dvl(t, data) -> Dvl:
     def col(key, shape=(), dtype=np.float64):
         return _column(data, key, shape, dtype)
 
-    return Dvl.from_velocity(
+    fields = Dvl._velocity_fields(
         t,
         col("velocity", (3,)),
         valid=col("valid", (), np.bool_),
@@ -445,10 +454,11 @@ def _dvl(t, data) -> Dvl:
         beam_valid=col("beam_valid", (4,), np.bool_),
         beam_velocity=col("beam_velocity", (4,)),
     )
+    return Dvl._trusted(**fields)
 
 
 def _dead_reckoning(t, data) -> DeadReckoning:
-    return DeadReckoning(
+    return DeadReckoning._trusted(
         t=t,
         position=_column(data, "position", (3,)),
         orientation=_column(data, "orientation", (3,)),
@@ -457,12 +467,12 @@ def _dead_reckoning(t, data) -> DeadReckoning:
 
 
 def _pressure(t, data) -> Pressure:
-    return Pressure(t=t, pressure=_column(data, "pressure", ()))
+    return Pressure._trusted(t=t, pressure=_column(data, "pressure", ()))
 
 
 def _sonar(t, data) -> SonarRange:
     extra = {k: data[-1][k] for k in ("field_of_view", "min_range", "max_range") if k in data[-1]}
-    return SonarRange(
+    return SonarRange._trusted(
         t=t, range=_column(data, "range", ()), confidence=_column(data, "confidence", ()), **extra
     )
 
