@@ -121,11 +121,13 @@ def _depth_jumps(t, d, v_max: float, tol: float) -> np.ndarray:
         return np.zeros(n, bool)
     pad_d = np.concatenate([np.full(h, np.nan), d, np.full(h, np.nan)])
     pad_t = np.concatenate([np.full(h, t[0]), t, np.full(h, t[-1])])
-    windows = np.lib.stride_tricks.sliding_window_view(pad_d, 2 * h + 1)
-    median = _window_median(windows)
-    times = np.lib.stride_tricks.sliding_window_view(pad_t, 2 * h + 1)
-    span = np.max(np.abs(times - t[:, None]), axis=1)
+    window = np.arange(n)[:, None] + _WINDOW  # (rows of the windows, as sliding windows)
+    median = _window_median(pad_d[window])
+    span = np.max(np.abs(pad_t[window] - t[:, None]), axis=1)
     return np.abs(d - median) > v_max * span + tol
+
+
+_WINDOW = np.arange(2 * HALF_WINDOW + 1)  # offsets of a window in the padded arrays
 
 
 def _window_median(windows: np.ndarray) -> np.ndarray:

@@ -433,7 +433,8 @@ def _padded(t, kind, z, R, floor2):
 
 def _diag(std, n: int, cfg: LocalizerConfig) -> np.ndarray:
     """n copies of diag(max(std, std_floor)^2)."""
-    return np.tile(np.diag(np.maximum(np.asarray(std, float), cfg.std_floor) ** 2), (n, 1, 1))
+    D = np.diag(np.maximum(np.asarray(std, float), cfg.std_floor) ** 2)
+    return np.repeat(D[None], n, axis=0)  # (np.tile, without its Python-level set-up)
 
 
 def _imu_rows(
