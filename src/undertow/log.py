@@ -241,7 +241,7 @@ class Dvl(_Stream):
             covariance=np.full((n, 3, 3), np.nan) if covariance is None else covariance,
             altitude=nan if altitude is None else altitude,
             beam_id=np.tile(np.arange(4), (n, 1)),
-            beam_unit=np.tile(_A50_UNITS, (n, 1, 1)),
+            beam_unit=np.tile(A50_UNITS, (n, 1, 1)),
             beam_range=np.full((n, 4), np.nan) if beam_range is None else beam_range,
             beam_valid=np.zeros((n, 4), bool) if beam_valid is None else beam_valid,
             beam_velocity=np.full((n, 4), np.nan) if beam_velocity is None else beam_velocity,
@@ -504,8 +504,8 @@ def dvl_beam_units(tilt_deg: float, azimuths_deg) -> np.ndarray:
     )
 
 
-_A50_UNITS = a50_beam_units()  # from_velocity's beams, made once
-_A50_UNITS.setflags(write=False)
+A50_UNITS = a50_beam_units()  # the default geometry's beams, made once (read-only)
+A50_UNITS.setflags(write=False)
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ReaderError
-from ..log import Dvl, a50_beam_units
+from ..log import A50_UNITS, Dvl
 
 #: what one malformed line, message or field of untrusted input can raise while being decoded:
 #: bad values (ValueError, TypeError, KeyError, AttributeError, IndexError), numbers too large
@@ -169,8 +169,7 @@ class DvlRows:
         """Add one report. ``beams``: (id, radial velocity, distance, valid) per beam; A50 beam
         ids 0..3 place the beam in that column with the A50 geometry unless ``beam_units``
         (4, 3) is given (then beams fill columns in order)."""
-        a50 = a50_beam_units()
-        ids, units = np.arange(4), a50.copy() if beam_units is None else np.asarray(beam_units)
+        ids, units = np.arange(4), A50_UNITS if beam_units is None else np.asarray(beam_units)
         rng, ok, vel = np.full(4, np.nan), np.zeros(4, bool), np.full(4, np.nan)
         for k, (bid, bvel, dist, bvalid) in enumerate(beams):
             col = int(bid) if beam_units is None else k
