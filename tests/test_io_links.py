@@ -581,3 +581,30 @@ def test_mavlink_serial_device():
     os.close(master)
     os.close(slave)
     np.testing.assert_allclose([r.data["pressure"] for r in records], 1e5 + 100.0 * np.arange(20))
+
+
+def test_links_and_grid_load_their_code_ahead():
+    """load() imports a link's protocol library in the calling thread (a live session calls it
+    before freezing its long-lived objects out of the collector's reach) and load_kernels()
+    loads the grid's growth kernel, so neither happens mid-session. Checked in a fresh
+    interpreter, where nothing is loaded yet."""
+    import subprocess
+    import sys
+
+    script = """
+import sys
+from undertow.io.links.mavlink_udp import MavlinkLink
+from undertow.io.links.ping1d import Ping1DLink
+from undertow.mapping import grid, kernels
+mav, ping = MavlinkLink("udpin:127.0.0.1:0"), Ping1DLink("udp://127.0.0.1:9")
+loaded = lambda prefix: any(m.startswith(prefix) for m in sys.modules)
+assert not loaded("pymavlink.dialects.v20") and not loaded("brping")
+assert not kernels._rehash.signatures
+mav.load(); ping.load(); grid.load_kernels()
+from pymavlink import mavutil
+assert "pymavlink.dialects.v20." + mavutil.current_dialect in sys.modules
+assert loaded("brping") and kernels._rehash.signatures
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]

@@ -45,6 +45,12 @@ GROWTH_PEAK = 2.5  # growing by 1.5 holds the old and the new arrays at once
 READOUT_BYTES_PER_CELL = 100  # cells(): indices, keys, alpha and beta as float64, temporaries
 
 
+def load_kernels() -> None:
+    """Load the kernel of a growth (the rehash; numba's cache, else a compile) now: a map
+    first outgrows its table mid-run, where a live session would stall on it."""
+    ChunkedGrid(1.0, capacity=8)._grow()
+
+
 class ChunkedGrid:
     """Hash of dense CHUNK^3 blocks of (alpha mass, beta mass); grows by a factor 1.5."""
 

@@ -285,6 +285,12 @@ class Link:
         self.info: dict[str, Any] = {}
 
     # -- lifecycle -------------------------------------------------------------------------
+    def load(self) -> None:
+        """Import what the link's thread needs, in the calling thread (the thread would do it
+        at its first connection). A live session calls this before it freezes its long-lived
+        objects out of the garbage collector's reach: a protocol library imported later stays
+        young, and the collector's first full pass over it stalls the session."""
+
     def start(self) -> Link:
         if self._thread is None or not self._thread.is_alive():
             self._stop.clear()

@@ -69,6 +69,11 @@ class MavlinkLink(Link):
         self.message_counts: dict[str, int] = {}
         self._conn = None
 
+    def load(self) -> None:
+        from pymavlink import mavutil
+
+        _preload_mavlink2(mavutil.current_dialect)
+
     def _connect(self):
         from pymavlink import mavutil
 

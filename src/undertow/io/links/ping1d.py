@@ -161,6 +161,9 @@ class Ping1DLink(Link):
         self.timeouts = 0
         self._device = None
 
+    def load(self) -> None:
+        _brping()
+
     def _connect(self):
         device = _quiet_ping1d()()
         try:

@@ -54,6 +54,7 @@ from ...io.links.common import Record, ScaledClock, records_to_log
 from ...io.recorder import Recorder
 from ...io.results import save_map, save_trajectory
 from ...log import Mounting
+from ...mapping.grid import load_kernels as load_grid_kernels
 from ...mapping.online import OnlineMapper
 from ...mapping.samples import rays_from_pose
 from ...settings import LIVE_VARIANCE_BOUNDS, Settings
@@ -169,6 +170,8 @@ class LiveSession:
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self) -> LiveSession:
         _warm_up(self.localizer.config.variant, self.mapping_config if self.mapper else None)
+        for link in self.links.values():
+            link.load()
         # the objects made so far (modules, compiled code, settings) live as long as the
         # session: out of the collector's reach, a full collection during the run scans only
         # what the run made (one took 50 ms on this machine, stalling every pose behind it)
@@ -527,6 +530,8 @@ def _warm_up(variant: str, mapping) -> None:
                 mapper.push(chunk, localizer.trajectory())
         if mapper is not None and localizer.ready:
             mapper.finish(localizer.trajectory())
+        if mapper is not None:
+            load_grid_kernels()
         _warm_up_recorder(records, localizer.trajectory())
 
 
