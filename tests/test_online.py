@@ -118,6 +118,46 @@ def test_chunked_filter_is_bit_identical(session, variant, how, seed):
         assert traj.metadata["adaptive_r"] == ref.metadata["adaptive_r"]
 
 
+def test_outputs_in_blocks_are_one_array(monkeypatch):
+    """The online filter's states are stored in blocks: appends in any pieces, across block
+    boundaries, with rewinds (n set back), read back as one array would hold them."""
+    from undertow.estimation.online import _Outputs
+
+    monkeypatch.setattr(_Outputs, "BLOCK", 7)
+    rng = np.random.default_rng(4)
+    out, ref = _Outputs(), np.zeros((0, 1 + 18 + 18 * 18))
+    for _ in range(60):
+        if rng.random() < 0.2 and out.n:  # a rewind
+            out.n = int(rng.integers(0, out.n + 1))
+            ref = ref[: out.n]
+        k = int(rng.integers(0, 12))
+        rows = rng.normal(size=(k, ref.shape[1]))
+        out.append(rows[:, 0], rows[:, 1:19], rows[:, 19:].reshape(k, 18, 18))
+        ref = np.concatenate([ref, rows])
+        n0 = int(rng.integers(0, out.n + 1))
+        t, x, P = out.view(n0, out.n)
+        got = np.concatenate([t[:, None], x, P.reshape(-1, 18 * 18)], axis=1)
+        assert np.array_equal(got, ref[n0:])
+    t, x, _ = out.view(out.n - 2, out.n)  # within a block: views of the storage
+    if (out.n - 2) // 7 == (out.n - 1) // 7:
+        assert t.base is not None and x.base is not None
+
+
+def test_committed_since_is_the_tail_of_the_trajectory(session):
+    recs, mounting = session
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        online = OnlineLocalizer("proposed", wave=WAVE, mounting=mounting, expected=EXPECTED)
+        _push_all(online, recs, _cuts(recs, "40", 0))
+    whole = online.trajectory()
+    for since in (0, 1, 2047, 2048, 2049, len(whole) - 1, len(whole), len(whole) + 5):
+        tail = online.committed(since)
+        first = min(since, len(whole))
+        assert tail.metadata["online"]["first_state"] == first
+        assert tail.metadata["online"]["final_states"] == whole.metadata["online"]["final_states"]
+        assert np.array_equal(tail.t, whole.t[first:]) and np.array_equal(tail.P, whole.P[first:])
+
+
 def test_one_record_chunks(session):
     recs, mounting = session
     part = [r for r in recs if r.t < 12.0]  # through the spike at 10 s

@@ -174,13 +174,17 @@ class OnlineLocalizer:
         traj = self._run.states(0)
         return dataclasses.replace(traj, metadata=self._metadata())
 
-    def committed(self) -> Trajectory:
-        """All states so far (views) with only ``metadata["online"]["final_states"]``: what
-        :meth:`trajectory` gives without the summaries (cheap enough for every chunk)."""
+    def committed(self, since: int = 0) -> Trajectory:
+        """The states from number ``since`` on (views, unless they span storage blocks) with
+        only ``metadata["online"]``: ``final_states`` (a count from the first state) and
+        ``first_state`` (= since): what :meth:`trajectory` gives without the summaries, cheap
+        enough for every chunk when ``since`` is recent (a consumer that took the states
+        before it)."""
         if self._run is None:
             return self.trajectory()
-        meta = {"online": {"final_states": self._run.final_states()}}
-        return dataclasses.replace(self._run.states(0), metadata=meta)
+        since = min(max(int(since), 0), self._run.out.n)
+        meta = {"online": {"final_states": self._run.final_states(), "first_state": since}}
+        return dataclasses.replace(self._run.states(since), metadata=meta)
 
     def _note(self, chunk: Log) -> None:
         for name, stream in chunk.streams().items():
@@ -285,27 +289,41 @@ def concat_logs(logs: list[Log], mounting: Mounting) -> Log:
 
 
 class _Outputs:
-    """The states recorded so far, in arrays grown by doubling (views handed out)."""
+    """The states recorded so far, in blocks of BLOCK states: appending never copies the states
+    before (a single array grown by doubling copies them all at each growth, a stall of tens of
+    ms at a few thousand states and of seconds in an hour of states). ``n`` may be set back
+    (a rewind); :meth:`view` hands out views when the range lies in one block."""
+
+    BLOCK = 2048
 
     def __init__(self) -> None:
         self.n = 0
-        self.t = np.empty(64)
-        self.x = np.empty((64, model.N_STATE))
-        self.P = np.empty((64, model.N_STATE, model.N_STATE))
+        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def append(self, t, x, P) -> None:
-        k = t.size
-        if self.n + k > self.t.size:
-            size = max(2 * self.t.size, self.n + k)
-            for name in ("t", "x", "P"):
-                old = getattr(self, name)
-                new = np.empty((size, *old.shape[1:]))
-                new[: self.n] = old[: self.n]
-                setattr(self, name, new)
-        self.t[self.n : self.n + k] = t
-        self.x[self.n : self.n + k] = x
-        self.P[self.n : self.n + k] = P
-        self.n += k
+        k, i = t.size, 0
+        while i < k:
+            b, j = divmod(self.n, self.BLOCK)
+            if b == len(self._blocks):
+                B, n_x = self.BLOCK, model.N_STATE
+                self._blocks.append((np.empty(B), np.empty((B, n_x)), np.empty((B, n_x, n_x))))
+            m = min(k - i, self.BLOCK - j)
+            bt, bx, bP = self._blocks[b]
+            bt[j : j + m], bx[j : j + m], bP[j : j + m] = t[i : i + m], x[i : i + m], P[i : i + m]
+            self.n += m
+            i += m
+
+    def view(self, n0: int, n1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t, x, P) of states n0..n1-1: views of one block, else the blocks' parts joined."""
+        B = self.BLOCK
+        if n1 <= n0:
+            return np.empty(0), np.empty((0, model.N_STATE)), np.empty((0,) + (model.N_STATE,) * 2)
+        b0, b1 = n0 // B, (n1 - 1) // B
+        parts = [tuple(a[max(n0 - b * B, 0) : min(n1 - b * B, B)] for a in self._blocks[b])
+                 for b in range(b0, b1 + 1)]  # fmt: skip
+        if len(parts) == 1:
+            return parts[0]
+        return tuple(np.concatenate(c) for c in zip(*parts, strict=True))
 
 
 class _DepthRate:
@@ -540,9 +558,7 @@ class _Run:
         self.depth.trim()
 
     def states(self, n0: int) -> Trajectory:
-        n = self.out.n
-        out = self.out
-        return Trajectory(out.t[n0:n], out.x[n0:n], out.P[n0:n], variant=self.cfg.variant)
+        return Trajectory(*self.out.view(n0, self.out.n), variant=self.cfg.variant)
 
     def counts(self) -> dict:
         rejected = dict(self.rejected)

@@ -66,9 +66,17 @@ class OnlineMapper:
         """Queue the chunk's ranges; integrate those the trajectory's final states now cover.
         Returns the number of ranges (DVL beams, sonar ranges) integrated."""
         self._queue(chunk)
-        final = trajectory.metadata.get("online", {}).get("final_states", len(trajectory))
-        self.poses.extend(trajectory, int(final))
+        online = trajectory.metadata.get("online", {})
+        first = int(online.get("first_state", 0))
+        final = int(online.get("final_states", first + len(trajectory)))
+        self.poses.extend(trajectory, final, first)
         return self._integrate(self.poses.t_last())
+
+    @property
+    def states_used(self) -> int:
+        """How many of the trajectory's states the map has taken: a later :meth:`push` needs
+        the states from this number on (``OnlineLocalizer.committed(since=...)``)."""
+        return self.poses.n
 
     def finish(self, trajectory: Trajectory) -> int:
         """Integrate the ranges still waiting that lie inside the final trajectory's span (the
@@ -186,15 +194,18 @@ class _Poses:
     def t_last(self) -> float:
         return float(self.t[self.n - 1]) if self.n else -np.inf
 
-    def extend(self, trajectory: Trajectory, upto: int) -> None:
+    def extend(self, trajectory: Trajectory, upto: int, first: int = 0) -> None:
+        """Take states n..upto-1 of a trajectory whose first state is number ``first``."""
         if upto <= self.n:
             return
-        sl = slice(self.n, upto)
-        raw = np.asarray(trajectory.orientation[sl], float)
+        if first > self.n:
+            raise ValueError(f"online map: states from {self.n} needed, given from {first}")
+        sl, src = slice(self.n, upto), slice(self.n - first, upto - first)
+        raw = np.asarray(trajectory.orientation[src], float)
         self._grow(upto)
-        self.t[sl] = trajectory.t[sl]
-        self.pos[sl] = trajectory.position[sl]
-        self.var[sl] = np.einsum("nii->ni", trajectory.P[sl, :3, :3])
+        self.t[sl] = trajectory.t[src]
+        self.pos[sl] = trajectory.position[src]
+        self.var[sl] = np.einsum("nii->ni", trajectory.P[src, :3, :3])
         self.ang[sl] = self._unwrap(raw)
         self.n = upto
 

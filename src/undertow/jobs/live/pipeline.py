@@ -291,7 +291,13 @@ class LiveSession:
             self._early.append(chunk)
             self._say_missing(released)
             return
-        trajectory = self.localizer.committed()
+        # the states from the first one the recording or the map has not taken yet
+        since = (
+            self.stats.states
+            if self.mapper is None
+            else min(self.stats.states, self.mapper.states_used)
+        )
+        trajectory = self.localizer.committed(since)
         self._record_final(trajectory, final_only=not math.isinf(horizon))
         if self.mapper is not None:
             self._to_map += [*self._early, chunk]
@@ -318,23 +324,27 @@ class LiveSession:
             self.on_notice(note)
 
     def _record_final(self, trajectory, final_only: bool = True) -> None:
-        """Record the states no later data can revise (all of them at the end)."""
-        n = len(trajectory.t)
+        """Record the states no later data can revise (all of them at the end); the
+        trajectory holds the states from number ``metadata["online"]["first_state"]`` on."""
+        online = trajectory.metadata.get("online", {})
+        first = int(online.get("first_state", 0))
+        n = first + len(trajectory.t)
         if final_only:
-            n = int(trajectory.metadata.get("online", {}).get("final_states", n))
+            n = int(online.get("final_states", n))
         if n <= self.stats.states:
             return
         if self.stats.started_filter_at is None:
-            self.stats.started_filter_at = float(trajectory.t[0])
+            self.stats.started_filter_at = float(trajectory.t[0])  # (first is 0 then)
         k0, self.stats.states = self.stats.states, n
         period = 1.0 / self.live.record_pose_hz if self.live.record_pose_hz else 0.0
-        for k in range(k0, n):
-            t = float(trajectory.t[k])
-            if t >= self._next_pose or k == n - 1 and not final_only:
-                self.recorder.write_pose(t, trajectory.x[k], trajectory.P[k])
+        t_all, x_all, P_all = trajectory.t, trajectory.x, trajectory.P
+        for k in range(k0 - first, n - first):
+            t = float(t_all[k])
+            if t >= self._next_pose or k == n - first - 1 and not final_only:
+                self.recorder.write_pose(t, x_all[k], P_all[k])
                 self._next_pose = t + period
-        self.stats.span_s = float(trajectory.t[n - 1] - trajectory.t[0])
-        self._path.extend(trajectory.position[k0:n:PATH_DECIMATION].tolist())
+        self.stats.span_s = float(t_all[n - first - 1]) - self.stats.started_filter_at
+        self._path.extend(trajectory.position[k0 - first : n - first : PATH_DECIMATION].tolist())
 
     def _update_map(self, trajectory) -> None:
         """The chunks released since the last update, to the map as one."""
@@ -345,6 +355,8 @@ class LiveSession:
 
     def _show_rays(self, chunk, trajectory) -> None:
         """The chunk's DVL beams and sonar ranges as rays from the newest pose (display)."""
+        if not len(trajectory.t):  # no state after those taken already: the newest
+            trajectory = self.localizer.latest()
         pos, rpy = trajectory.position[-1:], trajectory.orientation[-1:]
         t = float(trajectory.t[-1])
         for kind, units, ranges, mount in _ranges(chunk):
