@@ -465,7 +465,10 @@ def _wait(condition, link, timeout: float = 10.0) -> None:
         time.sleep(0.005)
 
 
-def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation):
+@pytest.mark.parametrize("deferred", [False, True])
+def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, deferred):
+    """The link's records are the .tlog reader's, decoded in the link's thread or (deferred)
+    by pump() in the caller's, which is woken by the datagrams holding DVL messages."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
     from test_io_tlog import _attitude_rows, _pressure_rows, _sonar_rows, _vision_rows, write_tlog
 
@@ -479,23 +482,35 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation):
         _attitude_rows(log) + _pressure_rows(log) + vision + _sonar_rows(log), key=lambda r: r[0]
     )
     port = _free_udp_port()
-    records = []
-    link = MavlinkLink(f"udpin:127.0.0.1:{port}", records.append, backoff=FAST)
+    records, wakes = [], []
+    link = MavlinkLink(f"udpin:127.0.0.1:{port}", records.append, backoff=FAST,
+                       deferred=deferred, wake=lambda: wakes.append(len(records)))  # fmt: skip
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def received(n):
+        link.pump()  # (nothing to do unless deferred)
+        return sum(link.message_counts.values()) >= n
+
     with link:
         _wait(lambda: link.counters.connects >= 1, link)  # bound before anything is sent
-        for k, (_, msg) in enumerate(rows):
+        if deferred:
+            sender.sendto(rows[0][1].pack(mav), ("127.0.0.1", port))
+            _wait(lambda: len(link._raw) == 1, link)
+            assert records == [] and link.message_counts == {}  # queued, not decoded
+        for k, (_, msg) in enumerate(rows[1:] if deferred else rows):
             sender.sendto(msg.pack(mav), ("127.0.0.1", port))
             if k == 50:  # a whole frame whose CRC fails
                 bad = bytearray(msg.pack(mav))
                 bad[12] ^= 0xFF
                 sender.sendto(bytes(bad), ("127.0.0.1", port))
             if k % 20 == 19:  # let the receiver keep up: loopback UDP drops what overflows
-                _wait(lambda n=k + 1: sum(link.message_counts.values()) >= n, link)
-        _wait(lambda: sum(link.message_counts.values()) >= len(rows), link)
+                _wait(lambda n=k + 1: received(n), link)
+        _wait(lambda: received(len(rows)), link)
     sender.close()
     assert link.counters.malformed >= 1
+    n_vision = sum(m.get_type() == "VISION_POSITION_DELTA" for _, m in rows)
+    assert len(wakes) == (n_vision if deferred else 0) and n_vision > 0
     path = tmp_path / "same.tlog"
     write_tlog(path, rows)
     offline = read_log(path)
@@ -509,6 +524,50 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation):
     np.testing.assert_array_equal(live.dvl.velocity, offline.dvl.velocity)
     np.testing.assert_array_equal(live.dead_reckoning.position, offline.dead_reckoning.position)
     assert all(r.t == r.arrival for r in records)  # stamped on arrival, as a tlog's receive time
+
+
+def test_deferred_mavlink_wakes_on_dvl_frames_in_either_protocol_version():
+    """The DVL message's id is taken from the MAVLink 2 module even while the connection still
+    parses MAVLink 1 (whose module lacks ids above 255), and read off both frame layouts."""
+    from pymavlink.dialects.v10 import ardupilotmega as mavlink1
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    from undertow.io.links.mavlink_udp import _frame_id, _message_id
+
+    assert not hasattr(mavlink1, "MAVLINK_MSG_ID_VISION_POSITION_DELTA")
+    dvl = mavlink2.MAVLINK_MSG_ID_VISION_POSITION_DELTA
+    assert _message_id(mavlink1.MAVLink(None), "VISION_POSITION_DELTA") == dvl
+    assert _message_id(mavlink2.MAVLink(None), "VISION_POSITION_DELTA") == dvl
+    mav2, mav1 = mavlink2.MAVLink(None), mavlink1.MAVLink(None)
+    frame = mavlink2.MAVLink_vision_position_delta_message(1, 100_000, [0.0] * 3, [0.0] * 3, 90.0)
+    assert _frame_id(frame.pack(mav2)) == dvl
+    assert _frame_id(mavlink1.MAVLink_heartbeat_message(12, 3, 0, 0, 0, 3).pack(mav1)) == 0
+    assert _frame_id(b"\x00junk") is None
+
+
+def test_deferred_mavlink_queue_is_bounded():
+    """A deferred link keeps at most max_queue datagrams for pump(): the oldest are dropped
+    and counted as overflow; pump() then delivers the newest."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    from undertow.io.links.mavlink_udp import MavlinkLink
+
+    port = _free_udp_port()
+    records = []
+    link = MavlinkLink(f"udpin:127.0.0.1:{port}", records.append, backoff=FAST, deferred=True,
+                       max_queue=5)  # fmt: skip
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    with link:
+        _wait(lambda: link.counters.connects >= 1, link)
+        for k in range(20):
+            msg = mavlink2.MAVLink_scaled_pressure2_message(k, 1000.0 + k, 0.0, 1500)
+            sender.sendto(msg.pack(mav), ("127.0.0.1", port))
+        _wait(lambda: link.counters.overflow + len(link._raw) >= 20, link)
+        link.pump()
+    sender.close()
+    assert link.counters.overflow == 15
+    assert [r.data["pressure"] for r in records] == [100.0 * (1000.0 + k) for k in range(15, 20)]
 
 
 def test_ping1d_serial_device():

@@ -291,6 +291,11 @@ class Link:
         objects out of the garbage collector's reach: a protocol library imported later stays
         young, and the collector's first full pass over it stalls the session."""
 
+    def pump(self) -> None:
+        """Decode what the link's thread queued undecoded and deliver its records, in the
+        calling thread (a link built ``deferred``, see :class:`MavlinkLink`); nothing for the
+        others. A consumer that runs a loop calls it each turn."""
+
     def start(self) -> Link:
         if self._thread is None or not self._thread.is_alive():
             self._stop.clear()

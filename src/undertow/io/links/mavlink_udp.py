@@ -13,10 +13,21 @@ uses the message's own time (``time_boot_ms``/``time_usec``) through the link's
 :class:`~undertow.io.links.common.ClockPolicy` (shifted to this machine's clock by a recorded
 offset), which removes the network jitter from the autopilot's sample spacing.
 A link silent for ``idle_timeout_s`` re-opens its connection (counted as a disconnect).
+
+``deferred`` (UDP only; the live session's choice): the link's thread only receives each
+datagram and takes its arrival time; :meth:`MavlinkLink.pump`, called by the consumer's loop,
+decodes what queued since and delivers the records from that thread. The decoding then runs in
+batches in the thread that uses the records, instead of once per datagram in a thread woken
+for each (with the GIL passed back and forth: here most of the link's CPU). The records, their
+times and the counters are those of the immediate mode; a datagram holding the message mapped to
+the DVL (VISION_POSITION_DELTA) calls ``wake`` at once, so that a loop waiting for DVL reports
+need not wait for its next turn. At most ``max_queue`` datagrams wait (the oldest dropped,
+counted as overflow).
 """
 
 from __future__ import annotations
 
+import collections
 import importlib
 import math
 import socket
@@ -49,6 +60,8 @@ class MavlinkLink(Link):
         backoff: Backoff | None = None,
         max_queue: int = 10_000,
         now=None,
+        deferred: bool = False,
+        wake=None,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ConfigError(f"mavlink time_source: '{time_source}' is not one of {TIME_SOURCES}")
@@ -68,6 +81,11 @@ class MavlinkLink(Link):
         self.idle_timeout_s = float(idle_timeout_s)
         self.message_counts: dict[str, int] = {}
         self._conn = None
+        self.deferred = bool(deferred)
+        self.wake = wake
+        self._raw: collections.deque = collections.deque()  # (connection, arrival, datagram)
+        self._max_raw = max(int(max_queue), 1)
+        self._unused: _UnusedFrames | None = None
 
     def load(self) -> None:
         from pymavlink import mavutil
@@ -119,7 +137,7 @@ class MavlinkLink(Link):
         """UDP: one blocking read per datagram, decoded by the connection's own parser
         (``recv_match`` polls, which costs several times the decoding at telemetry rates)."""
         sock.settimeout(0.2)
-        unused = _UnusedFrames(conn.mav, self.mapper.message_types)
+        dvl_id = _message_id(conn.mav, "VISION_POSITION_DELTA")
         last = time.monotonic()
         while not self.stopping:
             try:
@@ -134,15 +152,36 @@ class MavlinkLink(Link):
                 raise
             last = time.monotonic()
             arrival = self.now()
-            if conn.first_byte:  # MAVLink 1 or 2, from the first packet (as recv_match does)
-                conn.auto_mavlink_version(data)
-                unused = _UnusedFrames(conn.mav, self.mapper.message_types)
-            name = unused.name(data)
-            if name is not None:  # a valid frame of a message no stream uses: counted only
-                self.message_counts[name] = self.message_counts.get(name, 0) + 1
+            if not self.deferred:
+                self._decode(conn, arrival, data)
                 continue
-            for msg in conn.mav.parse_buffer(data) or ():
-                self.handle(msg, arrival)
+            if len(self._raw) >= self._max_raw:
+                self._raw.popleft()
+                self.counters.overflow += 1
+            self._raw.append((conn, arrival, data))
+            if self.wake is not None and _frame_id(data) == dvl_id:
+                self.wake()
+
+    def pump(self) -> None:
+        """Decode the datagrams the thread queued (``deferred``) and deliver their records."""
+        raw = self._raw
+        while raw:
+            self._decode(*raw.popleft())
+
+    def _decode(self, conn, arrival: float, data: bytes) -> None:
+        """One datagram: counted if it is a valid frame of a message no stream uses, else
+        parsed by the connection's own parser and mapped."""
+        if conn.first_byte:  # MAVLink 1 or 2, from the first packet (as recv_match does)
+            conn.auto_mavlink_version(data)
+        unused = self._unused
+        if unused is None or unused.mav is not conn.mav:  # (a new connection or version)
+            unused = self._unused = _UnusedFrames(conn.mav, self.mapper.message_types)
+        name = unused.name(data)
+        if name is not None:  # a valid frame of a message no stream uses: counted only
+            self.message_counts[name] = self.message_counts.get(name, 0) + 1
+            return
+        for msg in conn.mav.parse_buffer(data) or ():
+            self.handle(msg, arrival)
 
     def handle(self, msg, arrival: float) -> None:
         """Map one decoded message received at ``arrival`` (Unix s) and deliver its records."""
@@ -202,6 +241,26 @@ class _UnusedFrames:
         name, crc_extra = known
         crc = self.crc(bytearray(data[1:-2]) + bytes((crc_extra,))).crc
         return name if crc == data[-2] | data[-1] << 8 else None
+
+
+def _message_id(mav, name: str) -> int | None:
+    """The id of message ``name`` in the MAVLink 2 module of the dialect of ``mav`` (a
+    connection starts in MAVLink 1, whose module may lack the messages of ids above 255); None
+    if it has none."""
+    try:
+        module = importlib.import_module(type(mav).__module__.replace(".v10.", ".v20."))
+    except ImportError:
+        return None
+    return getattr(module, f"MAVLINK_MSG_ID_{name}", None)
+
+
+def _frame_id(data: bytes) -> int | None:
+    """The message id of a datagram that starts with a MAVLink 2 or 1 frame (None if not)."""
+    if len(data) >= 10 and data[0] == 0xFD:
+        return data[7] | data[8] << 8 | data[9] << 16
+    if len(data) >= 6 and data[0] == 0xFE:
+        return data[5]
+    return None
 
 
 def _preload_mavlink2(dialect: str) -> None:

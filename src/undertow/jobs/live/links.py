@@ -35,10 +35,13 @@ def parse_tcp(address: str) -> tuple[str, int]:
 
 
 def open_links(live: LiveSettings, callback: Callable[[Record], None],
-               now: Callable[[], float]) -> dict[str, Link]:  # fmt: skip
+               now: Callable[[], float], wake: Callable[[], None] | None = None,
+               ) -> dict[str, Link]:  # fmt: skip
     """The configured links (not started), keyed dvl / sonar / mavlink; a ConfigError names a
     bad address. Ping requests run at ``ping_rate_hz`` of sensor time (``time_scale`` times as
-    often in wall time, at most :data:`MAX_PING_RATE_HZ`)."""
+    often in wall time, at most :data:`MAX_PING_RATE_HZ`). The MAVLink link is ``deferred``:
+    the caller's loop decodes its datagrams (``Link.pump`` each turn); ``wake`` is called when
+    one holds a DVL message."""
     links: dict[str, Link] = {}
     # a wall-time delay d is d * time_scale sensor seconds: the clock tolerance scales with it
     max_offset = live.max_clock_offset_s * live.time_scale
@@ -55,7 +58,8 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
     if live.mavlink:
         from ...io.links.mavlink_udp import MavlinkLink
 
-        links["mavlink"] = MavlinkLink(live.mavlink, callback, now=now, max_offset_s=max_offset)
+        links["mavlink"] = MavlinkLink(live.mavlink, callback, now=now, max_offset_s=max_offset,
+                                       deferred=True, wake=wake)  # fmt: skip
     if not links:
         raise ConfigError("live: no sensor link given (--dvl, --sonar and/or --mavlink)")
     return links

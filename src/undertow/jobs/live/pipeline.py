@@ -1,7 +1,8 @@
 """`undertow live` as a library: sensor links in, the online filter, map and sea state, a
 recording of everything, and the final results out.
 
-Data flow (one thread does the work; each link has its own thread that only queues):
+Data flow (one thread does the work; each link has its own thread that only queues: records,
+or for MAVLink over UDP the datagrams with their arrival times, decoded by this loop each turn):
 
     links -> recorder (every raw record, as it arrives) -> reorder buffer -> chunks (time order)
           -> OnlineLocalizer (committed states, recorded) -> OnlineMapper (every MAP_EVERY_S:
@@ -130,7 +131,7 @@ class LiveSession:
         # wakes the loop, the rest wait for its next tick (POLL_S): fewer wake-ups per record
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
-        self.links = open_links(self.live, self._ingest, self.clock)
+        self.links = open_links(self.live, self._ingest, self.clock, wake=self._wake.set)
         self.expected = expected_streams(self.links)
         wave = self.live.wave
         self.auto_wave = isinstance(wave, str) and wave.strip().lower() == "auto"
@@ -245,6 +246,8 @@ class LiveSession:
         # the horizon from the clock read before the queue is emptied: a record stamped before
         # it is in this batch, so the loop falling behind never makes a record late
         horizon = self.clock() - self.live.reorder_s
+        for link in self.links.values():  # the datagrams a deferred link queued, decoded here
+            link.pump()
         for wall, record in self._drain():
             self._take(wall, record)
         if self._pending_dvl:  # first: a DVL report's pose does not wait for the commit
@@ -436,6 +439,8 @@ class LiveSession:
         for link in self.links.values():
             link.stop(timeout=2.0)
         gc.unfreeze()  # (start) the session's long-lived objects are collectable again
+        for link in self.links.values():
+            link.pump()
         for item in self._drain():  # what the links queued before they stopped
             self._take(*item)
         self._commit(math.inf)
