@@ -294,33 +294,43 @@ def _tlog_frames() -> list[bytes]:
     return frames
 
 
-def test_unused_mavlink_frames_are_named_without_decoding():
-    """Intact frames of messages no stream reads are named; mapped ones, a bad CRC, a frame
+def test_single_mavlink_frames_named_or_decoded_without_pymavlinks_parser():
+    """Intact frames of messages no stream reads are named; mapped ones of scalar fields are
+    decoded to pymavlink's message (fields, header); a message with arrays, a bad CRC, a frame
     after buffered bytes and a signed frame go to pymavlink's parser."""
-    from undertow.io.links.mavlink_udp import _UnusedFrames
+    from undertow.io.links.mavlink_udp import _SingleFrames
 
     mav = mavlink2.MAVLink(None)
+    mav.robust_parsing = True
     used = MavlinkMapper().message_types
-    unused = _UnusedFrames(mav, used)
-    names = [unused.name(f) for f in _tlog_frames()[:6]]
-    assert names == [None, "SCALED_IMU2", None, None, None, "HEARTBEAT"]
+    frames = _SingleFrames(mav, used)
+    got = [frames.check(f) for f in _tlog_frames()[:6]]
+    names = [g if g is None else (g[0], g[1] is not None) for g in got]
+    # VISION_POSITION_DELTA and DISTANCE_SENSOR have array fields: pymavlink's parser
+    assert names == [("ATTITUDE", True), ("SCALED_IMU2", False), ("SCALED_PRESSURE2", True),
+                     None, None, ("HEARTBEAT", False)]  # fmt: skip
+    for k in (0, 2):
+        ref = mavlink2.MAVLink(None).parse_buffer(_tlog_frames()[k])[0]
+        assert got[k][1].to_dict() == ref.to_dict()
+        assert vars(got[k][1].get_header()) == vars(ref.get_header())
+        assert got[k][1].get_msgbuf() == ref.get_msgbuf()
     imu = bytearray(_tlog_frames()[1])
     imu[-1] ^= 0x01
-    assert unused.name(bytes(imu)) is None
+    assert frames.check(bytes(imu)) is None
     signed = bytearray(_tlog_frames()[1])
     signed[2] |= 0x01
-    assert unused.name(bytes(signed)) is None
+    assert frames.check(bytes(signed)) is None
     mav.parse_buffer(_tlog_frames()[0][:5])  # half a frame waits in the parser's buffer
-    assert unused.name(_tlog_frames()[1]) is None
+    assert frames.check(_tlog_frames()[1]) is None
 
 
 @FAST
 @given(data=st.data())
-def test_unused_mavlink_frames_are_named_only_when_pymavlink_decodes_them(data):
-    """Any damage to a frame: the link names (and counts without decoding) a datagram only
-    when pymavlink's parser decodes exactly one message of that name from it, a message no
-    stream uses."""
-    from undertow.io.links.mavlink_udp import _UnusedFrames
+def test_single_mavlink_frames_are_what_pymavlink_decodes(data):
+    """Any damage to a frame: the link names (counts without decoding) or decodes a datagram
+    itself only when pymavlink's parser decodes exactly one message of that name from it, with
+    the same fields and header; a named one is a message no stream uses."""
+    from undertow.io.links.mavlink_udp import _SingleFrames
 
     frame = bytearray(data.draw(st.sampled_from(_tlog_frames())))
     for _ in range(data.draw(st.integers(0, 3))):
@@ -331,7 +341,13 @@ def test_unused_mavlink_frames_are_named_only_when_pymavlink_decodes_them(data):
     mav = mavlink2.MAVLink(None)
     mav.robust_parsing = True
     used = MavlinkMapper().message_types
-    name = _UnusedFrames(mav, used).name(bytes(frame))
-    decoded = [m.get_type() for m in mav.parse_buffer(bytes(frame)) or []]
-    if name is not None:
-        assert decoded == [name] and name not in used
+    got = _SingleFrames(mav, used).check(bytes(frame))
+    decoded = mav.parse_buffer(bytes(frame)) or []
+    if got is not None:
+        name, msg = got
+        assert [m.get_type() for m in decoded] == [name]
+        if msg is None:
+            assert name not in used
+        else:
+            assert msg.to_dict() == decoded[0].to_dict()
+            assert vars(msg.get_header()) == vars(decoded[0].get_header())

@@ -85,7 +85,7 @@ class MavlinkLink(Link):
         self.wake = wake
         self._raw: collections.deque = collections.deque()  # (connection, arrival, datagram)
         self._max_raw = max(int(max_queue), 1)
-        self._unused: _UnusedFrames | None = None
+        self._frames: _SingleFrames | None = None
 
     def load(self) -> None:
         from pymavlink import mavutil
@@ -170,18 +170,20 @@ class MavlinkLink(Link):
 
     def _decode(self, conn, arrival: float, data: bytes) -> None:
         """One datagram: counted if it is a valid frame of a message no stream uses, else
-        parsed by the connection's own parser and mapped."""
+        decoded (:class:`_SingleFrames`, or the connection's own parser) and mapped."""
         if conn.first_byte:  # MAVLink 1 or 2, from the first packet (as recv_match does)
             conn.auto_mavlink_version(data)
-        unused = self._unused
-        if unused is None or unused.mav is not conn.mav:  # (a new connection or version)
-            unused = self._unused = _UnusedFrames(conn.mav, self.mapper.message_types)
-        name = unused.name(data)
-        if name is not None:  # a valid frame of a message no stream uses: counted only
-            self.message_counts[name] = self.message_counts.get(name, 0) + 1
-            return
-        for msg in conn.mav.parse_buffer(data) or ():
-            self.handle(msg, arrival)
+        frames = self._frames
+        if frames is None or frames.mav is not conn.mav:  # (a new connection or version)
+            frames = self._frames = _SingleFrames(conn.mav, self.mapper.message_types)
+        done = frames.check(data)
+        if done is None:
+            for msg in conn.mav.parse_buffer(data) or ():
+                self.handle(msg, arrival)
+        elif done[1] is None:  # a valid frame of a message no stream uses: counted only
+            self.message_counts[done[0]] = self.message_counts.get(done[0], 0) + 1
+        else:
+            self.handle(done[1], arrival)
 
     def handle(self, msg, arrival: float) -> None:
         """Map one decoded message received at ``arrival`` (Unix s) and deliver its records."""
@@ -209,38 +211,71 @@ class MavlinkLink(Link):
             self._emit(record)
 
 
-class _UnusedFrames:
-    """Recognizes a datagram that is exactly one unsigned MAVLink 2 frame of a message the
-    mapper does not use (an autopilot streams many: SCALED_IMU2 beside ATTITUDE, HEARTBEAT,
-    SYS_STATUS) and checks it as pymavlink's ``decode`` does: the length byte against the
-    datagram, the message id in the dialect, the CRC-16/MCRF4XX of the frame after the magic
-    byte, extended by the message's CRC_EXTRA (MAVLink serialization,
-    https://mavlink.io/en/guide/serialization.html). Such a frame is counted, not decoded
-    (decoding builds a message object no stream reads: most of the per-message time). Anything
-    else, a failed check included, goes to pymavlink's parser, which keeps its buffer and its
-    verdicts (BAD_DATA) for it; so pymavlink's own packet counters omit the frames skipped."""
+class _SingleFrames:
+    """Handles a datagram that is exactly one unsigned MAVLink 2 frame (what an autopilot or a
+    router sends over UDP), checked as pymavlink's ``decode`` checks it: the length byte against
+    the datagram, the message id in the dialect, the CRC-16/MCRF4XX of the frame after the magic
+    byte extended by the message's CRC_EXTRA (MAVLink serialization,
+    https://mavlink.io/en/guide/serialization.html). Then:
+
+    - a message the mapper does not use (an autopilot streams many: SCALED_IMU2 beside
+      ATTITUDE, HEARTBEAT, SYS_STATUS) is only named, to be counted;
+    - a used one without array or text fields (ATTITUDE, SCALED_PRESSURE2, ...) is decoded here
+      with pymavlink's own definition of it (its struct, field order and class; a MAVLink 2
+      payload cut of its trailing zeros padded back), into the message pymavlink would make.
+
+    Anything else, a failed check included, goes to pymavlink's parser, which keeps its buffer and
+    its verdicts (BAD_DATA) for it; pymavlink's own packet counters omit the frames done here.
+    Both shortcuts are fuzzed against pymavlink's parser (tests/test_fuzz_links.py)."""
 
     def __init__(self, mav, used: tuple[str, ...]) -> None:
         module = sys.modules[type(mav).__module__]
         self.mav = mav
         self.crc = module.x25crc
+        self.header = getattr(module, "MAVLink_header", None)
         self.v2 = getattr(module, "WIRE_PROTOCOL_VERSION", "") == "2.0"
         self.unused = {msgid: (cls.msgname, cls.crc_extra)
                        for msgid, cls in module.mavlink_map.items()
                        if cls.msgname not in used}  # fmt: skip
+        self.simple = {msgid: cls for msgid, cls in module.mavlink_map.items()
+                       if cls.msgname in used and _simple_layout(cls)}  # fmt: skip
 
-    def name(self, data: bytes) -> str | None:
-        """The message name when ``data`` is one valid frame of an unused message, else None."""
+    def check(self, data: bytes):
+        """(name, None) for a valid frame of an unused message, (name, message) for one decoded
+        here, None for what goes to pymavlink's parser."""
         n = len(data)
         if (n < 12 or data[0] != 0xFD or data[2] != 0 or n != data[1] + 12 or not self.v2
                 or self.mav.buf_len() or self.mav.signing.secret_key is not None):  # fmt: skip
             return None
-        known = self.unused.get(data[7] | data[8] << 8 | data[9] << 16)
-        if known is None:
+        msgid = data[7] | data[8] << 8 | data[9] << 16
+        known = self.unused.get(msgid)
+        cls = None if known is not None else self.simple.get(msgid)
+        if known is None and (cls is None or self.header is None):
             return None
-        name, crc_extra = known
-        crc = self.crc(bytearray(data[1:-2]) + bytes((crc_extra,))).crc
-        return name if crc == data[-2] | data[-1] << 8 else None
+        name, crc_extra = known if known is not None else (cls.msgname, cls.crc_extra)
+        crc = data[-2] | data[-1] << 8
+        if self.crc(bytearray(data[1:-2]) + bytes((crc_extra,))).crc != crc:
+            return None
+        if cls is None:
+            return name, None
+        size = cls.unpacker.size
+        payload = bytes(data[10:-2]).ljust(size, b"\0")[:size]
+        fields = cls.unpacker.unpack(payload)
+        msg = cls(*[fields[k] for k in cls.orders])
+        msg._signed = False
+        msg._msgbuf = bytearray(data)
+        msg._payload = msg._msgbuf[6:-2]  # (as pymavlink sets it)
+        msg._crc = crc
+        msg._header = self.header(msgid, 0, data[3], data[1], data[4], data[5], data[6])
+        return name, msg
+
+
+def _simple_layout(cls) -> bool:
+    """A message of scalar numeric fields only (no arrays, no text): decoded by its struct."""
+    fmt = cls.unpacker.format
+    fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+    return (sum(cls.lengths) == len(cls.lengths) and "s" not in fmt and "c" not in fmt
+            and sorted(cls.orders) == list(range(len(cls.orders))))  # fmt: skip
 
 
 def _message_id(mav, name: str) -> int | None:
