@@ -4,10 +4,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from undertow.rotations import (
+    matrix_to_quaternion_scalar,
     matrix_to_rpy,
     quaternion_to_rpy,
     rpy_to_matrix,
     rpy_to_quaternion,
+    rpy_to_quaternion_scalar,
     wrap_angle,
 )
 
@@ -27,6 +29,26 @@ def test_quaternion_agrees_with_scipy_xyzw():
     ref = Rotation.from_euler("ZYX", RPY[:, ::-1]).as_quat()
     ref = np.where(ref[:, 3:4] < 0, -ref, ref)
     np.testing.assert_allclose(q, ref, atol=1e-12)
+
+
+def test_scalar_forms_agree_with_scipy():
+    """The one-at-a-time forms (live messages): rpy -> quaternion and matrix -> quaternion
+    (Shepperd's four branches: rotations near 180 degrees about each axis included) against
+    scipy, w >= 0."""
+    flips = [np.diag([1.0, -1.0, -1.0]), np.diag([-1.0, 1.0, -1.0]), np.diag([-1.0, -1.0, 1.0])]
+    mats = [*rpy_to_matrix(RPY), *flips, *(f @ rpy_to_matrix([1e-3, -2e-3, 3e-3]) for f in flips)]
+    for R in mats:
+        ref = Rotation.from_matrix(R).as_quat()
+        ref = -ref if ref[3] < 0 else ref
+        q = np.array(matrix_to_quaternion_scalar(R))
+        assert q[3] >= 0
+        # at w = 0 (a half turn) q and -q are both w >= 0: compare the rotations
+        np.testing.assert_allclose(Rotation.from_quat(q).as_matrix(), R, atol=1e-12)
+        if ref[3] > 1e-6:
+            np.testing.assert_allclose(q, ref, atol=1e-12)
+    for rpy in RPY:
+        np.testing.assert_allclose(rpy_to_quaternion_scalar(*rpy), rpy_to_quaternion(rpy),
+                                   atol=1e-15)  # fmt: skip
 
 
 def test_round_trips():

@@ -39,7 +39,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..log import G0, Mounting, SensorMount
-from ..rotations import matrix_to_rpy
+from ..rotations import matrix_to_rpy, rpy_to_quaternion_scalar
 from ._collect import MALFORMED
 from .links.common import Record
 
@@ -89,21 +89,6 @@ def _finite(*values: float) -> bool:
         if not (isinstance(v, int | float) and math.isfinite(v)):
             return False
     return True
-
-
-def _quaternion(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of R = Rz(yaw) Ry(pitch) Rx(roll), w >= 0 (as
-    :func:`undertow.rotations.rpy_to_quaternion`, in scalar arithmetic: one message at a time)."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    q = (
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-        cr * cp * cy + sr * sp * sy,
-    )
-    return q if q[3] >= 0 else (-q[0], -q[1], -q[2], -q[3])
 
 
 def _rotation_vector_matrix(a: np.ndarray) -> np.ndarray:
@@ -183,7 +168,7 @@ class MavlinkMapper:
         rates = (msg.rollspeed, msg.pitchspeed, msg.yawspeed)
         if not _finite(*rpy, *rates):
             return None
-        q = _quaternion(*rpy)
+        q = rpy_to_quaternion_scalar(*rpy)
         self._attitude_q = q
         if self._gyro_msg is not None:
             return []

@@ -39,7 +39,7 @@ import numpy as np
 
 from ...errors import ConfigError
 from ...occupancy import OCCUPIED_THRESHOLD, OccupancyMap
-from ...rotations import matrix_to_rpy, rpy_to_quaternion
+from ...rotations import matrix_to_quaternion_scalar, rpy_to_quaternion_scalar
 
 POSE = "/undertow/pose"
 UNCERTAINTY = "/undertow/pose/uncertainty"
@@ -182,8 +182,8 @@ class LiveView:
         x = np.asarray(x, dtype=np.float64).reshape(-1)
         P = np.asarray(P, dtype=np.float64)
         stamp, ns = _stamp(m, t)
-        q = rpy_to_quaternion(x[3:6])
-        quat = m.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))
+        q = rpy_to_quaternion_scalar(float(x[3]), float(x[4]), float(x[5]))
+        quat = m.Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])
         pos = m.Vector3(x=float(x[0]), y=float(x[1]), z=float(x[2]))
         vel = x[6:12] if x.size >= 12 else np.zeros(6)
         vcov = P[6:12, 6:12] if x.size >= 12 else np.zeros((6, 6))
@@ -192,8 +192,8 @@ class LiveView:
             pose=m.Pose(position=pos, orientation=quat),
             linear_velocity=m.Vector3(x=float(vel[0]), y=float(vel[1]), z=float(vel[2])),
             angular_velocity=m.Vector3(x=float(vel[3]), y=float(vel[4]), z=float(vel[5])),
-            pose_covariance=[float(v) for v in P[:6, :6].reshape(36)],
-            velocity_covariance=[float(v) for v in np.asarray(vcov).reshape(36)],
+            pose_covariance=P[:6, :6].ravel().tolist(),
+            velocity_covariance=np.asarray(vcov, dtype=np.float64).ravel().tolist(),
         )  # fmt: skip
         self._log(POSE, odom, ns)
         tf = m.FrameTransform(
@@ -211,7 +211,7 @@ class LiveView:
         if np.linalg.det(vec) < 0:
             vec[:, 2] = -vec[:, 2]
         size = 6.0 * np.sqrt(np.clip(lam, 0.0, None))
-        q = [float(v) for v in rpy_to_quaternion(matrix_to_rpy(vec))]
+        q = matrix_to_quaternion_scalar(vec)
         sphere = m.SpherePrimitive(
             pose=m.Pose(
                 position=m.Vector3(x=float(centre[0]), y=float(centre[1]), z=float(centre[2])),
