@@ -95,7 +95,8 @@ def settle(link, quiet: float = 0.3, timeout: float = 10.0) -> None:
     deadline = time.monotonic() + timeout
     last, since = -1, time.monotonic()
     while time.monotonic() < deadline:
-        now = link.counters.received
+        link.pump()  # (a deferred link's data is decoded here; nothing to do otherwise)
+        now = link.counters.received + len(link._raw)
         if now != last:
             last, since = now, time.monotonic()
         elif time.monotonic() - since > quiet:
@@ -110,6 +111,7 @@ def run_link(link, server, timeout: float = 10.0):
     with link:
         assert server.done.wait(timeout), "server did not finish"
         settle(link)
+    link.pump()
     server.close()
     return records
 
@@ -118,14 +120,20 @@ def _v1_unique() -> list[str]:
     return list(dict.fromkeys(ln for ln in V1.read_text().splitlines() if ln.strip()))
 
 
-def test_real_v1_recording_with_a_drop_and_garbage():
+@pytest.mark.parametrize("deferred", [False, True])
+def test_real_v1_recording_with_a_drop_and_garbage(deferred):
+    """The same records and counters whether the link's thread decodes the lines or
+    (deferred) pump() in the caller's thread does, the thread waking it for each read."""
     raw = [ln for ln in V1.read_text().splitlines() if ln.strip()]  # as the A50 sent it
     unique = _v1_unique()
     lines = list(raw)
     lines[10:10] = ["this is not json {", '{"vx": "fast"}', "[" * 100_000]
     server = A50Server(lines, drop_after=len(lines) // 2)
-    link = A50TcpLink("127.0.0.1", server.port, backoff=FAST)
+    wakes = []
+    link = A50TcpLink("127.0.0.1", server.port, backoff=FAST, deferred=deferred,
+                      wake=lambda: wakes.append(1))  # fmt: skip
     records = run_link(link, server)
+    assert (len(wakes) > 0) == deferred
     c = link.counters
     assert server.connections == 2 and c.connects >= 2 and c.disconnects >= 1
     assert c.malformed == 3 and c.stale == 0

@@ -14,6 +14,11 @@ Times: a velocity report's sensor time is ``time_of_validity`` (us -> s), a posi
 arrival within ``max_offset_s``, else shift it by a recorded offset). Exact duplicate lines are
 dropped and counted; undecodable lines (broken JSON, absurd values, lines longer than
 ``MAX_LINE_BYTES``) are counted as malformed; neither ever stops the link.
+
+``deferred`` (the live session's choice): the link's thread only receives the bytes and takes
+their arrival time, calling ``wake``; :meth:`A50TcpLink.pump`, called by the consumer's loop,
+splits and decodes them and delivers the records from that thread (the decoding then runs in
+the thread that uses the records; records, times and counters are those of the immediate mode).
 """
 
 from __future__ import annotations
@@ -173,6 +178,8 @@ class A50TcpLink(Link):
         backoff: Backoff | None = None,
         max_queue: int = 10_000,
         now=None,
+        deferred: bool = False,
+        wake=None,
     ) -> None:
         counters = LinkCounters()
         clock = clock or ClockPolicy(counters, max_offset_s=max_offset_s)
@@ -192,6 +199,9 @@ class A50TcpLink(Link):
         self.connect_timeout_s = connect_timeout_s
         self.idle_timeout_s = idle_timeout_s
         self._sock: socket.socket | None = None
+        self.deferred = bool(deferred)
+        self.wake = wake
+        self._pump_lines: tuple[object, LineBuffer] | None = None  # (session, its lines)
 
     @property
     def responses(self) -> list[dict]:
@@ -216,6 +226,7 @@ class A50TcpLink(Link):
                 pass
 
     def _run_session(self, sock: socket.socket) -> None:
+        session = object()  # deferred: a line buffer of its own for each connection
         lines = LineBuffer(self.counters)
         last = time.monotonic()
         while not self.stopping:
@@ -229,10 +240,27 @@ class A50TcpLink(Link):
                 return  # closed by the sensor
             last = time.monotonic()
             arrival = self.now()
-            for line in lines.feed(chunk):
-                for record in self.decoder.decode(line, arrival):
-                    self._emit(record)
-            self._note_config()
+            if not self.deferred:
+                self._decode(lines, chunk, arrival)
+                continue
+            self._defer((session, arrival, chunk))
+            if self.wake is not None:
+                self.wake()
+
+    def pump(self) -> None:
+        """Split and decode the bytes the thread queued (``deferred``); deliver the records."""
+        raw = self._raw
+        while raw:
+            session, arrival, chunk = raw.popleft()
+            if self._pump_lines is None or self._pump_lines[0] is not session:
+                self._pump_lines = (session, LineBuffer(self.counters))
+            self._decode(self._pump_lines[1], chunk, arrival)
+
+    def _decode(self, lines: LineBuffer, chunk: bytes, arrival: float) -> None:
+        for line in lines.feed(chunk):
+            for record in self.decoder.decode(line, arrival):
+                self._emit(record)
+        self._note_config()
 
     def _note_config(self) -> None:
         for response in reversed(self.decoder.responses):

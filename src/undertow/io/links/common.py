@@ -280,6 +280,9 @@ class Link:
         self.backoff = backoff or Backoff()
         self.callback = callback
         self._queue: queue.Queue[Record] = queue.Queue(maxsize=max(int(max_queue), 1))
+        # what a deferred link's thread received, undecoded, for pump(); bounded as the queue
+        self._raw: collections.deque = collections.deque()
+        self._max_raw = max(int(max_queue), 1)
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.info: dict[str, Any] = {}
@@ -331,6 +334,14 @@ class Link:
         """Records as they come, until none arrived for ``idle_timeout`` s."""
         while (record := self.get(idle_timeout)) is not None:
             yield record
+
+    def _defer(self, item) -> None:
+        """Queue what the thread received for :meth:`pump` (the oldest dropped and counted as
+        overflow beyond ``max_queue``)."""
+        if len(self._raw) >= self._max_raw:
+            self._raw.popleft()
+            self.counters.overflow += 1
+        self._raw.append(item)
 
     def _emit(self, record: Record) -> None:
         self.counters.delivered += 1

@@ -27,7 +27,6 @@ counted as overflow).
 
 from __future__ import annotations
 
-import collections
 import importlib
 import math
 import socket
@@ -83,8 +82,6 @@ class MavlinkLink(Link):
         self._conn = None
         self.deferred = bool(deferred)
         self.wake = wake
-        self._raw: collections.deque = collections.deque()  # (connection, arrival, datagram)
-        self._max_raw = max(int(max_queue), 1)
         self._frames: _SingleFrames | None = None
 
     def load(self) -> None:
@@ -155,10 +152,7 @@ class MavlinkLink(Link):
             if not self.deferred:
                 self._decode(conn, arrival, data)
                 continue
-            if len(self._raw) >= self._max_raw:
-                self._raw.popleft()
-                self.counters.overflow += 1
-            self._raw.append((conn, arrival, data))
+            self._defer((conn, arrival, data))
             if self.wake is not None and _frame_id(data) == dvl_id:
                 self.wake()
 

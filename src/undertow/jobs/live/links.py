@@ -39,9 +39,9 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
                ) -> dict[str, Link]:  # fmt: skip
     """The configured links (not started), keyed dvl / sonar / mavlink; a ConfigError names a
     bad address. Ping requests run at ``ping_rate_hz`` of sensor time (``time_scale`` times as
-    often in wall time, at most :data:`MAX_PING_RATE_HZ`). The MAVLink link is ``deferred``:
-    the caller's loop decodes its datagrams (``Link.pump`` each turn); ``wake`` is called when
-    one holds a DVL message."""
+    often in wall time, at most :data:`MAX_PING_RATE_HZ`). The A50 and MAVLink links are
+    ``deferred``: the caller's loop decodes what they receive (``Link.pump`` each turn);
+    ``wake`` is called for what may hold a DVL report (A50 bytes, MAVLink DVL messages)."""
     links: dict[str, Link] = {}
     # a wall-time delay d is d * time_scale sensor seconds: the clock tolerance scales with it
     max_offset = live.max_clock_offset_s * live.time_scale
@@ -49,7 +49,8 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
         host, port = parse_tcp(live.dvl)
         links["dvl"] = A50TcpLink(host, port, callback, now=now, max_offset_s=max_offset,
                                   reset_dead_reckoning=live.reset_dead_reckoning,
-                                  calibrate_gyro=live.calibrate_gyro)  # fmt: skip
+                                  calibrate_gyro=live.calibrate_gyro, deferred=True,
+                                  wake=wake)  # fmt: skip
     if live.sonar:
         from ...io.links.ping1d import Ping1DLink
 

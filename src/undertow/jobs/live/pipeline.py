@@ -2,7 +2,8 @@
 recording of everything, and the final results out.
 
 Data flow (one thread does the work; each link has its own thread that only queues: records,
-or for MAVLink over UDP the datagrams with their arrival times, decoded by this loop each turn):
+or for the A50 and MAVLink over UDP the bytes received with their arrival times, decoded by
+this loop each turn):
 
     links -> recorder (every raw record, as it arrives) -> reorder buffer -> chunks (time order)
           -> OnlineLocalizer (committed states, recorded) -> OnlineMapper (every MAP_EVERY_S:
@@ -131,6 +132,7 @@ class LiveSession:
         # wakes the loop, the rest wait for its next tick (POLL_S): fewer wake-ups per record
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
+        self._loop_thread = threading.get_ident()  # the thread that runs step() (set by it)
         self.links = open_links(self.live, self._ingest, self.clock, wake=self._wake.set)
         self.expected = expected_streams(self.links)
         wave = self.live.wave
@@ -225,10 +227,10 @@ class LiveSession:
             self.view.close()
 
     # -- the work ----------------------------------------------------------------------------
-    def _ingest(self, record: Record) -> None:  # a link thread: only queue
+    def _ingest(self, record: Record) -> None:  # a link thread, or the loop's pump: only queue
         self._queue.append((time.perf_counter(), record))
-        if record.stream == "dvl":
-            self._wake.set()
+        if record.stream == "dvl" and threading.get_ident() != self._loop_thread:
+            self._wake.set()  # (a record the loop decoded itself is taken in this turn)
 
     def _drain(self) -> list:
         batch = []
@@ -241,6 +243,7 @@ class LiveSession:
     def step(self, timeout: float = POLL_S) -> None:
         """Take what arrived (waiting at most ``timeout`` s for the first), preview the DVL
         reports that came, release what the horizon passed, report status when due."""
+        self._loop_thread = threading.get_ident()
         self._wake.wait(timeout)
         self._wake.clear()
         # the horizon from the clock read before the queue is emptied: a record stamped before
