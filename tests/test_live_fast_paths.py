@@ -16,7 +16,12 @@ from undertow.errors import DataError
 from undertow.estimation.online import OnlineLocalizer
 from undertow.io.links.common import RECORD_FIELDS, Record, records_to_log
 from undertow.io.recorder import Recorder
-from undertow.io.rosbag_write import MessageBuilder, imu_message, pressure_message
+from undertow.io.rosbag_write import (
+    MessageBuilder,
+    dead_reckoning_message,
+    imu_message,
+    pressure_message,
+)
 from undertow.sim import load_scenario, simulate
 
 SPECIAL = [math.nan, math.inf, -math.inf, -0.0, 0.0, 1e308, -5e-324, 1.0]
@@ -57,6 +62,16 @@ def test_cdr_templates_are_the_bytes_rosbags_writes(tmp_path, late):
             record = Record("pressure", t, {"pressure": p})
             _, [(_, ns, msgtype, payload)] = rec._pressure(t, record, late)
             ns_ref, msg = pressure_message(b, t, rec._frame["barometer"], p)
+            assert ns == ns_ref
+            assert bytes(payload) == bytes(b.store.serialize_cdr(msg, msgtype))
+        for _ in range(300):
+            t = float(rng.uniform(0.0, 2.0**31 - 1.0))
+            rpy = tuple(float(a) for a in rng.uniform(-3.2, 3.2, 3))
+            data = {"position": _vec(rng, 3), "orientation": rpy, "std": _value(rng)}
+            record = Record("dead_reckoning", t, data)
+            _, [(_, ns, msgtype, payload)] = rec._dead_reckoning(t, record, late)
+            std = np.float64(data["std"])
+            ns_ref, msg = dead_reckoning_message(b, t, data["position"], np.array(rpy), std)
             assert ns == ns_ref
             assert bytes(payload) == bytes(b.store.serialize_cdr(msg, msgtype))
         assert all(template is not None for template in rec._templates.values())

@@ -511,17 +511,25 @@ class Recorder:
         position = _floats(d.get("position"), 3)
         rpy = _floats(d.get("orientation"), 3)
         std = np.float64(_float(d.get("std")))
-        ns, msg = dead_reckoning_message(self._b, t, position, np.array(rpy), std)
         var = float(std**2)
-        q = msg.pose.pose.orientation  # the reader's roll, pitch, yaw: from this quaternion
-        rpy_read = quaternion_to_rpy(np.array([[q.x, q.y, q.z, q.w]]))[0]
+        # the message's fields after the header as dead_reckoning_message makes them: position,
+        # the quaternion of the attitude, the covariance with std^2 at 0, 7 and 14 (43 float64)
+        q = rpy_to_quaternion(np.array(rpy)).tolist()
+        cov = [0.0] * 36
+        cov[0] = cov[7] = cov[14] = var
+        topic = self._topic("dead_reckoning", late)
+
+        def build():
+            return dead_reckoning_message(self._b, t, position, np.array(rpy), std)
+
+        message = self._templated((topic,), _POSE_TYPE, t, (*position, *q, *cov), build)
+        rpy_read = quaternion_to_rpy(np.array([q]))[0]  # the reader's: from this quaternion
         data = {
             "position": position,
             "orientation": tuple(float(a) for a in rpy_read),
             "std": math.sqrt(var) if var >= 0 else math.nan,
         }
-        msgtype = _POSE_TYPE
-        return data, [(self._topic("dead_reckoning", late), ns, msgtype, msg)]
+        return data, [(topic, *message)]
 
     def _dvl(self, t: float, record: Record, late: str):
         dvl = _dvl_row(t, record.data)
