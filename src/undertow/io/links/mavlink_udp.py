@@ -131,8 +131,9 @@ class MavlinkLink(Link):
             self.handle(msg, self.now())
 
     def _run_udp(self, conn, sock) -> None:
-        """UDP: one blocking read per datagram, decoded by the connection's own parser
-        (``recv_match`` polls, which costs several times the decoding at telemetry rates)."""
+        """UDP: one blocking read per datagram (``recv_match`` polls, which costs several
+        times the decoding at telemetry rates), decoded at once or (``deferred``) queued for
+        :meth:`pump`."""
         sock.settimeout(0.2)
         dvl_id = _message_id(conn.mav, "VISION_POSITION_DELTA")
         last = time.monotonic()
@@ -268,8 +269,7 @@ def _simple_layout(cls) -> bool:
     """A message of scalar numeric fields only (no arrays, no text): decoded by its struct."""
     fmt = cls.unpacker.format
     fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
-    return (sum(cls.lengths) == len(cls.lengths) and "s" not in fmt and "c" not in fmt
-            and sorted(cls.orders) == list(range(len(cls.orders))))  # fmt: skip
+    return sum(cls.lengths) == len(cls.lengths) and "s" not in fmt and "c" not in fmt
 
 
 def _message_id(mav, name: str) -> int | None:
