@@ -296,8 +296,8 @@ class Link:
 
     def pump(self) -> None:
         """Decode what the link's thread queued undecoded and deliver its records, in the
-        calling thread (a link built ``deferred``, see :class:`MavlinkLink`); nothing for the
-        others. A consumer that runs a loop calls it each turn."""
+        calling thread (a link built ``deferred``: ``A50TcpLink``, ``MavlinkLink`` over UDP);
+        nothing for the others. A consumer that runs a loop calls it each turn."""
 
     def start(self) -> Link:
         if self._thread is None or not self._thread.is_alive():
