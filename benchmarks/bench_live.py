@@ -18,8 +18,9 @@ Figures:
   on the A50's clock, which a late arrival may relatch; ``filter_span_s``: of the filter's
   states, which also counts the arrival stamps of the clockless MAVLink and Ping records,
   stretched when this process falls behind);
-  ``cpu_s_by_thread``: where the CPU went (MainThread: recording, filter, map, view).
-- ``latency_ms``: wall time from a DVL report's arrival (the link's callback) to its pose being
+  ``cpu_s_by_thread``: where the CPU went (MainThread: decoding the A50's and MAVLink's data,
+  which their threads only receive, recording, filter, map, view).
+- ``latency_ms``: wall time from a DVL report's arrival (queued by the session) to its pose being
   published (the preview on the committed filter), median and p99. Target: p99 < 10 ms.
 
     .venv/bin/python benchmarks/bench_live.py [--rate 20] [--scenario wave-a0.10-f1.00]
