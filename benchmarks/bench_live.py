@@ -20,8 +20,9 @@ Figures:
   stretched when this process falls behind);
   ``cpu_s_by_thread``: where the CPU went (MainThread: decoding the A50's and MAVLink's data,
   which their threads only receive, recording, filter, map, view).
-- ``latency_ms``: wall time from a DVL report's arrival (queued by the session) to its pose being
-  published (the preview on the committed filter), median and p99. Target: p99 < 10 ms.
+- ``latency_ms``: wall time from a DVL report's arrival (its bytes received by the link's thread)
+  to its pose being published (the preview on the committed filter), median and p99. Target:
+  p99 < 10 ms.
 
     .venv/bin/python benchmarks/bench_live.py [--rate 20] [--scenario wave-a0.10-f1.00]
         [--commit-every S]  (the results are the same at any commit interval: a longer one

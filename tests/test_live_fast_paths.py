@@ -290,3 +290,22 @@ def test_preview_checkpoints_rules():
     assert c.start() is None  # past the resync time: a fresh preview
     c.reached(11.3, "s11.3", fresh=True)
     assert c.start() == (11.3, "s11.3") and len(c._kept) == 1
+
+
+def test_latency_counts_from_the_links_receipt():
+    """A DVL report's latency starts when the link's thread received it (its arrival on the
+    session's clock, scaled by the replay rate), not when the loop decoded it; without an
+    arrival (or a clock ahead of the queueing) it starts when it was queued."""
+    import time
+
+    from undertow.io.links.common import ScaledClock
+    from undertow.jobs.live.pipeline import received_at
+
+    for scale in (1.0, 20.0):
+        clock = ScaledClock(scale)
+        arrival = clock() - scale * 0.030  # received 30 ms (wall) ago
+        queued = time.perf_counter()
+        got = received_at(clock, arrival, queued)
+        assert abs((queued - got) - 0.030) < 0.005
+    assert received_at(clock, math.nan, queued) == queued
+    assert received_at(clock, clock() + 10.0, queued) == queued  # an arrival in the future

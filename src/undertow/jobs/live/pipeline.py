@@ -275,8 +275,8 @@ class LiveSession:
             return
         if record.stream in FILTER_STREAMS:
             self._checkpoints.arrived(record.t)
-        if record.stream == "dvl":
-            self._pending_dvl.append(wall)
+        if record.stream == "dvl":  # the latency counts from the link's receipt
+            self._pending_dvl.append(received_at(self.clock, record.arrival, wall))
 
     def _commit(self, horizon: float) -> None:
         released = self.buffer.release(horizon)
@@ -496,6 +496,18 @@ class LiveSession:
             "wave": self.sea.to_dict() if self.sea is not None else None,
             "notes": list(self.notes),
         })  # fmt: skip
+
+
+def received_at(clock: ScaledClock, arrival: float, queued: float) -> float:
+    """When (``time.perf_counter``) a link's thread received a record's bytes: its ``arrival``
+    (on the session's ``clock``, taken by that thread) brought back to perf_counter time;
+    ``queued`` (when the record was queued for the loop) if it has none or the clocks disagree.
+    A deferred link's data waits undecoded, so the queueing time alone would leave that wait
+    out of the latency."""
+    if not math.isfinite(arrival):
+        return queued
+    behind = clock.wall_seconds(clock() - arrival)
+    return min(queued, time.perf_counter() - max(behind, 0.0))
 
 
 def _filter_params(settings: Settings, calibration) -> dict:
