@@ -409,26 +409,30 @@ def _measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise)
         part = stream(log, cfg, noise, rejected)
         if part is not None:
             t, kind, z, R, ok = part
-            parts.append(_padded(t[ok], kind, z[ok], R[ok], cfg.std_floor**2))
-    t = np.concatenate([q[0] for q in parts])
-    kind = np.concatenate([q[1] for q in parts])
-    order = np.lexsort((kind, t))
-    z = np.concatenate([q[2] for q in parts])[order]
-    R = np.concatenate([q[3] for q in parts])[order]
-    return model.pack_measurements(t[order], kind[order], z, R), rejected
+            parts.append((t[ok], kind, z[ok], R[ok]))
+    rows, _ = merged_rows(parts, cfg.std_floor**2)
+    return rows, rejected
 
 
-def _padded(t, kind, z, R, floor2):
-    """Rows of one stream as (t, kind, z (n, 3), R (n, 3, 3)): z and R zero-padded to three
-    dimensions, the diagonal of R floored at ``floor2``."""
-    n = t.size
-    zz = np.full((n, 3), 0.0)
-    zz[:, : z.shape[1]] = z
-    RR = np.zeros((n, 3, 3))
-    RR[:, : R.shape[1], : R.shape[2]] = R
+def merged_rows(parts, floor2: float) -> tuple[np.ndarray, np.ndarray]:
+    """One :data:`~undertow.estimation.model.MEASUREMENT` array of the streams' rows ``parts``
+    [(t (n,), kind, z (n, d), R (n, d, d))]: z and R zero-padded to three dimensions, the
+    diagonal of R floored at ``floor2``, merged by time, then kind. Also the merge order (the
+    index into the parts' rows concatenated), to carry values kept beside the rows."""
+    n = sum(part[0].size for part in parts)
+    rows = np.zeros(n, model.MEASUREMENT)
+    rt, rk, rz, rR = rows["t"], rows["kind"], rows["z"], rows["R"]
+    a = 0
+    for t, kind, z, R in parts:
+        b, d = a + t.size, z.shape[1]
+        rt[a:b], rk[a:b] = t, kind
+        rz[a:b, :d] = z
+        rR[a:b, :d, :d] = R
+        a = b
     i = np.arange(3)
-    RR[:, i, i] = np.maximum(RR[:, i, i], floor2)
-    return t, np.full(n, kind, np.int64), zz, RR
+    rR[:, i, i] = np.maximum(rR[:, i, i], floor2)
+    order = np.lexsort((rk, rt))
+    return rows[order], order
 
 
 def _diag(std, n: int, cfg: LocalizerConfig) -> np.ndarray:

@@ -50,6 +50,7 @@ from .localizer import (
     _initial_state,
     _nis_summary,
     _pressure_rows,
+    merged_rows,
     sensor_coverage,
 )
 
@@ -450,46 +451,30 @@ class _Run:
 
     def _rows(self, chunk: Log, commit: bool = True):
         """(candidate rows merged in the offline order, their depth index, (t, depth) of the
-        new in-envelope depths); ``commit``: count them. The rows are those of
-        :func:`~undertow.estimation.localizer._padded` (z and R zero-padded to three
-        dimensions, R's diagonal floored at std_floor^2), written into one array (a chunk is a
-        few records: fewer small arrays than padding each stream and concatenating)."""
+        new in-envelope depths); ``commit``: count them."""
         cfg, rejected = self.cfg, {}
-        parts = []  # (t, kind, z, R, depth index) of each stream's accepted rows
+        parts, depth_idx = [], []  # each stream's accepted rows; their depth index (-1: none)
         for name, build in (("imu", _imu_rows), ("dvl", _dvl_rows),
                             ("dead_reckoning", _dr_rows)):  # fmt: skip
             stream = getattr(chunk, name)
             if stream is not None and len(stream):
                 t, kind, z, R, ok = build(chunk, cfg, self.noise, rejected, warn=False)
-                parts.append((t[ok], kind, z[ok], R[ok], -1))
+                parts.append((t[ok], kind, z[ok], R[ok]))
+                depth_idx.append(np.full(parts[-1][0].size, -1))
         depths = (np.zeros(0), np.zeros(0))
         if chunk.pressure is not None and len(chunk.pressure):
             t, kind, z, R, ok = _pressure_rows(chunk, cfg, self.noise, rejected, warn=False,
                                                jumps=False)  # fmt: skip
-            n_ok = int(ok.sum())
-            parts.append((t[ok], kind, z[ok], R[ok], self.depth.count + np.arange(n_ok)))
+            parts.append((t[ok], kind, z[ok], R[ok]))
+            depth_idx.append(self.depth.count + np.arange(int(ok.sum())))
             depths = (t[ok], z[ok, 0])
         for key, value in rejected.items() if commit else ():
             self.rejected[key] = self.rejected.get(key, 0) + value
-        n = sum(part[0].size for part in parts)
-        rows = np.zeros(n, model.MEASUREMENT)
-        idx = np.empty(n, np.int64)
-        rt, rk, rz, rR = rows["t"], rows["kind"], rows["z"], rows["R"]
-        a = 0
-        for t, kind, z, R, depth_idx in parts:
-            b, d = a + t.size, z.shape[1]
-            rt[a:b], rk[a:b], idx[a:b] = t, kind, depth_idx
-            rz[a:b, :d] = z
-            rR[a:b, :d, :d] = R
-            a = b
-        i = np.arange(3)
-        rR[:, i, i] = np.maximum(rR[:, i, i], cfg.std_floor**2)
-        if n == 0:
-            return rows, idx, depths
-        order = np.lexsort((rk, rt))
+        rows, order = merged_rows(parts, cfg.std_floor**2)
         if commit:
-            self.candidates += np.bincount(rk, minlength=self.candidates.size)
-        return rows[order], idx[order], depths
+            self.candidates += np.bincount(rows["kind"], minlength=self.candidates.size)
+        idx = np.concatenate(depth_idx) if depth_idx else np.zeros(0, np.int64)
+        return rows, idx[order], depths
 
     def peek(self, chunk: Log, start=None) -> tuple:
         """(t, x, P, state reached) of the chunk filtered on a copy of the state (``start``,

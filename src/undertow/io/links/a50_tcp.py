@@ -226,8 +226,8 @@ class A50TcpLink(Link):
                 pass
 
     def _run_session(self, sock: socket.socket) -> None:
-        session = object()  # deferred: a line buffer of its own for each connection
-        lines = LineBuffer(self.counters)
+        session = object()  # deferred: pump() keeps a line buffer of its own per connection
+        lines = None if self.deferred else LineBuffer(self.counters)
         last = time.monotonic()
         while not self.stopping:
             try:
