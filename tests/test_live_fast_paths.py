@@ -14,6 +14,7 @@ import pytest
 
 from undertow.errors import DataError
 from undertow.estimation.online import OnlineLocalizer
+from undertow.io import read_log
 from undertow.io.links.common import RECORD_FIELDS, Record, records_to_log
 from undertow.io.recorder import Recorder
 from undertow.io.rosbag_write import (
@@ -85,9 +86,9 @@ def test_pose_template_is_the_bytes_rosbags_writes(tmp_path):
     b = MessageBuilder()
     rec = Recorder(tmp_path / "rec")
     written = []
-    write = rec._writer.write
-    rec._writer.write = lambda conn, ns, data: (written.append((conn.topic, ns, bytes(data))),
-                                                write(conn, ns, data))  # fmt: skip
+    write = rec._append
+    rec._append = lambda conn, ns, data: (written.append((conn.topic, ns, bytes(data))),
+                                          write(conn, ns, data))  # fmt: skip
     try:
         cases = []
         for _ in range(200):
@@ -181,6 +182,31 @@ def _sim_records(span_s: float):
                  for i in range(len(s)) if s.t[i] < span_s]  # fmt: skip
     recs.sort(key=lambda r: r.t)
     return recs, log.mounting
+
+
+def test_appended_messages_are_the_file_rosbags_writes(tmp_path):
+    """The recorder's MessageAppender against rosbags' own Writer.write: the same records
+    (every stream, a late one, estimates; enough bytes for rosbags to close chunks of 1 MiB by
+    itself) give the same .mcap and metadata.yaml, byte for byte."""
+    recs, mounting = _sim_records(math.inf)
+    recs.append(Record("sonar", recs[-1].t + 0.01, {"range": 2.5, "confidence": 90.0}))
+    x, P = np.arange(18.0), np.eye(18)
+    bags = {}
+    for fast in (True, False):
+        rec = Recorder(tmp_path / f"bag_{fast}" / "rec", mounting, flush_every_s=1e9)
+        assert rec._append.__self__.fast  # rosbags' MCAP storage: the fast path applies
+        rec._append.__self__.fast = fast
+        for i, record in enumerate(recs):
+            rec.write_record(record)
+            if i % 50 == 0:
+                rec.write_pose(record.t, x, P)
+        rec.write_late(recs[3])
+        chunks = len(rec._writer.storage.chunks)
+        bags[fast] = rec.close()
+    assert chunks >= 1  # one closed by size during the writes (the last one by close)
+    for name in ("rec.mcap", "metadata.yaml"):
+        assert (bags[True] / name).read_bytes() == (bags[False] / name).read_bytes(), name
+    assert read_log(bags[True]).imu is not None
 
 
 def test_a_resumed_preview_is_the_fresh_preview():

@@ -90,6 +90,7 @@ from ..log import Mounting, SonarRange
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
 from .a50_json import MAX_REPORT_INTERVAL_MS, velocity_report_line
 from .links.common import RECORD_FIELDS, Record
+from .mcap_append import MessageAppender
 from .msgdefs import A50_DVL
 from .rosbag import SIDECAR
 from .rosbag_streams import TF_MESSAGE
@@ -235,6 +236,7 @@ class Recorder:
         except Exception as exc:  # rosbags' WriterError or an OSError: nothing may stay behind
             shutil.rmtree(self._holder, ignore_errors=True)
             raise ConfigError(f"{self.path}: cannot start the recording ({exc})") from None
+        self._append = MessageAppender(self._writer).write
         self._conns: dict[str, object] = {}
         self._mounting_written = False
         self._lock = threading.Lock()
@@ -245,6 +247,7 @@ class Recorder:
         self._dvl_keys: set[tuple] = set()
         self._last_flush: float | None = None
         self._templates: dict[tuple, _CdrTemplate | None] = {}
+        self._by_stream = {stream: getattr(self, f"_{stream}") for stream in RECORD_FIELDS}
 
     def declare(self, streams, wave: bool = False) -> None:
         """Add the topics of ``streams`` (raw stream names) and of the estimates (pose, status;
@@ -422,11 +425,12 @@ class Recorder:
             topic = self.topics.tf_static[0]
             ns, msg = tf_static_message(self._b, self.topics, self.mounting, messages[0][1] * 1e-9)
             messages = [(topic, ns, TF_MESSAGE, msg), *messages]
-        store = self._b.store
+        store, counts, conns = self._b.store, self.counts, self._conns
         for topic, ns, msgtype, msg in messages:
-            data = msg if isinstance(msg, bytes) else store.serialize_cdr(msg, msgtype)
-            self._writer.write(self._connection(topic, msgtype), ns, data)
-            self.counts[topic] = self.counts.get(topic, 0) + 1
+            data = msg if type(msg) is bytes else store.serialize_cdr(msg, msgtype)
+            conn = conns.get(topic) or self._connection(topic, msgtype)
+            self._append(conn, ns, data)
+            counts[topic] = counts.get(topic, 0) + 1
         t = messages[-1][1] * 1e-9
         if self._last_flush is None:
             self._last_flush = t
@@ -436,7 +440,7 @@ class Recorder:
 
     def _messages(self, t: float, record: Record, late: str):
         try:
-            return getattr(self, f"_{record.stream}")(t, record, late)
+            return self._by_stream[record.stream](t, record, late)
         except (TypeError, ValueError) as exc:  # a field that is not numbers of its shape
             raise DataError(f"{record.stream} record: malformed field ({exc})") from None
 
