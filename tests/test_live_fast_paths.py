@@ -6,6 +6,7 @@ preview over the whole buffer."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import warnings
 
@@ -17,12 +18,15 @@ from undertow.estimation.online import OnlineLocalizer
 from undertow.io import read_log
 from undertow.io.links.common import RECORD_FIELDS, Record, records_to_log
 from undertow.io.recorder import Recorder
+from undertow.io.a50_json import velocity_report_line
 from undertow.io.rosbag_write import (
     MessageBuilder,
     dead_reckoning_message,
+    dvl_driver_message,
     imu_message,
     pressure_message,
 )
+from undertow.log import Dvl
 from undertow.sim import load_scenario, simulate
 
 SPECIAL = [math.nan, math.inf, -math.inf, -0.0, 0.0, 1e308, -5e-324, 1.0]
@@ -75,7 +79,34 @@ def test_cdr_templates_are_the_bytes_rosbags_writes(tmp_path, late):
             ns_ref, msg = dead_reckoning_message(b, t, data["position"], np.array(rpy), std)
             assert ns == ns_ref
             assert bytes(payload) == bytes(b.store.serialize_cdr(msg, msgtype))
+        for _ in range(300):
+            t = float(rng.uniform(0.0, 2.0**31 - 1.0))
+            ok = tuple(bool(k) for k in rng.random(4) < 0.7)
+            data = {"velocity": _vec(rng, 3), "valid": bool(rng.random() < 0.8),
+                    "fom": _value(rng), "covariance": rng.normal(size=(3, 3)),
+                    "altitude": _value(rng), "beam_range": _vec(rng, 4), "beam_valid": ok,
+                    "beam_velocity": _vec(rng, 4)}  # fmt: skip
+            for key in ("fom", "covariance", "beam_valid", "altitude"):
+                if rng.random() < 0.1:
+                    del data[key]
+            sensor_time = t - 0.003 if rng.random() < 0.5 else math.nan
+            record = Record("dvl", t, data, t, sensor_time)
+            _, [(_, ns, msgtype, payload), (_, ns_j, type_j, text)] = rec._dvl(t, record, late)
+            obj = json.loads(bytes(text)[8:-1])  # the report line in the std_msgs/String
+            dvl = Dvl.from_velocity([t], [data["velocity"]])
+            beams = ("beam_range", "beam_valid", "beam_velocity")
+            dvl = dataclasses.replace(dvl, valid=np.array([data["valid"]]), **{
+                k: np.array([data[k]]) for k in ("fom", "altitude", "covariance", *beams)
+                if k in data})  # fmt: skip
+            tov = sensor_time if math.isfinite(sensor_time) else t
+            ns_ref, msg = dvl_driver_message(b, dvl, 0, rec._frame["dvl"], obj["time"])
+            assert ns == ns_j == ns_ref
+            assert bytes(payload) == bytes(b.store.serialize_cdr(msg, msgtype))
+            line = velocity_report_line(dvl, 0, obj["time"], tov)
+            string = b.T["std_msgs/msg/String"](data=line)
+            assert bytes(text) == bytes(b.store.serialize_cdr(string, type_j))
         assert all(template is not None for template in rec._templates.values())
+        assert rec._string_template  # the JSON lines' template reproduced rosbags' bytes
     finally:
         rec.abort()
 

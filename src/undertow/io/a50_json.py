@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -193,41 +194,80 @@ def _dvl_from_reports(reports: list[tuple[int, dict]], notes: Notes, metadata: d
     return dvl if len(dvl) else None
 
 
+class VelocityReport(NamedTuple):
+    """One json_v3 velocity report's values as the A50 sends them (plain Python values): the
+    protocol's invalid markers in place (NaN altitude -> -1, an invalid beam's distance -> -1);
+    ``beams`` four (id, velocity, distance, valid); ``covariance`` 3 rows of 3; times: ``time_ms``
+    since the previous report, ``tov_us`` the time of validity in Unix us."""
+
+    time_ms: float
+    velocity: tuple[float, float, float]
+    fom: float
+    covariance: list
+    altitude: float
+    beams: tuple
+    valid: bool
+    tov_us: int
+
+
+def velocity_report(dvl: Dvl, i: int, time_ms: float, time_of_validity_s: float) -> VelocityReport:
+    """Row ``i`` of ``dvl`` as a :class:`VelocityReport`."""
+    altitude = float(dvl.altitude[i])
+    ok = dvl.beam_valid[i].tolist()
+    ids, vel, dist = dvl.beam_id[i].tolist(), dvl.beam_velocity[i], dvl.beam_range[i]
+    return report_values(
+        time_ms, dvl.velocity[i].tolist(), float(dvl.fom[i]), dvl.covariance[i].tolist(),
+        altitude, [(int(ids[k]), float(vel[k]), float(dist[k]), bool(ok[k])) for k in range(4)],
+        bool(dvl.valid[i]), time_of_validity_s,
+    )  # fmt: skip
+
+
+def report_values(time_ms, velocity, fom, covariance, altitude, beams, valid,
+                  time_of_validity_s) -> VelocityReport:  # fmt: skip
+    """A :class:`VelocityReport` of plain values: ``beams`` (id, velocity, distance, valid) with
+    the distance as measured (-1 written for an invalid beam), ``altitude`` NaN when unknown."""
+    return VelocityReport(
+        float(time_ms),
+        tuple(velocity),
+        fom,
+        covariance,
+        altitude if math.isfinite(altitude) else -1.0,
+        tuple((bid, bvel, dist if ok else -1.0, ok) for bid, bvel, dist, ok in beams),
+        valid,
+        int(round(time_of_validity_s * 1e6)),
+    )
+
+
+def report_line(r: VelocityReport) -> str:
+    """The json_v3 line of a :class:`VelocityReport` (NaN values written as ``NaN``)."""
+    vx, vy, vz = r.velocity
+    report = {
+        "time": r.time_ms,
+        "vx": vx,
+        "vy": vy,
+        "vz": vz,
+        "fom": r.fom,
+        "covariance": r.covariance,
+        "altitude": r.altitude,
+        "transducers": [
+            {"id": bid, "velocity": bvel, "distance": dist, "rssi": math.nan, "nsd": math.nan,
+             "beam_valid": ok}
+            for bid, bvel, dist, ok in r.beams
+        ],  # fmt: skip
+        "velocity_valid": r.valid,
+        "status": 0,
+        "format": "json_v3",
+        "type": "velocity",
+        "time_of_validity": r.tov_us,
+        "time_of_transmission": r.tov_us,
+    }
+    return json.dumps(report)
+
+
 def velocity_report_line(dvl: Dvl, i: int, time_ms: float, time_of_validity_s: float) -> str:
     """Row ``i`` of ``dvl`` as a json_v3 velocity report line (as the A50 sends it).
 
     NaN altitude is written as -1 and the distance of an invalid beam as -1 (the protocol's
     invalid markers); other NaN values are written as ``NaN``.
     """
-    altitude = float(dvl.altitude[i])
-    transducers = []
-    for k in range(4):
-        ok = bool(dvl.beam_valid[i, k])
-        transducers.append(
-            {
-                "id": int(dvl.beam_id[i, k]),
-                "velocity": float(dvl.beam_velocity[i, k]),
-                "distance": float(dvl.beam_range[i, k]) if ok else -1.0,
-                "rssi": math.nan,
-                "nsd": math.nan,
-                "beam_valid": ok,
-            }
-        )
-    tov_us = int(round(time_of_validity_s * 1e6))
-    report = {
-        "time": float(time_ms),
-        "vx": float(dvl.velocity[i, 0]),
-        "vy": float(dvl.velocity[i, 1]),
-        "vz": float(dvl.velocity[i, 2]),
-        "fom": float(dvl.fom[i]),
-        "covariance": dvl.covariance[i].tolist(),
-        "altitude": altitude if math.isfinite(altitude) else -1.0,
-        "transducers": transducers,
-        "velocity_valid": bool(dvl.valid[i]),
-        "status": 0,
-        "format": "json_v3",
-        "type": "velocity",
-        "time_of_validity": tov_us,
-        "time_of_transmission": tov_us,
-    }
-    return json.dumps(report)
+    return report_line(velocity_report(dvl, i, time_ms, time_of_validity_s))

@@ -73,12 +73,12 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 import struct
 import tempfile
 import threading
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import yaml
@@ -88,7 +88,7 @@ from .._util.plain import json_safe, to_plain
 from ..errors import ConfigError, DataError
 from ..log import Mounting, SonarRange
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
-from .a50_json import MAX_REPORT_INTERVAL_MS, velocity_report_line
+from .a50_json import MAX_REPORT_INTERVAL_MS, report_line, report_values
 from .links.common import RECORD_FIELDS, Record
 from .mcap_append import MessageAppender
 from .msgdefs import A50_DVL
@@ -98,7 +98,7 @@ from .rosbag_write import (
     TF_STATIC_QOS,
     MessageBuilder,
     dead_reckoning_message,
-    dvl_driver_message,
+    driver_message,
     imu_message,
     pressure_message,
     sonar_message,
@@ -137,8 +137,11 @@ _SONAR_DEFAULTS = {
 def _floats(value, n: int) -> tuple[float, ...]:
     if value is None:
         return (math.nan,) * n
-    if type(value) is tuple and len(value) == n and all(type(v) is float for v in value):
-        return value  # already n Python floats (what the links deliver)
+    if type(value) is tuple and len(value) == n:  # (what the links deliver)
+        try:
+            return tuple(map(float, value))
+        except (TypeError, ValueError):  # not numbers: the general path says so
+            pass
     arr = np.asarray(value, dtype=np.float64).reshape(-1)
     if arr.size != n:
         raise ValueError(f"expected {n} values, got {arr.size}")
@@ -163,33 +166,62 @@ def _stamp(t: float) -> tuple[int, int, int]:
     return sec, nanosec, sec * 1_000_000_000 + nanosec
 
 
-class _CdrTemplate:
-    """The CDR bytes of a message whose fields after its ``std_msgs/Header`` are ``n`` float64
-    (sensor_msgs/Imu, sensor_msgs/FluidPressure), written without building the message: the
-    bytes of a first message serialized by rosbags, with the stamp (int32 sec, uint32 nanosec
-    right after the 4-byte encapsulation header) and the trailing little-endian doubles
-    replaced (OMG CDR: the frame id's length, bytes and padding stay those of the template).
-    :meth:`make` keeps a template only when it reproduces rosbags' bytes of that message."""
+def _aligned(codes: str) -> struct.Struct:
+    """Little-endian struct of the CDR fields ``codes`` (struct codes; ``Ns`` bytes, aligned
+    to 1) laid out from an offset aligned to 8: each primitive aligned to its size (OMG CDR)."""
+    fmt, off = "<", 0
+    for count, code in re.findall(r"(\d*)([a-zA-Z?])", codes):
+        n = int(count or 1)
+        items = [f"{n}s"] if code == "s" else [code] * n
+        for item in items:
+            size = struct.calcsize("<" + item)
+            pad = -off % (1 if code == "s" else size)
+            fmt += "x" * pad + item
+            off += pad + size
+    return struct.Struct(fmt)
 
-    def __init__(self, serialized: bytes, n: int) -> None:
-        self.doubles = struct.Struct(f"<{n}d")
+
+class _CdrTemplate:
+    """The CDR bytes of a message of fixed layout after its ``std_msgs/Header`` (the ``tail``:
+    by default ``n`` float64, as sensor_msgs/Imu and FluidPressure), written without building the
+    message: the bytes of a first message serialized by rosbags, with the stamp (int32 sec,
+    uint32 nanosec right after the 4-byte encapsulation header) and the tail replaced (OMG CDR:
+    the frame id's length, bytes and padding stay those of the template; the tail starts
+    aligned to 8). :meth:`make` keeps a template only when it reproduces rosbags' bytes of that
+    message."""
+
+    def __init__(self, serialized: bytes, tail: struct.Struct) -> None:
+        self.tail = tail
         self.encapsulation = serialized[:4]
-        self.middle = serialized[4 + _STAMP.size : len(serialized) - self.doubles.size]
+        self.middle = serialized[4 + _STAMP.size : len(serialized) - tail.size]
 
     def pack(self, sec: int, nanosec: int, values) -> bytes:
         return b"".join((self.encapsulation, _STAMP.pack(sec, nanosec), self.middle,
-                         self.doubles.pack(*values)))  # fmt: skip
+                         self.tail.pack(*values)))  # fmt: skip
 
     @classmethod
-    def make(cls, serialized, t: float, values) -> _CdrTemplate | None:
+    def make(cls, serialized, t: float, values, tail=None) -> _CdrTemplate | None:
         serialized = bytes(serialized)
         try:
-            template = cls(serialized, len(values))
+            template = cls(serialized, tail or struct.Struct(f"<{len(values)}d"))
             sec, nanosec, _ = _stamp(t)
             same = template.pack(sec, nanosec, values) == serialized
         except (struct.error, OverflowError):
             same = False
         return template if same else None
+
+
+#: waterlinked_a50_ros_driver/msg/DVL after its header: time, velocity, fom, altitude, the
+#: beams (a sequence of 4: id, velocity, distance, rssi, nsd, valid), velocity_valid, status,
+#: form (a string of 7 characters)
+_DVL_TAIL = _aligned("6d I" + " q4d?" * 4 + " ?q I8s")
+_FORM = b"json_v3\x00"
+
+
+def _string_cdr(encapsulation: bytes, text: str) -> bytes:
+    """CDR bytes of a std_msgs/String: uint32 length (with the NUL), the UTF-8 bytes, NUL."""
+    data = text.encode()
+    return b"".join((encapsulation, struct.pack("<I", len(data) + 1), data, b"\x00"))
 
 
 def _f32(value: float) -> float:
@@ -247,6 +279,7 @@ class Recorder:
         self._dvl_keys: set[tuple] = set()
         self._last_flush: float | None = None
         self._templates: dict[tuple, _CdrTemplate | None] = {}
+        self._string_template: bytes | bool | None = None  # std_msgs/String's encapsulation
         self._by_stream = {stream: getattr(self, f"_{stream}") for stream in RECORD_FIELDS}
 
     def declare(self, streams, wave: bool = False) -> None:
@@ -484,7 +517,7 @@ class Recorder:
 
         return {"pressure": p}, [(topic, *self._templated((topic,), msgtype, t, (p, 0.0), build))]
 
-    def _templated(self, key: tuple, msgtype: str, t: float, values: tuple, build):
+    def _templated(self, key: tuple, msgtype: str, t: float, values: tuple, build, tail=None):
         """(ns, msgtype, CDR bytes) of a message of fixed layout: packed on the key's template
         (:class:`_CdrTemplate`), made from the first such message rosbags serializes."""
         template = self._templates.get(key)
@@ -495,16 +528,16 @@ class Recorder:
         if key in self._templates:  # no template reproduces this type's bytes: rosbags
             return ns, msgtype, msg
         serialized = bytes(self._b.store.serialize_cdr(msg, msgtype))
-        self._templates[key] = _CdrTemplate.make(serialized, t, values)
+        self._templates[key] = _CdrTemplate.make(serialized, t, values, tail)
         return ns, msgtype, serialized
 
     def _sonar(self, t: float, record: Record, late: str):
         d = record.data
-        limits = tuple(_f32(d.get(k, v)) for k, v in _SONAR_DEFAULTS.items())
-        if not late:
-            if self._sonar_limits is None:
+        limits = None if late else self._sonar_limits
+        if limits is None:
+            limits = tuple(_f32(d.get(k, v)) for k, v in _SONAR_DEFAULTS.items())
+            if not late:
                 self._sonar_limits = limits
-            limits = self._sonar_limits
         rng = _f32(_float(d.get("range")))
         ns, msg = sonar_message(self._b, t, self._frame["sonar"], limits, rng)
         data = {"range": rng, **dict(zip(_SONAR_DEFAULTS, limits, strict=True))}
@@ -536,19 +569,34 @@ class Recorder:
         return data, [(topic, *message)]
 
     def _dvl(self, t: float, record: Record, late: str):
-        dvl = _dvl_row(t, record.data)
-        time_ms = self._dvl_interval_ms(t, late, dvl)
+        fields = _dvl_fields(record.data)
+        v, valid, fom, cov, altitude, rng, ok, bvel = fields
+        time_ms = self._dvl_interval_ms(t, late, v)
         tov = record.sensor_time if math.isfinite(record.sensor_time) else t
-        ns, msg = dvl_driver_message(self._b, dvl, 0, self._frame["dvl"], time_ms)
-        line = velocity_report_line(dvl, 0, time_ms, tov)
-        string = self._b.T[_STRING_TYPE](data=line)
-        messages = [
-            (self._topic("dvl", late), ns, A50_DVL, msg),
-            (self._topic("dvl_json", late), ns, _STRING_TYPE, string),
-        ]
-        return _dvl_read_back(dvl), messages
+        beams = [(k, bvel[k], rng[k], ok[k]) for k in range(4)]
+        report = report_values(time_ms, v, fom, cov, altitude, beams, valid, tov)
+        topic, json_topic = self._topic("dvl", late), self._topic("dvl_json", late)
+        values = (report.time_ms, *v, fom, report.altitude, 4,
+                  *(x for bid, bv, dist, b_ok in report.beams
+                    for x in (bid, bv, dist, math.nan, math.nan, b_ok)),
+                  valid, 0, len(_FORM), _FORM)  # fmt: skip
 
-    def _dvl_interval_ms(self, t: float, late: str, dvl: SimpleNamespace) -> float:
+        def build():
+            return driver_message(self._b, t, self._frame["dvl"], report)
+
+        ns, _, msg = self._templated((topic,), A50_DVL, t, values, build, _DVL_TAIL)
+        line = report_line(report)
+        string = self._string_template
+        if string is None:  # the first line: rosbags' bytes, kept as the template if equal
+            ours = _string_cdr(b"\x00\x01\x00\x00", line)
+            ref = bytes(self._b.store.serialize_cdr(self._b.T[_STRING_TYPE](data=line),
+                                                    _STRING_TYPE))  # fmt: skip
+            self._string_template = string = ours[:4] if ours == ref else False
+        text = _string_cdr(string, line) if string else self._b.T[_STRING_TYPE](data=line)
+        messages = [(topic, ns, A50_DVL, msg), (json_topic, ns, _STRING_TYPE, text)]
+        return _dvl_read_back(fields), messages
+
+    def _dvl_interval_ms(self, t: float, late: str, v: tuple) -> float:
         """The driver's ``time`` field (ms since the previous report, in [0, a day]), made
         unique with its velocity among the session's reports: the reader matches a report's
         JSON line (its covariance) by (time, vx, vy, vz)."""
@@ -556,7 +604,6 @@ class Recorder:
             return 0.0
         last, self._dvl_last_t = self._dvl_last_t, t
         time_ms = 0.0 if last is None else min(max((t - last) * 1e3, 0.0), MAX_REPORT_INTERVAL_MS)
-        v = tuple(float(x) for x in dvl.velocity[0])
         step_to = math.inf  # the reader keeps `time` in [0, MAX]: at the top, search downwards
         while (time_ms, *v) in self._dvl_keys:
             if time_ms >= MAX_REPORT_INTERVAL_MS:
@@ -566,49 +613,48 @@ class Recorder:
         return time_ms
 
 
-_BEAM_IDS = np.arange(4).reshape(1, 4)
-
-
-def _dvl_row(t: float, d: dict) -> SimpleNamespace:
-    """A one-row stand-in of a :class:`~undertow.log.Dvl` (the fields the driver message and
-    the JSON line read) from a record's fields, missing ones as ``Dvl.from_velocity`` fills
-    them (valid True, NaN values, beams not valid)."""
-
-    def arr(key, shape, fill, dtype=np.float64):
-        value = d.get(key)
-        if value is None:
-            return np.full((1, *shape), fill, dtype=dtype)
-        return np.asarray(value, dtype=dtype).reshape((1, *shape))
-
-    return SimpleNamespace(
-        t=np.array([t]),
-        velocity=arr("velocity", (3,), np.nan),
-        valid=arr("valid", (), True, np.bool_),
-        fom=arr("fom", (), np.nan),
-        covariance=arr("covariance", (3, 3), np.nan),
-        altitude=arr("altitude", (), np.nan),
-        beam_id=_BEAM_IDS,
-        beam_range=arr("beam_range", (4,), np.nan),
-        beam_valid=arr("beam_valid", (4,), False, np.bool_),
-        beam_velocity=arr("beam_velocity", (4,), np.nan),
+def _dvl_fields(d: dict) -> tuple:
+    """(velocity, valid, fom, covariance (3 lists of 3), altitude, beam_range, beam_valid,
+    beam_velocity) of a DVL record's fields as plain values, missing ones as
+    ``Dvl.from_velocity`` fills them (valid True, NaN values, beams not valid)."""
+    valid, beam_valid = d.get("valid"), d.get("beam_valid")
+    cov = d.get("covariance")
+    return (
+        _floats(d.get("velocity"), 3),
+        True if valid is None else _bool(valid),
+        _float(d.get("fom")),
+        [[math.nan] * 3] * 3 if cov is None else np.asarray(cov, np.float64).reshape(3, 3).tolist(),
+        _float(d.get("altitude")),
+        _floats(d.get("beam_range"), 4),
+        (False,) * 4 if beam_valid is None else tuple(_bool(k) for k in _items(beam_valid, 4)),
+        _floats(d.get("beam_velocity"), 4),
     )
 
 
-def _dvl_read_back(dvl: SimpleNamespace) -> dict:
+def _bool(value) -> bool:
+    return value if type(value) is bool else bool(np.asarray(value, np.bool_).reshape(()))
+
+
+def _items(value, n: int) -> list:
+    items = list(value) if isinstance(value, (tuple, list)) else np.asarray(value).reshape(-1)
+    if len(items) != n:
+        raise ValueError(f"expected {n} values, got {len(items)}")
+    return items
+
+
+def _dvl_read_back(fields: tuple) -> dict:
     """The DVL fields as the bag reader gives them back (module docstring)."""
-    alt = float(dvl.altitude[0])
-    ok = dvl.beam_valid[0]
-    v = dvl.velocity[0]
-    cov = None if np.isnan(v).any() else dvl.covariance[0]  # NaN != NaN: no JSON match
+    v, valid, fom, cov, alt, rng, ok, bvel = fields
+    nan_v = any(math.isnan(x) for x in v)  # NaN != NaN: no JSON match, no covariance
     return {
-        "velocity": tuple(float(x) for x in v),
-        "valid": bool(dvl.valid[0]),
-        "fom": float(dvl.fom[0]),
-        "covariance": np.full((3, 3), np.nan) if cov is None else np.array(cov, dtype=np.float64),
+        "velocity": v,
+        "valid": valid,
+        "fom": fom,
+        "covariance": np.full((3, 3), np.nan) if nan_v else np.array(cov, dtype=np.float64),
         "altitude": alt if math.isfinite(alt) and alt >= 0 else math.nan,
-        "beam_range": tuple(np.where(ok, dvl.beam_range[0], np.nan).tolist()),
-        "beam_valid": tuple(bool(k) for k in ok),
-        "beam_velocity": tuple(float(x) for x in dvl.beam_velocity[0]),
+        "beam_range": tuple(r if k else math.nan for r, k in zip(rng, ok, strict=True)),
+        "beam_valid": ok,
+        "beam_velocity": bvel,
     }
 
 

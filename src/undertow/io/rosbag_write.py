@@ -39,7 +39,7 @@ from .._util.plain import to_plain
 from ..errors import UndertowError
 from ..log import Log
 from ..rotations import rpy_to_quaternion, world_to_body
-from .a50_json import velocity_report_line
+from .a50_json import VelocityReport, velocity_report, velocity_report_line
 from .msgdefs import A50_BEAM, A50_DVL, MARINE_DVL, dvl_typestore
 from .rosbag import SIDECAR
 from .rosbag_streams import POINTCLOUD2, TF_MESSAGE
@@ -378,28 +378,24 @@ def _dvl_driver(log: Log, b: MessageBuilder, frame: str):
 def dvl_driver_message(b: MessageBuilder, d, i: int, frame: str, time_ms: float):
     """(record time ns, ``waterlinked_a50_ros_driver/msg/DVL``) of row ``i`` of the Dvl ``d``:
     NaN altitude as -1 and an invalid beam's distance as -1, as the driver sends them."""
+    return driver_message(b, float(d.t[i]), frame, velocity_report(d, i, time_ms, d.t[i]))
+
+
+def driver_message(b: MessageBuilder, t: float, frame: str, r: VelocityReport):
+    """(record time ns, ``waterlinked_a50_ros_driver/msg/DVL``) stamped ``t`` of a velocity
+    report's values (rssi and nsd NaN: the report's own are not kept)."""
     beam_t = b.T[A50_BEAM]
-    h, ns = b.header(d.t[i], frame)
-    beams = [
-        beam_t(
-            id=int(d.beam_id[i, k]),
-            velocity=float(d.beam_velocity[i, k]),
-            distance=float(d.beam_range[i, k]) if d.beam_valid[i, k] else -1.0,
-            rssi=math.nan,
-            nsd=math.nan,
-            valid=bool(d.beam_valid[i, k]),
-        )
-        for k in range(4)
-    ]
-    alt = float(d.altitude[i])
+    h, ns = b.header(t, frame)
+    beams = [beam_t(id=bid, velocity=bvel, distance=dist, rssi=math.nan, nsd=math.nan, valid=ok)
+             for bid, bvel, dist, ok in r.beams]  # fmt: skip
     msg = b.T[A50_DVL](
         header=h,
-        time=float(time_ms),
-        velocity=b.vec(d.velocity[i]),
-        fom=float(d.fom[i]),
-        altitude=alt if math.isfinite(alt) else -1.0,
+        time=r.time_ms,
+        velocity=b.vec(r.velocity),
+        fom=r.fom,
+        altitude=r.altitude,
         beams=beams,
-        velocity_valid=bool(d.valid[i]),
+        velocity_valid=r.valid,
         status=0,
         form="json_v3",
     )
