@@ -16,9 +16,9 @@ import pytest
 from undertow.errors import DataError
 from undertow.estimation.online import OnlineLocalizer
 from undertow.io import read_log
+from undertow.io.a50_json import velocity_report_line
 from undertow.io.links.common import RECORD_FIELDS, Record, records_to_log
 from undertow.io.recorder import Recorder
-from undertow.io.a50_json import velocity_report_line
 from undertow.io.rosbag_write import (
     MessageBuilder,
     dead_reckoning_message,

@@ -250,8 +250,14 @@ def report_line(r: VelocityReport) -> str:
         "covariance": r.covariance,
         "altitude": r.altitude,
         "transducers": [
-            {"id": bid, "velocity": bvel, "distance": dist, "rssi": math.nan, "nsd": math.nan,
-             "beam_valid": ok}
+            {
+                "id": bid,
+                "velocity": bvel,
+                "distance": dist,
+                "rssi": math.nan,
+                "nsd": math.nan,
+                "beam_valid": ok,
+            }
             for bid, bvel, dist, ok in r.beams
         ],  # fmt: skip
         "velocity_valid": r.valid,

@@ -37,10 +37,13 @@ class MessageAppender:
         mode = getattr(getattr(writer, "compression_mode", None), "name", None)
         self.fast = (
             chunk is not None
-            and all(hasattr(chunk, a) for a in ("bio", "msgs", "message_start_time",
-                                                 "message_end_time"))  # fmt: skip
-            and all(hasattr(storage, a) for a in ("channel_stats", "message_start_time",
-                                                  "message_end_time", "close_chunk"))  # fmt: skip
+            and all(
+                hasattr(chunk, a) for a in ("bio", "msgs", "message_start_time", "message_end_time")
+            )  # fmt: skip
+            and all(
+                hasattr(storage, a)
+                for a in ("channel_stats", "message_start_time", "message_end_time", "close_chunk")
+            )  # fmt: skip
             and isinstance(getattr(writer, "counts", None), dict)
             and all(hasattr(writer, a) for a in ("min_timestamp", "max_timestamp"))
             and mode != "MESSAGE"
