@@ -259,7 +259,7 @@ def report_line(r: VelocityReport) -> str:
                 "beam_valid": ok,
             }
             for bid, bvel, dist, ok in r.beams
-        ],  # fmt: skip
+        ],
         "velocity_valid": r.valid,
         "status": 0,
         "format": "json_v3",

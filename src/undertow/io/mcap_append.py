@@ -36,16 +36,12 @@ class MessageAppender:
         chunk = getattr(storage, "chunk", None)
         mode = getattr(getattr(writer, "compression_mode", None), "name", None)
         self.fast = (
-            chunk is not None
-            and all(
-                hasattr(chunk, a) for a in ("bio", "msgs", "message_start_time", "message_end_time")
+            _has(chunk, "bio", "msgs", "message_start_time", "message_end_time")
+            and _has(
+                storage, "channel_stats", "message_start_time", "message_end_time", "close_chunk"
             )  # fmt: skip
-            and all(
-                hasattr(storage, a)
-                for a in ("channel_stats", "message_start_time", "message_end_time", "close_chunk")
-            )  # fmt: skip
+            and _has(writer, "min_timestamp", "max_timestamp")
             and isinstance(getattr(writer, "counts", None), dict)
-            and all(hasattr(writer, a) for a in ("min_timestamp", "max_timestamp"))
             and mode != "MESSAGE"
         )
         self.storage = storage
@@ -79,3 +75,7 @@ class MessageAppender:
             writer.min_timestamp = ns
         if ns > writer.max_timestamp:
             writer.max_timestamp = ns
+
+
+def _has(obj, *names: str) -> bool:
+    return obj is not None and all(hasattr(obj, name) for name in names)
