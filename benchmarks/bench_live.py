@@ -116,7 +116,8 @@ def cores() -> tuple[int, int] | None:
 
 
 def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | None = None,
-             served_s: float | None = None, pin: tuple[int, int] | None = None) -> dict:  # fmt: skip
+             served_s: float | None = None,
+             pin: tuple[int, int] | None = None) -> dict:  # fmt: skip
     from undertow.io import read_log
     from undertow.jobs.live.pipeline import LiveSession
     from undertow.settings import LiveSettings, Settings
