@@ -2,14 +2,19 @@
 
 `undertow serve` plays a simulated run at RATE x real time in a separate process (A50 over TCP,
 Ping1D over UDP, MAVLink over UDP on 127.0.0.1); a :class:`LiveSession` in this process runs
-the links, the recording, the filter, the online map (and the Foxglove view with one
-subscribed WebSocket client, in the second run) with its clock scaled by RATE.
+the links, the recording, the filter, the online map (and the Foxglove view, in the second run,
+with one client subscribed to every channel: another process, the Foxglove app's stand-in)
+with its clock scaled by RATE.
+
+**One core.** The target is a speed on one core: every thread of this process (links, loop,
+the view's server) is pinned to one core, and serve and the viewer (the sensors and the
+Foxglove app, other devices on a robot) to another. The same two runs are then made unpinned
+(``unpinned``: every process free on every core, the sensors' stand-in sharing this process's
+cores and caches), for comparison.
 
 Figures:
 - ``cpu_s_per_realtime_s``: CPU seconds of this process (every thread: links, recording,
-  filter, map, view; not the thread of the bench's own WebSocket client, which stands for the
-  Foxglove app on another machine: its CPU is in ``cpu_s_by_thread``) per second of sensor
-  data while the session runs; ``realtime_factor`` =
+  filter, map, view) per second of sensor data while the session runs; ``realtime_factor`` =
   its inverse, the speed at which one core keeps up. Target: >= 50 (a Raspberry Pi 4 is about
   5-10x slower than this machine, so >= 5-10x real time there). The one-off cost of writing
   the final results after the data stops (compressed trajectory and map, closing the
@@ -19,7 +24,8 @@ Figures:
   states, which also counts the arrival stamps of the clockless MAVLink and Ping records,
   stretched when this process falls behind);
   ``cpu_s_by_thread``: where the CPU went (MainThread: decoding the A50's and MAVLink's data,
-  which their threads only receive, recording, filter, map, view).
+  which their threads only receive, recording, filter, map, view; the rest of ``cpu_s`` is the
+  view server's native threads).
 - ``latency_ms``: wall time from a DVL report's arrival (its bytes received by the link's thread)
   to its pose being published (the preview on the committed filter), median and p99. Target:
   p99 < 10 ms.
@@ -47,7 +53,6 @@ RATE = 20.0
 SCENARIO = "wave-a0.10-f1.00"
 HERE = Path(__file__).resolve().parent
 UNDERTOW = Path(sys.executable).with_name("undertow")
-VIEWER = "viewer_client"  # the bench's Foxglove client thread (Foxglove's side, not counted)
 
 
 def _free_port(kind=socket.SOCK_STREAM) -> int:
@@ -56,19 +61,16 @@ def _free_port(kind=socket.SOCK_STREAM) -> int:
         return s.getsockname()[1]
 
 
-def _subscriber(port: int, stop: threading.Event) -> None:
-    """A Foxglove client subscribed to every channel, reading until ``stop``."""
+def _subscriber(port: int) -> None:
+    """A Foxglove client subscribed to every channel, reading until the server closes."""
     import websockets
 
     async def run():
         async with websockets.connect(f"ws://127.0.0.1:{port}",
                                       subprotocols=["foxglove.sdk.v1"]) as ws:  # fmt: skip
             subscribed = set()
-            while not stop.is_set():
-                try:
-                    frame = await asyncio.wait_for(ws.recv(), 0.2)
-                except TimeoutError:
-                    continue
+            while True:
+                frame = await ws.recv()
                 if isinstance(frame, str):
                     msg = json.loads(frame)
                     if msg.get("op") == "advertise":
@@ -138,15 +140,19 @@ def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | Non
                         view=view, view_port=0)  # fmt: skip
     if commit_every_s is not None:
         live = live.model_copy(update={"commit_every_s": commit_every_s})
-    view_server = stop = client = None
-    if view:
-        from undertow.jobs.live.view import LiveView
+    view_server = client = None
+    if view:  # the Foxglove app's stand-in: another process (on serve's core when pinned)
+        from undertow.jobs.live.view import TOPICS, LiveView
 
         view_server = LiveView("127.0.0.1", 0)
-        stop = threading.Event()
-        client = threading.Thread(target=_subscriber, args=(view_server.port, stop), daemon=True,
-                                  name=VIEWER)  # fmt: skip
-        client.start()
+        client = subprocess.Popen([sys.executable, __file__, "--viewer", str(view_server.port)])
+        if pin:
+            os.sched_setaffinity(client.pid, {pin[1]})
+        deadline = time.monotonic() + 30.0
+        while not all(view_server.subscribed(topic) for topic in TOPICS):
+            if time.monotonic() > deadline or client.poll() is not None:
+                raise RuntimeError("bench_live: the viewer did not subscribe within 30 s")
+            time.sleep(0.01)
     with tempfile.TemporaryDirectory() as tmp:
         session = LiveSession(Settings(live=live), Path(tmp) / "out", view=view_server).start()
         # set-up (each link thread imports its protocol library and connects) is not the
@@ -166,15 +172,16 @@ def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | Non
         cpu0, wall0 = time.process_time(), time.perf_counter()
         result = session.run()
         cpu_all = time.process_time() - cpu0
-        viewer = threads.get(VIEWER, 0.0) - threads0.get(VIEWER, 0.0)  # not the pipeline's
-        cpu = loop_end[0] - cpu0 - viewer
+        cpu = loop_end[0] - cpu0
         wall = time.perf_counter() - wall0 - live.idle_stop_s
         dvl = read_log(result.recording).dvl  # the A50's own clock: the served sensor time
         dvl_span = float(dvl.t[-1] - dvl.t[0]) if dvl is not None and len(dvl) > 1 else None
     server.wait(timeout=60)
-    if stop is not None:
-        stop.set()
-        client.join(timeout=5)
+    if client is not None:  # (the session closed the view's server: the viewer ends)
+        try:
+            client.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            client.kill()
     _pin(None)
     s = result.summary
     span = served_s or dvl_span
@@ -222,6 +229,9 @@ def main(rate: float = RATE, scenario: str = SCENARIO, commit_every_s: float | N
 
 
 if __name__ == "__main__":
+    if sys.argv[1:2] == ["--viewer"]:  # the viewer process run_once starts
+        _subscriber(int(sys.argv[2]))
+        sys.exit(0)
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rate", type=float, default=RATE)
     parser.add_argument("--scenario", default=SCENARIO)
