@@ -8,6 +8,7 @@ carried a distance) is counted in :class:`Notes`; :meth:`Notes.finish` emits one
 
 from __future__ import annotations
 
+import math
 import os
 import stat
 import warnings
@@ -129,6 +130,26 @@ def count_nan_rows(notes: Notes, stream: str, *arrays) -> None:
         notes.add(f"{stream}: messages with NaN values (kept as NaN)", int(bad.sum()))
 
 
+def beam_columns(beams, by_id: bool = True) -> tuple[list, list, list]:
+    """(range, valid, velocity) of the four beam columns from (id, radial velocity, distance,
+    valid) per beam: placed by A50 beam id 0..3 (``by_id``; other ids are skipped) or in order;
+    a beam reported invalid has its range NaN, an absent one NaN values and valid False."""
+    rng, ok, vel = [math.nan] * 4, [False] * 4, [math.nan] * 4
+    for k, (bid, bvel, dist, bvalid) in enumerate(beams):
+        col = int(bid) if by_id else k
+        if not 0 <= col < 4:
+            continue
+        ok[col] = bool(bvalid)
+        vel[col] = float(bvel)
+        rng[col] = float(dist) if bvalid else math.nan
+    return rng, ok, vel
+
+
+def report_altitude(altitude) -> float:
+    """The altitude kept of a report: NaN for a missing or negative one (the A50 sends -1)."""
+    return float(altitude) if altitude is not None and altitude >= 0 else math.nan
+
+
 class DvlRows:
     """Accumulates DVL reports (one :meth:`append` per message) and builds a :class:`Dvl`.
 
@@ -170,20 +191,13 @@ class DvlRows:
         ids 0..3 place the beam in that column with the A50 geometry unless ``beam_units``
         (4, 3) is given (then beams fill columns in order)."""
         ids, units = np.arange(4), A50_UNITS if beam_units is None else np.asarray(beam_units)
-        rng, ok, vel = np.full(4, np.nan), np.zeros(4, bool), np.full(4, np.nan)
-        for k, (bid, bvel, dist, bvalid) in enumerate(beams):
-            col = int(bid) if beam_units is None else k
-            if not 0 <= col < 4:
-                continue
-            ok[col] = bool(bvalid)
-            vel[col] = bvel
-            rng[col] = dist if bvalid else np.nan
+        rng, ok, vel = beam_columns(beams, by_id=beam_units is None)
         self.t.append(float(t))
         self.velocity.append(tuple(velocity))
         self.valid.append(bool(valid))
         self.fom.append(float(fom))
         self.covariance.append(np.full((3, 3), np.nan) if covariance is None else covariance)
-        self.altitude.append(float(altitude) if altitude is not None and altitude >= 0 else np.nan)
+        self.altitude.append(report_altitude(altitude))
         self.beam_id.append(ids)
         self.beam_unit.append(units)
         self.beam_range.append(rng)

@@ -31,7 +31,16 @@ import numpy as np
 
 from ..errors import ReaderError
 from ..log import DeadReckoning, Dvl, Log
-from ._collect import MALFORMED, DvlRows, Notes, check_regular, count_nan_rows, time_order
+from ._collect import (
+    MALFORMED,
+    DvlRows,
+    Notes,
+    beam_columns,
+    check_regular,
+    count_nan_rows,
+    report_altitude,
+    time_order,
+)
 
 JSON_SUFFIXES = (".txt", ".json", ".jsonl", ".log")
 
@@ -60,13 +69,7 @@ def add_velocity_report(rows: DvlRows, obj: dict, t: float) -> None:
     """Append one velocity report (raises one of ``_collect.MALFORMED`` when malformed; a
     ``time`` field that is not a number of ms in [0, a day] is malformed: summed into the json_v1
     time base, one absurd value would push every later report out of the log)."""
-    time_ms = float(obj.get("time", math.nan))
-    if "time" in obj and not 0.0 <= time_ms <= MAX_REPORT_INTERVAL_MS:
-        raise ValueError(f"time field {time_ms} is not a report interval in ms")
-    beams = [
-        (b["id"], float(b["velocity"]), float(b["distance"]), bool(b.get("beam_valid", True)))
-        for b in obj.get("transducers", [])
-    ]
+    time_ms = _report_time_ms(obj)
     tov = obj.get("time_of_validity")
     rows.append(
         t,
@@ -75,11 +78,46 @@ def add_velocity_report(rows: DvlRows, obj: dict, t: float) -> None:
         fom=float(obj.get("fom", math.nan)),
         covariance=_covariance(obj),
         altitude=float(obj.get("altitude", math.nan)),
-        beams=beams,
+        beams=_beams(obj),
         raw_altitude=float(obj.get("altitude", math.nan)),
         time_of_validity=math.nan if tov is None else float(tov) * 1e-6,
         time_ms=time_ms,
     )
+
+
+def velocity_fields(obj: dict) -> tuple[dict, float]:
+    """(the fields of a ``dvl`` record, time of validity s or NaN) of one velocity report: what
+    :func:`add_velocity_report` appends, as plain values (the same checks and quirks)."""
+    _report_time_ms(obj)
+    tov = obj.get("time_of_validity")
+    velocity = (float(obj["vx"]), float(obj["vy"]), float(obj["vz"]))
+    cov = _covariance(obj)
+    rng, ok, vel = beam_columns(_beams(obj))
+    fields = {
+        "velocity": velocity,
+        "valid": bool(obj.get("velocity_valid", True)),
+        "fom": float(obj.get("fom", math.nan)),
+        "covariance": np.full((3, 3), np.nan) if cov is None else cov,
+        "altitude": report_altitude(float(obj.get("altitude", math.nan))),
+        "beam_range": tuple(rng),
+        "beam_valid": tuple(ok),
+        "beam_velocity": tuple(vel),
+    }
+    return fields, math.nan if tov is None else float(tov) * 1e-6
+
+
+def _report_time_ms(obj: dict) -> float:
+    time_ms = float(obj.get("time", math.nan))
+    if "time" in obj and not 0.0 <= time_ms <= MAX_REPORT_INTERVAL_MS:
+        raise ValueError(f"time field {time_ms} is not a report interval in ms")
+    return time_ms
+
+
+def _beams(obj: dict) -> list[tuple]:
+    return [
+        (b["id"], float(b["velocity"]), float(b["distance"]), bool(b.get("beam_valid", True)))
+        for b in obj.get("transducers", [])
+    ]
 
 
 def position_row(obj: dict) -> tuple:

@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from .._collect import MALFORMED, DvlRows
-from ..a50_json import add_velocity_report, is_position_report, is_velocity_report, position_row
+from .._collect import MALFORMED
+from ..a50_json import is_position_report, is_velocity_report, position_row, velocity_fields
 from .common import Backoff, ClockPolicy, Link, LinkCounters, Record
 
 DEFAULT_PORT = 16171
@@ -79,11 +79,9 @@ class A50LineDecoder:
             data = {"position": (x, y, z), "orientation": (roll, pitch, yaw), "std": std}
             return self._stamped("dead_reckoning", data, arrival, ts, text)
         if is_velocity_report(obj):
-            rows = DvlRows()
-            add_velocity_report(rows, obj, 0.0)
-            tov = rows.extra["time_of_validity"][0]
+            fields, tov = velocity_fields(obj)
             self.formats.add(str(obj.get("format", "json_v1")))
-            return self._stamped("dvl", _dvl_data(rows), arrival, tov, text)
+            return self._stamped("dvl", fields, arrival, tov, text)
         if "type" not in obj:
             raise ValueError("not a DVL report")
         return []  # another report type of a newer protocol: ignored
@@ -95,19 +93,6 @@ class A50LineDecoder:
             return []
         st = sensor if sensor is not None else math.nan
         return [Record(stream, t, data, arrival, st, self.source)]
-
-
-def _dvl_data(rows: DvlRows) -> dict[str, Any]:
-    return {
-        "velocity": rows.velocity[0],
-        "valid": rows.valid[0],
-        "fom": rows.fom[0],
-        "covariance": rows.covariance[0],
-        "altitude": rows.altitude[0],
-        "beam_range": rows.beam_range[0],
-        "beam_valid": rows.beam_valid[0],
-        "beam_velocity": rows.beam_velocity[0],
-    }
 
 
 class LineBuffer:

@@ -9,24 +9,20 @@ import json
 import math
 from collections.abc import Iterable
 
-from ..a50_json import add_velocity_report, is_position_report, position_row
-from ..links.a50_tcp import _dvl_data
+from ..a50_json import is_position_report, position_row, velocity_fields
 from ..links.common import Record, records_to_log
 from ..mavlink import MavlinkConfig, MavlinkMapper
 from .player import Served
 
 
 def _a50(entry: Served) -> list[Record]:
-    from .._collect import DvlRows
-
     obj = json.loads(entry.payload)
     if is_position_report(obj):
         _, x, y, z, std, roll, pitch, yaw = position_row(obj)
         data = {"position": (x, y, z), "orientation": (roll, pitch, yaw), "std": std}
         return [Record("dead_reckoning", entry.t, data, entry.wall, entry.sensor_time, "a50")]
-    rows = DvlRows()
-    add_velocity_report(rows, obj, entry.t)
-    return [Record("dvl", entry.t, _dvl_data(rows), entry.wall, entry.sensor_time, "a50")]
+    fields, _ = velocity_fields(obj)
+    return [Record("dvl", entry.t, fields, entry.wall, entry.sensor_time, "a50")]
 
 
 def _ping(entry: Served) -> list[Record]:
