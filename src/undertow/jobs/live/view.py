@@ -195,14 +195,17 @@ class LiveView:
             pose_covariance=P[:6, :6].ravel().tolist(),
             velocity_covariance=np.asarray(vcov, dtype=np.float64).ravel().tolist(),
         )  # fmt: skip
-        self._log(POSE, odom, ns)
         tf = m.FrameTransform(
             timestamp=stamp, parent_frame_id="world", child_frame_id="base_link",
             translation=pos, rotation=quat,
         )  # fmt: skip
+        ellipsoid = self._ellipsoid(stamp, x[:3], P[:3, :3]) if UNCERTAINTY in wanted else None
+        # built first, then handed to the server back to back: its sender wakes once for the
+        # three rather than once for each
+        self._log(POSE, odom, ns)
         self._log(TF, tf, ns)
-        if UNCERTAINTY in wanted:
-            self._log(UNCERTAINTY, self._ellipsoid(stamp, x[:3], P[:3, :3]), ns)
+        if ellipsoid is not None:
+            self._log(UNCERTAINTY, ellipsoid, ns)
 
     def _ellipsoid(self, stamp, centre, cov):
         """3-sigma ellipsoid: diameters 2 * 3 sqrt(lambda_i) along the eigenvectors of cov."""
