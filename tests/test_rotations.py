@@ -1,12 +1,14 @@
 """Rotations: the ZYX convention against closed forms and scipy."""
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from undertow.rotations import (
     matrix_to_quaternion_scalar,
     matrix_to_rpy,
     quaternion_to_rpy,
+    quaternion_to_rpy_one,
     rpy_to_matrix,
     rpy_to_quaternion,
     rpy_to_quaternion_scalar,
@@ -64,3 +66,30 @@ def test_wrap_angle_range():
     a = wrap_angle(np.linspace(-20, 20, 1001))
     assert np.all(a >= -np.pi) and np.all(a < np.pi)
     np.testing.assert_allclose(np.sin(a), np.sin(np.linspace(-20, 20, 1001)), atol=1e-12)
+
+
+def _bits(a) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
+    return np.where(np.isnan(a), np.nan, a).view(np.uint64)  # one NaN; signed zeros kept
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")  # numpy on NaN, infinities, 0 / 0
+def test_one_at_a_time_forms_are_numpys_bits():
+    """The live recorder writes a quaternion and reads its attitude back one message at a
+    time; a replay converts the whole stream with numpy: the scalar forms must give numpy's
+    bits, special values included (NaN, infinities, zero and underflowing quaternions)."""
+    rng = np.random.default_rng(4)
+    q = rng.normal(size=(20000, 4))
+    q[::97] = 0.0
+    q[::101, 1] = np.nan
+    q[::103, 2] = np.inf
+    q[::107] *= 1e-200  # squares underflow: numpy divides by a zero norm
+    q[::109] *= 1e200
+    q[::113, 0] = -0.0
+    one = np.array([quaternion_to_rpy_one(row) for row in q])
+    assert np.array_equal(_bits(one), _bits(quaternion_to_rpy(q)))
+    rpy = rng.uniform(-7.0, 7.0, (20000, 3))
+    rpy[::97, 0] = np.nan
+    rpy[::89, 2] = -0.0
+    scalar = np.array([rpy_to_quaternion_scalar(*row) for row in rpy])
+    assert np.array_equal(scalar.view(np.uint64), rpy_to_quaternion(rpy).view(np.uint64))

@@ -78,7 +78,7 @@ def rpy_to_quaternion_scalar(roll: float, pitch: float, yaw: float) -> tuple[flo
         cr * cp * sy - sr * sp * cy,
         cr * cp * cy + sr * sp * sy,
     )
-    return q if q[3] >= 0 else (-q[0], -q[1], -q[2], -q[3])
+    return (-q[0], -q[1], -q[2], -q[3]) if q[3] < 0 else q  # (as numpy's where: NaN kept)
 
 
 def matrix_to_quaternion_scalar(R) -> tuple[float, float, float, float]:
@@ -101,6 +101,23 @@ def matrix_to_quaternion_scalar(R) -> tuple[float, float, float, float]:
         s = 2.0 * math.sqrt(max(1.0 + r22 - r00 - r11, 0.0))
         q = ((r02 + r20) / s, (r12 + r21) / s, s / 4.0, (r10 - r01) / s)
     return q if q[3] >= 0 else (-q[0], -q[1], -q[2], -q[3])
+
+
+def quaternion_to_rpy_one(q) -> tuple[float, float, float]:
+    """:func:`quaternion_to_rpy` of one quaternion (x, y, z, w), bit for bit: the arithmetic in
+    scalars (the same operations in the same order; the norm as numpy sums four squares), the
+    arc functions from numpy, whose vectorized forms may round differently from libm's."""
+    x, y, z, w = (float(v) for v in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if n == 0.0:  # (squares that underflow) numpy's division by zero: +-inf, 0 / 0 NaN
+        x, y, z, w = (math.copysign(math.inf, v) if v else math.nan for v in (x, y, z, w))
+    else:
+        x, y, z, w = x / n, y / n, z / n, w / n
+    s = 2 * (w * y - z * x)
+    s = min(max(s, -1.0), 1.0) if s == s else s  # np.clip (NaN kept)
+    roll, yaw = np.arctan2([2 * (w * x + y * z), 2 * (w * z + x * y)],
+                           [1 - 2 * (x * x + y * y), 1 - 2 * (y * y + z * z)]).tolist()  # fmt: skip
+    return roll, float(np.arcsin(s)), yaw
 
 
 def quaternion_to_rpy(q) -> np.ndarray:

@@ -87,7 +87,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from .._util.plain import json_safe, to_plain
 from ..errors import ConfigError, DataError
 from ..log import Mounting, SonarRange
-from ..rotations import quaternion_to_rpy, rpy_to_quaternion
+from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
 from .a50_json import MAX_REPORT_INTERVAL_MS, report_line, report_values
 from .links.common import RECORD_FIELDS, Record
 from .mcap_append import MessageAppender
@@ -548,10 +548,13 @@ class Recorder:
         position = _floats(d.get("position"), 3)
         rpy = _floats(d.get("orientation"), 3)
         std = np.float64(_float(d.get("std")))
-        var = float(std**2)
+        var = float(std**2)  # (numpy's power: not always the bits of std * std)
         # the message's fields after the header as dead_reckoning_message makes them: position,
         # the quaternion of the attitude, the covariance with std^2 at 0, 7 and 14 (43 float64)
-        q = rpy_to_quaternion(np.array(rpy)).tolist()
+        try:
+            q = rpy_to_quaternion_scalar(*rpy)  # numpy's bits (tests/test_rotations.py)
+        except ValueError:  # an infinite angle: math.cos refuses it, numpy gives NaN
+            q = tuple(rpy_to_quaternion(np.array(rpy)).tolist())
         cov = [0.0] * 36
         cov[0] = cov[7] = cov[14] = var
         topic = self._topic("dead_reckoning", late)
@@ -560,10 +563,9 @@ class Recorder:
             return dead_reckoning_message(self._b, t, position, np.array(rpy), std)
 
         message = self._templated((topic,), _POSE_TYPE, t, (*position, *q, *cov), build)
-        rpy_read = quaternion_to_rpy(np.array([q]))[0]  # the reader's: from this quaternion
         data = {
             "position": position,
-            "orientation": tuple(float(a) for a in rpy_read),
+            "orientation": quaternion_to_rpy_one(q),  # the reader's: from this quaternion
             "std": math.sqrt(var) if var >= 0 else math.nan,
         }
         return data, [(topic, *message)]
