@@ -360,7 +360,8 @@ class LiveSession:
             self.stats.pings += self.mapper.push(chunk, trajectory)
 
     def _show_rays(self, chunk, trajectory) -> None:
-        """The chunk's DVL beams and sonar ranges as rays from the newest pose (display)."""
+        """The chunk's newest DVL report's beams and newest sonar range as rays from the newest
+        pose (display: older reports of the chunk were taken from other poses)."""
         if not len(trajectory.t):  # no state after those taken already: the newest
             trajectory = self.localizer.latest()
         pos, rpy = trajectory.position[-1:], trajectory.orientation[-1:]
@@ -522,19 +523,20 @@ def _filter_params(settings: Settings, calibration) -> dict:
 
 
 def _ranges(chunk):
-    """(kind, units (n, 3) in the sensor frame, ranges (n,), mount) of a chunk's valid DVL
-    beams and sonar ranges."""
+    """(kind, units (n, 3) in the sensor frame, ranges (n,), mount) of the valid beams of a
+    chunk's newest DVL report and of its newest sonar range."""
     out = []
     if chunk.dvl is not None and len(chunk.dvl):
         d = chunk.dvl
-        r, u = d.beam_range.reshape(-1), d.beam_unit.reshape(-1, 3)
-        ok = d.beam_valid.reshape(-1) & np.isfinite(r) & np.all(np.isfinite(u), axis=1)
+        r, u = d.beam_range[-1], d.beam_unit[-1]
+        ok = d.beam_valid[-1] & np.isfinite(r) & np.all(np.isfinite(u), axis=1)
         out.append(("dvl", u[ok], r[ok], chunk.mounting.dvl))
     if chunk.sonar is not None and len(chunk.sonar):
-        s = chunk.sonar
-        ok = np.isfinite(s.range)
-        unit = np.tile([0.0, 0.0, 1.0], (int(ok.sum()), 1))  # the sonar frame's +z axis
-        out.append(("sonar", unit, s.range[ok], chunk.mounting.sonar))
+        r = chunk.sonar.range[-1:]
+        ok = np.isfinite(r)
+        unit = np.zeros((int(ok.sum()), 3))
+        unit[:, 2] = 1.0  # the sonar frame's +z axis
+        out.append(("sonar", unit, r[ok], chunk.mounting.sonar))
     return out
 
 
