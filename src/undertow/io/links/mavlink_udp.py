@@ -35,6 +35,7 @@ import time
 
 from ...errors import ConfigError
 from ..mavlink import MavlinkConfig, MavlinkMapper
+from . import mavlink_filter
 from .common import Backoff, ClockPolicy, Link, LinkCounters
 
 TIME_SOURCES = ("arrival", "sensor")
@@ -61,6 +62,7 @@ class MavlinkLink(Link):
         now=None,
         deferred: bool = False,
         wake=None,
+        kernel_filter: bool = False,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ConfigError(f"mavlink time_source: '{time_source}' is not one of {TIME_SOURCES}")
@@ -82,6 +84,7 @@ class MavlinkLink(Link):
         self._conn = None
         self.deferred = bool(deferred)
         self.wake = wake
+        self.kernel_filter = bool(kernel_filter)
         self._frames: _SingleFrames | None = None
 
     def load(self) -> None:
@@ -135,6 +138,8 @@ class MavlinkLink(Link):
         times the decoding at telemetry rates), decoded at once or (``deferred``) queued for
         :meth:`pump`."""
         sock.settimeout(0.2)
+        if self.kernel_filter:
+            self.info["kernel_filter"] = self._attach_filter(conn, sock)
         dvl_id = _message_id(conn.mav, "VISION_POSITION_DELTA")
         last = time.monotonic()
         while not self.stopping:
@@ -156,6 +161,15 @@ class MavlinkLink(Link):
             self._defer((conn, arrival, data))
             if self.wake is not None and _frame_id(data) == dvl_id:
                 self.wake()
+
+    def _attach_filter(self, conn, sock) -> bool:
+        """The kernel drops the single frames of messages no stream uses (:mod:`.mavlink_filter`);
+        HEARTBEAT kept: the sign of a live autopilot (``idle_timeout_s``)."""
+        names = (*self.mapper.message_types, "HEARTBEAT")
+        keep_v2 = {i for i in (_message_id(conn.mav, n) for n in names) if i is not None}
+        keep_v1 = {i for i in (_message_id(conn.mav, n, version=1) for n in names)
+                   if i is not None}  # fmt: skip
+        return mavlink_filter.attach(sock, keep_v2, keep_v1)
 
     def pump(self) -> None:
         """Decode the datagrams the thread queued (``deferred``) and deliver their records."""
@@ -272,12 +286,14 @@ def _simple_layout(cls) -> bool:
     return sum(cls.lengths) == len(cls.lengths) and "s" not in fmt and "c" not in fmt
 
 
-def _message_id(mav, name: str) -> int | None:
-    """The id of message ``name`` in the MAVLink 2 module of the dialect of ``mav`` (a
+def _message_id(mav, name: str, version: int = 2) -> int | None:
+    """The id of message ``name`` in the MAVLink 2 (or 1) module of the dialect of ``mav`` (a
     connection starts in MAVLink 1, whose module may lack the messages of ids above 255); None
     if it has none."""
+    module = type(mav).__module__
+    module = module.replace(".v10.", ".v20.") if version == 2 else module.replace(".v20.", ".v10.")
     try:
-        module = importlib.import_module(type(mav).__module__.replace(".v10.", ".v20."))
+        module = importlib.import_module(module)
     except ImportError:
         return None
     return getattr(module, f"MAVLINK_MSG_ID_{name}", None)

@@ -60,7 +60,7 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
         from ...io.links.mavlink_udp import MavlinkLink
 
         links["mavlink"] = MavlinkLink(live.mavlink, callback, now=now, max_offset_s=max_offset,
-                                       deferred=True, wake=wake)  # fmt: skip
+                                       deferred=True, wake=wake, kernel_filter=True)  # fmt: skip
     if not links:
         raise ConfigError("live: no sensor link given (--dvl, --sonar and/or --mavlink)")
     return links
