@@ -56,6 +56,30 @@ def _quiet_ping1d():
                 self.iodev.connect(self.server_address)
                 self.iodev.setblocking(False)
 
+            def wait_message(self, message_ids, timeout=0.5):
+                """brping's, over UDP waiting for the socket to be readable (``select``)
+                instead of reading every 5 ms: the reply is taken, and stamped, as it comes,
+                without the polls in between."""
+                import select
+                import socket
+
+                if not isinstance(self.iodev, socket.socket):
+                    return super().wait_message(message_ids, timeout)
+                deadline = time.monotonic() + timeout
+                while True:
+                    msg = self.read()
+                    if msg is not None and msg.message_id in message_ids:
+                        return msg
+                    if msg is not None or len(self._input_buffer):
+                        continue  # more to parse in what was read
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        return None
+                    try:
+                        select.select([self.iodev], [], [], remaining)
+                    except ValueError:  # (closed: its descriptor is -1)
+                        raise OSError("Ping1D socket closed") from None
+
             def handle_message(self, msg):
                 if not hasattr(msg, "payload_field_names"):
                     self.unrecognized += 1
