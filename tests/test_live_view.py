@@ -115,3 +115,26 @@ def test_undertow_imports_without_foxglove_and_the_view_names_the_package():
     assert out.stdout.strip().splitlines() == [
         "live view: the Foxglove SDK is not installed (pip install foxglove-sdk)"
     ]
+
+
+def test_uncertainty_ellipsoid_gives_back_the_covariance():
+    """The 3-sigma ellipsoid's axes (diameters 2 * 3 sigma) along its orientation rebuild the
+    position covariance: R diag((d / 6)^2) R^T = P (R from the quaternion sent), for random
+    covariances (eigh's left-handed bases included) and a degenerate one."""
+    from scipy.spatial.transform import Rotation
+
+    from undertow.jobs.live.view import ellipsoid_axes
+
+    rng = np.random.default_rng(3)
+    left_handed = 0
+    for k in range(200):
+        A = rng.normal(size=(3, 3)) * (0.1 if k % 2 else 3.0)
+        cov = A @ A.T if k else np.diag([4.0, 4.0, 0.0])
+        size, q = ellipsoid_axes(cov)
+        R = Rotation.from_quat(q).as_matrix()
+        sigma = np.array(size) / 6.0
+        scale = np.abs(cov).max()
+        np.testing.assert_allclose(R @ np.diag(sigma**2) @ R.T, cov, atol=1e-9 * scale)
+        assert q[3] >= 0 and min(size) >= 0
+        left_handed += np.linalg.det(np.linalg.eigh(cov)[1]) < 0
+    assert left_handed > 0  # the flip was exercised

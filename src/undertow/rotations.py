@@ -86,7 +86,8 @@ def matrix_to_quaternion_scalar(R) -> tuple[float, float, float, float]:
     components (Shepperd, "Quaternion from rotation matrix", J. Guidance and Control 1(3),
     1978): 4 w^2 = 1 + tr R, 4 x^2 = 1 + R00 - R11 - R22, ...; the others from the
     off-diagonal sums and differences."""
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = (tuple(map(float, row)) for row in R)
+    rows = R.tolist() if isinstance(R, np.ndarray) else R
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = ([float(v) for v in row] for row in rows)
     tr = r00 + r11 + r22
     if tr >= max(r00, r11, r22):
         s = 2.0 * math.sqrt(max(1.0 + tr, 0.0))

@@ -103,6 +103,20 @@ def _colors(values: np.ndarray) -> np.ndarray:
     return rgba
 
 
+def ellipsoid_axes(cov) -> tuple[list[float], tuple[float, float, float, float]]:
+    """(diameters, orientation quaternion (x, y, z, w)) of the 3-sigma ellipsoid of the 3x3
+    covariance ``cov``: 2 * 3 sqrt(lambda_i) along the eigenvectors (as a rotation: the third
+    flipped when they form a left-handed basis), so cov = R diag((d / 6)^2) R^T."""
+    cov = np.asarray(cov, dtype=np.float64)
+    lam, vec = np.linalg.eigh(0.5 * (cov + cov.T))
+    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = rows = vec.tolist()
+    if a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0) < 0:
+        rows = [[a0, a1, -a2], [b0, b1, -b2], [c0, c1, -c2]]
+    return [6.0 * math.sqrt(v) if v > 0 else 0.0 for v in lam.tolist()], (
+        matrix_to_quaternion_scalar(rows)
+    )
+
+
 class _Listener:
     """Keeps the topics some client is subscribed to (callbacks from the server's thread)."""
 
@@ -210,11 +224,7 @@ class LiveView:
     def _ellipsoid(self, stamp, centre, cov):
         """3-sigma ellipsoid: diameters 2 * 3 sqrt(lambda_i) along the eigenvectors of cov."""
         m = self._m
-        lam, vec = np.linalg.eigh(0.5 * (cov + cov.T))
-        if np.linalg.det(vec) < 0:
-            vec[:, 2] = -vec[:, 2]
-        size = 6.0 * np.sqrt(np.clip(lam, 0.0, None))
-        q = matrix_to_quaternion_scalar(vec)
+        size, q = ellipsoid_axes(cov)
         sphere = m.SpherePrimitive(
             pose=m.Pose(
                 position=m.Vector3(x=float(centre[0]), y=float(centre[1]), z=float(centre[2])),
