@@ -168,6 +168,19 @@ def test_sidecar_water_density_not_a_number(tmp_path, small_bag, density):
     assert log.metadata["mounting_source"] == "undertow.yaml"  # the rest of the sidecar kept
 
 
+@pytest.mark.parametrize("field", ["tilt_deg", "azimuths_deg", "beam_width_deg"])
+def test_sidecar_dvl_geometry_int_too_large(field):
+    """A YAML integer too large for a float in the sidecar's dvl_geometry (found by
+    test_ros2_sidecar_undertow_yaml): the one-line ConfigError the reader turns into a note,
+    not an OverflowError."""
+    from undertow.log import DvlGeometry
+
+    data = {"tilt_deg": 22.5, "azimuths_deg": [135, -135, -45, 45], "beam_width_deg": 2.0}
+    data[field] = [10**400] * 4 if field == "azimuths_deg" else 10**400
+    with pytest.raises(ConfigError, match=r"^dvl_geometry: malformed \(OverflowError"):
+        DvlGeometry.from_dict(data)
+
+
 def test_metadata_yaml_non_string_topic_name(tmp_path, small_bag):
     bag = _bag_copy(small_bag, tmp_path)
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())

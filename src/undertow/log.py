@@ -39,7 +39,7 @@ FRESH_WATER_DENSITY = 998.0
 def _as_array(value, dtype, name: str, stream: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=dtype, copy=True)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:  # (an int too large for a float)
         raise DataError(
             f"{stream}.{name}: cannot convert to {np.dtype(dtype).name}: {exc}"
         ) from exc
@@ -563,7 +563,8 @@ class DvlGeometry:
                 azimuths_deg=tuple(float(a) for a in data["azimuths_deg"]),
                 beam_width_deg=None if width is None else float(width),
             )
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
+            # (OverflowError: an integer too large for a float, as a YAML file may hold)
             raise ConfigError(f"dvl_geometry: malformed ({type(exc).__name__}: {exc})") from None
 
 
