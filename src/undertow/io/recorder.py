@@ -26,10 +26,13 @@ The estimates, on topics of their own (the readers ignore them):
 - ``/undertow/late/<stream>``: records that arrived after the reorder horizon (not given to the
   filter), with their stream's message type (``/undertow/late/dvl_json`` for the DVL's line).
 
-The high-rate messages of fixed layout (``sensor_msgs/Imu``, ``sensor_msgs/FluidPressure``, the
-pose) are not built and serialized one by one: their CDR bytes are a template of the first such
-message rosbags serializes, with the stamp and the float64 fields packed in place (kept only when
-it reproduces rosbags' bytes of that message; the same bytes, a fifth of the time).
+The messages of fixed layout (``sensor_msgs/Imu``, ``sensor_msgs/FluidPressure``, the pose and
+dead reckoning, the A50 driver's ``DVL``) are not built and serialized one by one: their CDR
+bytes are a template of the first such message rosbags serializes, with the stamp and the fields
+after the header packed in place (kept only when it reproduces rosbags' bytes of that message;
+the same bytes, a fifth of the time); the DVL's JSON line goes into its ``std_msgs/String`` the
+same way. The messages are appended to the MCAP chunk by :mod:`undertow.io.mcap_append` (the file
+rosbags' writer makes, byte for byte).
 
 Header stamps are the record time t (s) as ``sec = floor(t)``, ``nanosec = round((t - sec) 1e9)``;
 the bag's record time is the same instant in ns.
