@@ -501,15 +501,19 @@ class Recorder:
             data["linear_acceleration"] = acc
         if has_q:
             data["orientation"] = q
-        topic, msgtype = self._topic("imu", late), _IMU_TYPE
-        values = (*q, *(_ZEROS9 if has_q else _NO_ESTIMATE9), *w, *_ZEROS9, *acc,
-                  *(_ZEROS9 if has_a else _NO_ESTIMATE9))  # fmt: skip
+        topic = self._topic("imu", late)
+        key = (topic, has_a, has_q)
+        template = self._templates.get(key)
+        values = q + (_ZEROS9 if has_q else _NO_ESTIMATE9) + w + _ZEROS9 + acc + (
+            _ZEROS9 if has_a else _NO_ESTIMATE9)  # fmt: skip
+        if template is not None:  # (the common case, without the general path's closure)
+            sec, nanosec, ns = _stamp(t)
+            return data, [(topic, ns, _IMU_TYPE, template.pack(sec, nanosec, values))]
 
         def build():
             return imu_message(self._b, t, self._frame["imu"], w, acc, q, has_a, has_q)
 
-        message = self._templated((topic, has_a, has_q), msgtype, t, values, build)
-        return data, [(topic, *message)]
+        return data, [(topic, *self._templated(key, _IMU_TYPE, t, values, build))]
 
     def _pressure(self, t: float, record: Record, late: str):
         p = _float(record.data.get("pressure"))
