@@ -459,7 +459,7 @@ class _Run:
             stream = getattr(chunk, name)
             if stream is not None and len(stream):
                 t, kind, z, R, ok = build(chunk, cfg, self.noise, rejected, warn=False)
-                parts.append((t[ok], kind, z[ok], R[ok]))
+                parts.append((t, kind, z, R) if ok.all() else (t[ok], kind, z[ok], R[ok]))
                 depth_idx.append(np.full(parts[-1][0].size, -1))
         depths = (np.zeros(0), np.zeros(0))
         if chunk.pressure is not None and len(chunk.pressure):
@@ -487,7 +487,8 @@ class _Run:
             is_p = ~accepted
             accepted[is_p] = ~jump[depth_idx[is_p] - self.depth.count]
         state = (self.state if start is None else start).copy()
-        rows = rows[accepted]
+        if not accepted.all():
+            rows = rows[accepted]
         if np.isnan(state.clock[0]) and rows.size:
             state.clock[0] = rows["t"][0]
         return (*model.resume_filter(rows, state, self.process, self.sensors, True), state)
