@@ -9,7 +9,7 @@ the op code and the record length uint64, https://mcap.dev/spec#message-op0x05) 
 pending chunk in one piece, with the bookkeeping rosbags' ``McapWriter.write`` does (the chunk's
 and the file's time range, the chunk's message index, the channel's message count, the writer's
 count and time range for ``metadata.yaml``), so the file is byte for byte what rosbags writes
-(``tests/test_recorder.py``). It is used only when the writer's storage has the attributes
+(``tests/test_live_fast_paths.py``). It is used only when the writer's storage has the attributes
 it relies on (rosbags' MCAP storage, uncompressed messages); otherwise :meth:`write` is the
 writer's own.
 """

@@ -502,18 +502,14 @@ class Recorder:
         if has_q:
             data["orientation"] = q
         topic = self._topic("imu", late)
-        key = (topic, has_a, has_q)
-        template = self._templates.get(key)
         values = q + (_ZEROS9 if has_q else _NO_ESTIMATE9) + w + _ZEROS9 + acc + (
             _ZEROS9 if has_a else _NO_ESTIMATE9)  # fmt: skip
-        if template is not None:  # (the common case, without the general path's closure)
-            sec, nanosec, ns = _stamp(t)
-            return data, [(topic, ns, _IMU_TYPE, template.pack(sec, nanosec, values))]
 
         def build():
             return imu_message(self._b, t, self._frame["imu"], w, acc, q, has_a, has_q)
 
-        return data, [(topic, *self._templated(key, _IMU_TYPE, t, values, build))]
+        message = self._templated((topic, has_a, has_q), _IMU_TYPE, t, values, build)
+        return data, [(topic, *message)]
 
     def _pressure(self, t: float, record: Record, late: str):
         p = _float(record.data.get("pressure"))

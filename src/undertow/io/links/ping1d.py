@@ -18,6 +18,8 @@ from __future__ import annotations
 import contextlib
 import io
 import math
+import select
+import socket
 import time
 
 from ...errors import ConfigError
@@ -49,8 +51,6 @@ def _quiet_ping1d():
             unrecognized = 0
 
             def connect_udp(self, host: str = None, port: int = 12345):
-                import socket
-
                 self.server_address = (host or "0.0.0.0", port)
                 self.iodev = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
                 self.iodev.connect(self.server_address)
@@ -60,9 +60,6 @@ def _quiet_ping1d():
                 """brping's, over UDP waiting for the socket to be readable (``select``)
                 instead of reading every 5 ms: the reply is taken, and stamped, as it comes,
                 without the polls in between."""
-                import select
-                import socket
-
                 if not isinstance(self.iodev, socket.socket):
                     return super().wait_message(message_ids, timeout)
                 deadline = time.monotonic() + timeout
