@@ -276,13 +276,18 @@ def test_a_resumed_preview_is_the_fresh_preview():
     assert compared > 50
 
 
-def test_a_preview_from_a_checkpoint_is_the_fresh_preview():
+@pytest.mark.parametrize(("commit_every", "taken_at_least"), [(0.5, 0.8), (0.1, 0.3)])
+def test_a_preview_from_a_checkpoint_is_the_fresh_preview(commit_every, taken_at_least):
     """DVL reports arrive 30 ms after their time (the A50 stamps the time of validity) and
     dead-reckoning reports 150 ms after (later than the preview before them), IMU and pressure
     on time; a preview at every DVL arrival continues from the newest checkpoint the arrivals
     left valid (PreviewCheckpoints) over the buffered records after it, and gives bit for bit
-    the committed filter run over the whole buffer. Most previews continue, and the late
-    reports invalidate some checkpoints."""
+    the committed filter run over the whole buffer. The commits release up to a preview's end
+    behind the horizon, as the pipeline's, and take the previews' states: the committed
+    trajectory is bit for bit the one without previews taken. Most previews continue, and the
+    late reports invalidate some checkpoints. With commits every 0.5 s (the pipeline's default)
+    most rows are taken from previews; every 0.1 s (shorter than the buffer: a late report
+    often leaves no preview to commit up to) fewer."""
     from undertow.jobs.live.preview import PreviewCheckpoints
 
     recs, mounting = _sim_records(12.0)
@@ -291,25 +296,32 @@ def test_a_preview_from_a_checkpoint_is_the_fresh_preview():
     order = np.argsort(arrival, kind="stable")
     kw = dict(wave=(0.1, 1.0), mounting=mounting, expected={"imu", "dvl", "pressure"})
     fresh, cont = OnlineLocalizer("proposed", **kw), OnlineLocalizer("proposed", **kw)
-    checkpoints = PreviewCheckpoints(resync_s=1.0)
+    plain = OnlineLocalizer("proposed", **kw)  # pushed the same chunks, never peeked
+    checkpoints = PreviewCheckpoints()
     buffered: list = []
-    horizon, compared, continued, dropped = -math.inf, 0, 0, 0
+    horizon, next_commit = -math.inf, -math.inf
+    compared, continued, dropped = 0, 0, 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         for k in order:
             record, now = recs[k], arrival[k]
-            if now - 0.25 > horizon:  # release behind the horizon, as the pipeline's commit
-                horizon = now - 0.25
+            boundary = checkpoints.boundary(now - 0.25)
+            wait = boundary is None and checkpoints.start() is not None  # (as the pipeline)
+            if now - 0.25 >= next_commit and not wait:  # 0.25 s behind
+                next_commit = now - 0.25 + commit_every
+                h = now - 0.25 if boundary is None else math.nextafter(boundary, math.inf)
+                horizon = max(horizon, h)
                 out = [r for r in buffered if r.t < horizon]
                 buffered = [r for r in buffered if r.t >= horizon]
                 if out:
                     out.sort(key=lambda r: r.t)
-                    for online in (fresh, cont):
+                    for online in (fresh, cont, plain):
                         online.push(records_to_log(out))
-                checkpoints.released(horizon)
+                checkpoints.released(horizon, continued=cont.at_preview)
             kept = len(checkpoints._kept)
             checkpoints.arrived(record.t)
             dropped += kept - len(checkpoints._kept)
+            assert record.t >= horizon  # (no record is late here)
             buffered.append(record)
             if record.stream != "dvl" or not fresh.ready:
                 continue
@@ -326,29 +338,40 @@ def test_a_preview_from_a_checkpoint_is_the_fresh_preview():
             assert a.t[-1] == b.t[-1]
             assert np.array_equal(a.x[-1], b.x[-1]) and np.array_equal(a.P[-1], b.P[-1])
             compared += 1
+        for online in (fresh, cont, plain):
+            online.push(records_to_log(sorted(buffered, key=lambda r: r.t)))
     assert compared > 50 and continued > 20 and dropped > 0
+    ref, got = plain.trajectory(), cont.trajectory()
+    assert np.array_equal(got.t, ref.t) and np.array_equal(got.x, ref.x)
+    assert np.array_equal(got.P, ref.P) and got.metadata["counts"] == ref.metadata["counts"]
+    assert ref.metadata["online"]["rows_from_previews"] == 0
+    taken = got.metadata["online"]["rows_from_previews"]
+    assert taken > taken_at_least * sum(v["total"] for v in got.metadata["sensors"].values())
 
 
 def test_preview_checkpoints_rules():
     from undertow.jobs.live.preview import PreviewCheckpoints
 
-    c = PreviewCheckpoints(resync_s=1.0)
-    assert c.start() is None
-    c.reached(10.0, "s10", fresh=True)  # resync due at 11.0
+    c = PreviewCheckpoints()
+    assert c.start() is None and c.boundary(100.0) is None
+    c.reached(10.0, "s10", fresh=True)
     c.reached(10.2, "s10.2", fresh=False)
     c.reached(10.4, "s10.4", fresh=False)
     assert c.start() == (10.4, "s10.4")
+    assert c.boundary(10.4) == 10.2 and c.boundary(10.41) == 10.4 and c.boundary(10.0) is None
     c.arrived(10.3)  # a record at 10.3 arrived after the previews that reached 10.4
     assert c.start() == (10.2, "s10.2")
     c.arrived(10.2)  # at the time reached: not taken by that preview either
     assert c.start() == (10.0, "s10")
     c.reached(10.5, "s10.5", fresh=False)
-    c.released(10.3)  # records before 10.3 left the buffer: 10.0 cannot be continued
+    c.released(10.3, continued=True)  # records before 10.3 left: 10.0 cannot be continued
     assert c.start() == (10.5, "s10.5")
     c.reached(11.2, "s11.2", fresh=False)
-    assert c.start() is None  # past the resync time: a fresh preview
-    c.reached(11.3, "s11.3", fresh=True)
-    assert c.start() == (11.3, "s11.3") and len(c._kept) == 1
+    c.released(10.6, continued=False)  # the committed state is no preview's: start afresh
+    assert c.start() is None
+    c.reached(11.3, "s11.3", fresh=False)
+    c.reached(11.4, "s11.4", fresh=True)  # a fresh preview: those before cannot lead to it
+    assert c.start() == (11.4, "s11.4") and len(c._kept) == 1
 
 
 def test_latency_counts_from_the_links_receipt():

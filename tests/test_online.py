@@ -344,3 +344,56 @@ def test_peek_previews_a_push_without_changing_the_filter(session):
         ref = Localizer("proposed", wave=WAVE).run(_whole(recs, mounting))
     assert compared > 100
     _assert_same(online.trajectory(), ref)
+
+
+@pytest.mark.parametrize("variant", ["proposed", "adaptive-r"])
+def test_pushes_that_take_the_previews_states_are_the_offline_run(session, variant):
+    """The live pipeline's protocol: a preview at every DVL record, continued from the last
+    (PreviewCheckpoints), commits every 0.5 s up to the latest preview's end 0.25 s behind. The
+    pushes take most rows' states from the previews; with the depth spike and plateau (the
+    previews judge those depths on fewer neighbours, and the pushes revise states after a
+    verdict changes, rewinding to a checkpoint before a preview taken) the trajectory is still
+    bit for bit the offline one."""
+    import math
+
+    from undertow.jobs.live.preview import PreviewCheckpoints
+
+    recs, mounting = session
+    online = OnlineLocalizer(variant, wave=WAVE, mounting=mounting, expected=EXPECTED)
+    checkpoints = PreviewCheckpoints()
+    buffered, horizon, next_commit, revised = [], -math.inf, -math.inf, 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for record in recs:
+            now = record.t
+            boundary = checkpoints.boundary(now - 0.25)
+            if now - 0.25 >= next_commit and (boundary is not None or not checkpoints._kept):
+                next_commit = now - 0.25 + 0.5
+                h = now - 0.25 if boundary is None else math.nextafter(boundary, math.inf)
+                horizon = max(horizon, h)
+                out = [r for r in buffered if r.t < horizon]
+                buffered = [r for r in buffered if r.t >= horizon]
+                if out:
+                    online.push(records_to_log(out))
+                    revised += online.revised
+                checkpoints.released(horizon, continued=online.at_preview)
+            checkpoints.arrived(record.t)
+            buffered.append(record)
+            if record.stream != "dvl" or not online.ready:
+                continue
+            start = checkpoints.start()
+            mine = [r for r in buffered if start is None or r.t > start[0]]
+            if mine:
+                online.peek(records_to_log(mine), start=None if start is None else start[1])
+                checkpoints.reached(mine[-1].t, online.preview_state, fresh=start is None)
+        online.push(records_to_log(buffered))
+        ref = Localizer(variant, wave=WAVE).run(_whole(recs, mounting))
+    traj = online.trajectory()
+    _assert_same(traj, ref)
+    assert traj.metadata["nis"] == ref.metadata["nis"]
+    assert traj.metadata["sensors"] == ref.metadata["sensors"]
+    if variant == "adaptive-r":
+        assert traj.metadata["adaptive_r"] == ref.metadata["adaptive_r"]
+    rows = sum(v["total"] for v in traj.metadata["sensors"].values())
+    assert traj.metadata["online"]["rows_from_previews"] > 0.8 * rows
+    assert revised > 0

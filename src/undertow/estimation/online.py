@@ -18,6 +18,13 @@ log in hand are made exact by rewinding to a saved filter state (a checkpoint):
   the states since are recomputed (``revised``: how many of the states :meth:`push` returns
   replace ones returned before).
 
+A push whose next rows are exactly the rows a preview (:meth:`peek`) filtered from the
+committed state (same bytes: records, noise, depth-rate verdicts), ending at a time the push's
+next row is after, takes that preview's states and end state instead of filtering the rows
+again (the same arithmetic from the same state: the same bits); previews chained by
+``peek(start=...)`` are taken one after another. The live pipeline previews every DVL report
+and commits at a preview's end, so the filter runs each row once.
+
 So every state :meth:`push` returns is what the offline filter would give were the log to end
 with this chunk; ``trajectory().metadata["online"]["final_states"]`` counts the leading states
 no later chunk can change (what the online mapper uses).
@@ -31,6 +38,7 @@ initial state :func:`~undertow.estimation.localizer._initial_state` takes from t
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 
@@ -142,16 +150,25 @@ class OnlineLocalizer:
         peek's, and that nothing the committed filter took since is missing from the peeks:
         a preview advanced by the new records only, O(new rows)). Its pressure rows are judged
         by the depth-rate check with the committed depths and its own (not the previous
-        peeks'), so it may differ from a fresh peek: a display, resynchronized by a fresh one.
+        peeks'), so it may differ from a fresh peek (then a push does not take it).
         Without a previous peek it starts from the committed state. ``start``: continue from
         that state instead (one :attr:`preview_state` gave; the same guarantees as ``resume``
-        for the records after it)."""
+        for the records after it).
+
+        A later push whose next rows are exactly this peek's, from the state it started from,
+        takes its states instead of filtering them again (module docstring)."""
         if self._run is None:
             return None
         if start is None and resume:
             start = self._preview
         t, x, P, self._preview = self._run.peek(chunk.replace(mounting=self.mounting), start)
         return Trajectory(t, x, P, variant=self.config.variant) if t.size else None
+
+    @property
+    def at_preview(self) -> bool:
+        """Whether the committed state is one a peek reached (the last push ended by taking
+        that peek's states): the peeks continued from it since continue the committed filter."""
+        return self._run is not None and isinstance(self._run.key, model.FilterState)
 
     @property
     def preview_state(self):
@@ -382,10 +399,28 @@ class _DepthRate:
         return self.final_jumps + int(self.jump.sum())
 
 
+class _Preview(NamedTuple):
+    """A peek: from the state ``start`` (the committed state's key, or the state an earlier
+    peek reached), the accepted ``rows`` it filtered, the states it recorded, the state it
+    reached (``end``, never changed afterwards: a later peek from it works on a copy)."""
+
+    start: object
+    rows: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    end: model.FilterState
+
+
 class _Run:
     """The filter once started: candidate rows (pressure rows before the depth-rate verdict),
-    checkpoints (position in the candidate rows -> filter state and outputs count), the rows
-    since the oldest checkpoint, the outputs."""
+    checkpoints (position in the candidate rows -> filter state and outputs count; a rewind to
+    a position goes to the latest checkpoint at or before it, and refilters from there), the
+    rows since the oldest checkpoint, the outputs, and the recent previews a push may take
+    (:meth:`_adopt`)."""
+
+    #: previews kept for a push to take (the live pipeline chains a few between commits)
+    MAX_PREVIEWS = 32
 
     def __init__(self, cfg, noise, x0, P0, process, sensors) -> None:
         self.cfg, self.noise, self.process, self.sensors = cfg, noise, process, sensors
@@ -401,6 +436,11 @@ class _Run:
         self.pos0 = 0
         self.checkpoints: dict[int, tuple[model.FilterState, int]] = {}
         self.group = None  # position of the first row at the latest time
+        # the committed state's key: a new object whenever the state changes, except when a
+        # push takes a preview (the key is then the state that preview reached)
+        self.key = object()
+        self.previews: dict[int, _Preview] = {}  # id(start) -> the latest peek from it
+        self.adopted = 0  # rows taken from previews
 
     def feed(self, chunk: Log) -> tuple[int, int]:
         """Filter a chunk; returns (outputs before, outputs kept before the new ones)."""
@@ -414,10 +454,12 @@ class _Run:
             at = self.pos0 + int(np.flatnonzero(self.tail_p == changed)[0])
             rewind = at if rewind is None else min(rewind, at)
         start = self.pos0 + self.tail.size
-        if rewind is not None:
+        if rewind is not None:  # the latest checkpoint at or before it (refiltered from there)
+            rewind = max(p for p in self.checkpoints if p <= rewind)
             state, n_out = self.checkpoints[rewind]
             self.checkpoints = {p: c for p, c in self.checkpoints.items() if p < rewind}
             self.state = state.copy()
+            self.key = object()
             self.out.n = n_out
             k = rewind - self.pos0
             rows = np.concatenate([self.tail[k:], rows])
@@ -486,16 +528,51 @@ class _Run:
             jump = self.depth.peek(t, d)
             is_p = ~accepted
             accepted[is_p] = ~jump[depth_idx[is_p] - self.depth.count]
+        key = self.key if start is None else start
         state = (self.state if start is None else start).copy()
         if not accepted.all():
             rows = rows[accepted]
         if np.isnan(state.clock[0]) and rows.size:
             state.clock[0] = rows["t"][0]
-        return (*model.resume_filter(rows, state, self.process, self.sensors, True), state)
+        t, x, P = model.resume_filter(rows, state, self.process, self.sensors, True)
+        if rows.size:  # for a push to take (_adopt)
+            self.previews.pop(id(key), None)
+            self.previews[id(key)] = _Preview(key, rows, t, x, P, state)
+            if len(self.previews) > self.MAX_PREVIEWS:
+                del self.previews[next(iter(self.previews))]
+        return t, x, P, state
+
+    def _adopt(self, rows, accepted, start: int) -> int:
+        """Take the previews that filtered exactly the next accepted rows from the committed
+        state, one after another (module docstring): their states are recorded and the state
+        becomes the one they reached, a checkpoint before each. A preview is taken only when
+        the next row is at a later time than its last (it recorded that time's state) or none
+        follows. Returns the candidate position (from ``start``) up to which rows are done."""
+        acc = np.flatnonzero(accepted)
+        i = done = 0  # accepted rows taken; candidate rows done
+        while True:
+            preview = self.previews.get(id(self.key))
+            if preview is None or preview.start is not self.key:
+                return done
+            n = preview.rows.size
+            if i + n > acc.size:
+                return done
+            if i + n < acc.size and rows["t"][acc[i + n]] == preview.rows["t"][-1]:
+                return done  # a row at its last time that it did not take
+            if rows[acc[i : i + n]].tobytes() != preview.rows.tobytes():
+                return done
+            del self.previews[id(self.key)]
+            self.checkpoints[start + done] = (self.state, self.out.n)
+            self.state, self.key = preview.end.copy(), preview.end
+            self.out.append(preview.t, preview.x, preview.P)
+            i += n
+            done = int(acc[i - 1]) + 1
+            self.adopted += n
 
     def _filter(self, rows, depth_idx, start: int) -> None:
-        """Filter the candidate rows from position ``start``, with a checkpoint before every
-        pressure row not finally judged and before the rows at the latest time."""
+        """Filter the candidate rows from position ``start`` (first taking the previews that
+        filtered them, :meth:`_adopt`), with a checkpoint at or before every pressure row not
+        finally judged and the rows at the latest time."""
         if rows.size == 0:
             return
         is_p = depth_idx >= 0
@@ -505,9 +582,9 @@ class _Run:
         open_p[is_p] = ~self.depth.is_final(depth_idx[is_p])
         last = int(np.searchsorted(rows["t"], rows["t"][-1]))
         self.group = start + last
-        cuts = np.flatnonzero(open_p).tolist()
-        cuts = sorted(set(cuts) | {last})
-        k = 0
+        k = self._adopt(rows, accepted, start)  # (its checkpoints cover the rows it took)
+        cuts = sorted({c for c in np.flatnonzero(open_p).tolist() if c >= k}
+                      | ({last} if last >= k else set()))  # fmt: skip
         for cut in cuts:
             self._advance(rows[k:cut][accepted[k:cut]], flush=False)
             self.checkpoints[start + cut] = (self.state.copy(), self.out.n)
@@ -524,18 +601,22 @@ class _Run:
             return
         if np.isnan(self.state.clock[0]):
             self.state.clock[0] = rows["t"][0]  # t0: the first measurement's time
+        self.key = object()
         out_t, out_x, out_P = model.resume_filter(rows, self.state, self.process, self.sensors,
                                                   flush)  # fmt: skip
         self.out.append(out_t, out_x, out_P)
 
     def _trim(self) -> None:
-        """Drop the checkpoints no later chunk can need, and the rows before the oldest kept."""
-        keep = {}
-        for pos, cp in self.checkpoints.items():
-            k = pos - self.pos0
-            p = self.tail_p[k]
-            if pos == self.group or (p >= 0 and not self.depth.is_final(p)):
-                keep[pos] = cp
+        """Drop the checkpoints no later chunk can need (a rewind goes to the latest one at or
+        before the first row still open: the rows at the latest time, or a pressure row not
+        finally judged), and the rows before the oldest kept."""
+        is_p = self.tail_p >= 0
+        open_p = np.flatnonzero(is_p)[~self.depth.is_final(self.tail_p[is_p])]
+        needed = self.group if self.group is not None else self.pos0 + self.tail.size
+        if open_p.size:
+            needed = min(needed, self.pos0 + int(open_p[0]))
+        base = max((p for p in self.checkpoints if p <= needed), default=needed)
+        keep = {p: cp for p, cp in self.checkpoints.items() if p >= base}
         self.checkpoints = keep
         first = min(keep, default=self.pos0 + self.tail.size)
         k = first - self.pos0
@@ -564,4 +645,5 @@ class _Run:
     def bookkeeping(self) -> dict:
         final = self.final_states()
         return {"final_states": final, "late_rows": self.late,
-                "checkpoints": len(self.checkpoints)}  # fmt: skip
+                "checkpoints": len(self.checkpoints),
+                "rows_from_previews": self.adopted}  # fmt: skip

@@ -12,8 +12,10 @@ this loop each turn):
     each DVL report -> a preview pose (before the commit of the same step): the committed
                        filter run on a copy over the records still in the buffer, or an
                        earlier preview's state advanced by the buffered records after it
-                       (:mod:`.preview`: same states when the depth-rate check agrees; a fresh
-                       one every PREVIEW_RESYNC_S), published to the live view at once
+                       (:mod:`.preview`: same states when the depth-rate check agrees),
+                       published to the live view at once; a commit releases the records up
+                       to a preview's end and the filter takes the previews' states where
+                       they filtered exactly its rows (each row filtered once)
 
 The committed estimate lags real time by the reorder buffer (``reorder_s``); it is what a replay
 of the recording reproduces exactly (``undertow localize``/``map`` on the recording, same
@@ -70,9 +72,6 @@ STATUS_PERIOD_S = 1.0
 POLL_S = 0.02
 #: every n-th committed state goes into the path shown in the view
 PATH_DECIMATION = 10
-#: sensor seconds between fresh previews (the committed filter over the whole buffer); between
-#: them a preview continues from an earlier one's state (:mod:`.preview`)
-PREVIEW_RESYNC_S = 1.0
 #: sensor seconds between online map updates (the chunks released meanwhile at once: the map
 #: is the same to rounding, module :mod:`undertow.mapping.online`, for a tenth of the calls)
 MAP_EVERY_S = 1.0
@@ -153,7 +152,7 @@ class LiveSession:
         self.recorder: Recorder | None = None
         self._stop = threading.Event()
         self._pending_dvl: list[float] = []
-        self._checkpoints = PreviewCheckpoints(PREVIEW_RESYNC_S)  # where a preview may start
+        self._checkpoints = PreviewCheckpoints()  # where a preview may start
         self._last_preview = None  # the states of the last preview
         self._first_wall: float | None = None
         self._last_wall: float | None = None
@@ -255,9 +254,8 @@ class LiveSession:
             self._take(wall, record)
         if self._pending_dvl:  # first: a DVL report's pose does not wait for the commit
             self._preview()
-        if horizon >= self._next_commit:
+        if horizon >= self._next_commit and self._commit(horizon):
             self._next_commit = horizon + self.live.commit_every_s
-            self._commit(horizon)
         if time.perf_counter() >= self._next_status:
             self._next_status = time.perf_counter() + STATUS_PERIOD_S
             self._status()
@@ -278,11 +276,22 @@ class LiveSession:
         if record.stream == "dvl":  # the latency counts from the link's receipt
             self._pending_dvl.append(received_at(self.clock, record.arrival, wall))
 
-    def _commit(self, horizon: float) -> None:
+    def _commit(self, horizon: float) -> bool:
+        """Release the records before ``horizon`` (all at the end: inf) to the filter, the
+        sea state, the recording of final states, the map and the view's rays. Up to the end
+        of the latest preview before the horizon, so that the filter takes the previews'
+        states; when every preview kept is ahead of the horizon, not yet (False: the next
+        step tries again; the wait is at most the buffer's length)."""
+        if not math.isinf(horizon):
+            boundary = self._checkpoints.boundary(horizon)
+            if boundary is not None:
+                horizon = math.nextafter(boundary, math.inf)
+            elif self._checkpoints.start() is not None:
+                return False
         released = self.buffer.release(horizon)
-        self._checkpoints.released(self.buffer.horizon)
         if not released:
-            return
+            self._checkpoints.released(self.buffer.horizon, continued=True)
+            return True
         if self.sea is not None:
             update = self.sea.push(released)
             if update is not None:
@@ -293,10 +302,11 @@ class LiveSession:
                     self.view.publish_wave(update.t, w.amplitude_m, w.frequency_hz or math.nan)
         chunk = records_to_log(released).replace(mounting=self.mounting)
         self.localizer.push(chunk)
+        self._checkpoints.released(self.buffer.horizon, continued=self.localizer.at_preview)
         if not self.localizer.ready:  # the filter will start from these records: keep them
             self._early.append(chunk)
             self._say_missing(released)
-            return
+            return True
         # the states from the first one the recording or the map has not taken yet
         since = (
             self.stats.states
@@ -313,6 +323,7 @@ class LiveSession:
         self._early = []
         if self.view is not None:
             self._show_rays(chunk, trajectory)
+        return True
 
     def _say_missing(self, released) -> None:
         """Once, when the filter still cannot start well after the first record: what is
@@ -379,8 +390,8 @@ class LiveSession:
         """The pose at the newest DVL report: the committed filter, on a copy, over the
         records still waiting in the buffer, published to the view; latency measured. When an
         earlier preview's state may be continued from (:mod:`.preview`), only the buffered
-        records after it are filtered; a fresh preview every PREVIEW_RESYNC_S. The preview is
-        a display (not recorded), so this does not touch the results."""
+        records after it are filtered. The preview is a display (not recorded); a commit
+        takes its states only where they are the committed filter's, bit for bit."""
         arrivals, self._pending_dvl = self._pending_dvl, []
         if not self.localizer.ready:
             self._checkpoints.clear()
