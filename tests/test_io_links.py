@@ -473,10 +473,11 @@ def _wait(condition, link, timeout: float = 10.0) -> None:
         time.sleep(0.005)
 
 
-@pytest.mark.parametrize("deferred", [False, True])
-def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, deferred):
+@pytest.mark.parametrize("mode", ["thread", "deferred", "polled"])
+def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, mode):
     """The link's records are the .tlog reader's, decoded in the link's thread or (deferred)
-    by pump() in the caller's, which is woken by the datagrams holding DVL messages."""
+    by pump() in the caller's, which is woken by the datagrams holding DVL messages, or
+    (polled) read and decoded by pump() alone, stamped with the kernel's receive times."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
     from test_io_tlog import _attitude_rows, _pressure_rows, _sonar_rows, _vision_rows, write_tlog
 
@@ -490,22 +491,35 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, deferred):
         _attitude_rows(log) + _pressure_rows(log) + vision + _sonar_rows(log), key=lambda r: r[0]
     )
     port = _free_udp_port()
-    records, wakes = [], []
+    records, wakes, sent = [], [], []
+    deferred = mode != "thread"
     link = MavlinkLink(f"udpin:127.0.0.1:{port}", records.append, backoff=FAST,
-                       deferred=deferred, wake=lambda: wakes.append(len(records)))  # fmt: skip
+                       deferred=deferred, wake=lambda: wakes.append(len(records)),
+                       polled=mode == "polled")  # fmt: skip
     mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
 
     def received(n):
-        link.pump()  # (nothing to do unless deferred)
+        link.pump()  # (nothing to do in the thread mode)
         return sum(link.message_counts.values()) >= n
 
     with link:
         _wait(lambda: link.counters.connects >= 1, link)  # bound before anything is sent
+        if mode == "polled":
+            _wait(lambda: link._polling is not None, link)
         if deferred:
+            sent.append(time.time())
             sender.sendto(rows[0][1].pack(mav), ("127.0.0.1", port))
-            _wait(lambda: len(link._raw) == 1, link)
+            if mode == "deferred":
+                _wait(lambda: len(link._raw) == 1, link)
+            else:
+                time.sleep(0.2)
             assert records == [] and link.message_counts == {}  # queued, not decoded
+            read_at = time.time()
+            received(1)
+            assert len(records) == 1
+            if mode == "polled":  # the kernel's receive time, not the read 0.2 s later
+                assert sent[0] <= records[0].arrival < read_at - 0.15
         for k, (_, msg) in enumerate(rows[1:] if deferred else rows):
             sender.sendto(msg.pack(mav), ("127.0.0.1", port))
             if k == 50:  # a whole frame whose CRC fails
@@ -518,7 +532,7 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, deferred):
     sender.close()
     assert link.counters.malformed >= 1
     n_vision = sum(m.get_type() == "VISION_POSITION_DELTA" for _, m in rows)
-    assert len(wakes) == (n_vision if deferred else 0) and n_vision > 0
+    assert len(wakes) == (n_vision if mode == "deferred" else 0) and n_vision > 0
     path = tmp_path / "same.tlog"
     write_tlog(path, rows)
     offline = read_log(path)
@@ -532,6 +546,50 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, deferred):
     np.testing.assert_array_equal(live.dvl.velocity, offline.dvl.velocity)
     np.testing.assert_array_equal(live.dead_reckoning.position, offline.dead_reckoning.position)
     assert all(r.t == r.arrival for r in records)  # stamped on arrival, as a tlog's receive time
+    arrivals = np.array([r.arrival for r in records])
+    assert np.all(np.diff(arrivals) >= 0)
+
+
+def test_polled_mavlink_counts_the_kernels_drops_and_stamps_on_its_clock():
+    """A polled link's socket (with a small receive buffer) not read while 3000 datagrams
+    arrive: the kernel drops what its receive buffer cannot hold (counted as overflow: every
+    datagram sent is a record or a drop), and each record is stamped with its receive time
+    through the link's clock (a ScaledClock at 10x: c(w), not the read time); a link silent
+    for idle_timeout_s reconnects."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+    from undertow.io.links.common import ScaledClock
+    from undertow.io.links.mavlink_udp import MavlinkLink
+
+    port = _free_udp_port()
+    records = []
+    clock = ScaledClock(10.0)
+    link = MavlinkLink(f"udpin:127.0.0.1:{port}", records.append, backoff=FAST, deferred=True,
+                       polled=True, now=clock, idle_timeout_s=0.5)  # fmt: skip
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    n = 3000
+    with link:
+        _wait(lambda: link._polling is not None, link)
+        # a small receive buffer (the kernel's minimum: a few datagrams) to make it drop some
+        link._polling[1].setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        first = clock()
+        for k in range(n):
+            msg = mavlink2.MAVLink_attitude_message(k, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0)
+            sender.sendto(msg.pack(mav), ("127.0.0.1", port))
+        last = clock()
+        time.sleep(0.1)
+        read = clock()
+        link.pump()
+        assert first <= records[0].arrival and records[-1].arrival <= last < read - 0.5
+        kept = len(records)
+        assert kept < n and link.counters.overflow == 0  # (a drop is told with the next one)
+        sender.sendto(msg.pack(mav), ("127.0.0.1", port))
+        _wait(lambda: link.pump() or len(records) > kept, link)
+        assert len(records) + link.counters.overflow == n + 1
+        _wait(lambda: link.counters.disconnects >= 1 and link._polling is not None, link)
+    sender.close()
+    assert link.counters.connects >= 2
 
 
 def test_deferred_mavlink_wakes_on_dvl_frames_in_either_protocol_version():

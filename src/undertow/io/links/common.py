@@ -230,6 +230,10 @@ class ScaledClock:
     def __call__(self) -> float:
         return self.start + self.scale * (time.time() - self.start)
 
+    def at(self, wall: float) -> float:
+        """c(w) of a wall time w (``time.time`` seconds) taken earlier, e.g. by the kernel."""
+        return self.start + self.scale * (wall - self.start)
+
     def wall_seconds(self, seconds: float) -> float:
         """The wall time in which ``seconds`` of this clock pass."""
         return seconds / self.scale

@@ -23,6 +23,16 @@ times and the counters are those of the immediate mode; a datagram holding the m
 the DVL (VISION_POSITION_DELTA) calls ``wake`` at once, so that a loop waiting for DVL reports
 need not wait for its next turn. At most ``max_queue`` datagrams wait (the oldest dropped,
 counted as overflow).
+
+``polled`` (UDP only; the live session's choice when an A50 link wakes its loop): no thread
+receives at all. :meth:`MavlinkLink.pump` reads the socket itself, without blocking, and stamps
+each datagram with the time the kernel received it (``SO_TIMESTAMPNS``, Linux socket(7);
+taken through the clock's ``at``, the read time when there is none), so a datagram read late
+is stamped as if read at once. The link's thread only connects, attaches the kernel filter and
+watches for silence. Each datagram then costs no thread wake-up (and no GIL hand-over), the
+larger part of its cost otherwise; in exchange no DVL message wakes the loop, which reads it at
+its next turn. Datagrams the kernel dropped because the receive buffer was full are counted as
+overflow (``SO_RXQ_OVFL``: the kernel tells them with the next datagram it keeps).
 """
 
 from __future__ import annotations
@@ -30,6 +40,7 @@ from __future__ import annotations
 import importlib
 import math
 import socket
+import struct
 import sys
 import time
 
@@ -39,6 +50,9 @@ from . import mavlink_filter
 from .common import Backoff, ClockPolicy, Link, LinkCounters
 
 TIME_SOURCES = ("arrival", "sensor")
+#: socket(7) options for a polled socket (Linux values where Python does not name them)
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
 
 
 class MavlinkLink(Link):
@@ -63,6 +77,7 @@ class MavlinkLink(Link):
         deferred: bool = False,
         wake=None,
         kernel_filter: bool = False,
+        polled: bool = False,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ConfigError(f"mavlink time_source: '{time_source}' is not one of {TIME_SOURCES}")
@@ -85,6 +100,10 @@ class MavlinkLink(Link):
         self.deferred = bool(deferred)
         self.wake = wake
         self.kernel_filter = bool(kernel_filter)
+        self.polled = bool(polled)
+        self._polling = None  # (conn, socket) that pump() reads (polled, while connected)
+        self._last_read = 0.0  # time.monotonic() of pump()'s last datagram
+        self._kernel_drops = 0  # SO_RXQ_OVFL: the socket's drop count so far
         self._frames: _SingleFrames | None = None
 
     def load(self) -> None:
@@ -136,10 +155,12 @@ class MavlinkLink(Link):
     def _run_udp(self, conn, sock) -> None:
         """UDP: one blocking read per datagram (``recv_match`` polls, which costs several
         times the decoding at telemetry rates), decoded at once or (``deferred``) queued for
-        :meth:`pump`."""
-        sock.settimeout(0.2)
+        :meth:`pump`; ``polled``: :meth:`_watch`."""
         if self.kernel_filter:
             self.info["kernel_filter"] = self._attach_filter(conn, sock)
+        if self.polled:
+            return self._watch(conn, sock)
+        sock.settimeout(0.2)
         dvl_id = _message_id(conn.mav, "VISION_POSITION_DELTA")
         last = time.monotonic()
         while not self.stopping:
@@ -162,6 +183,55 @@ class MavlinkLink(Link):
             if self.wake is not None and _frame_id(data) == dvl_id:
                 self.wake()
 
+    def _watch(self, conn, sock) -> None:
+        """``polled``: hand the socket to :meth:`pump` and watch for silence (no datagram read
+        for ``idle_timeout_s``: the session ends, and the connection is opened again)."""
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+        except OSError:  # (not Linux: no drop count)
+            pass
+        sock.setblocking(False)
+        self._kernel_drops = 0
+        self._last_read = time.monotonic()
+        self._polling = (conn, sock)
+        try:
+            while not self._stop.wait(0.2):
+                if time.monotonic() - self._last_read > self.idle_timeout_s:
+                    raise OSError(f"no MAVLink for {self.idle_timeout_s} s")
+        finally:
+            self._polling = None
+
+    def _read_polled(self) -> None:
+        """Read and decode every datagram waiting on the polled socket, each stamped with its
+        kernel receive time."""
+        polling = self._polling
+        if polling is None:
+            return
+        conn, sock = polling
+        at = getattr(self.now, "at", None)
+        if at is None and self.now is time.time:
+            at = float
+        while True:
+            try:
+                data, ancillary, _, _ = sock.recvmsg(65535, 256)
+            except OSError:  # nothing waiting (BlockingIOError), or closed by a reconnect
+                return
+            self._last_read = time.monotonic()
+            wall = None
+            for level, kind, value in ancillary:
+                if level != socket.SOL_SOCKET:
+                    continue
+                if kind == SO_TIMESTAMPNS and len(value) >= 16:
+                    sec, nsec = struct.unpack_from("@qq", value)
+                    wall = sec + nsec * 1e-9
+                elif kind == SO_RXQ_OVFL and len(value) >= 4:
+                    drops = struct.unpack_from("@I", value)[0]
+                    self.counters.overflow += (drops - self._kernel_drops) % (1 << 32)
+                    self._kernel_drops = drops
+            arrival = at(wall) if at is not None and wall is not None else self.now()
+            self._decode(conn, arrival, data)
+
     def _attach_filter(self, conn, sock) -> bool:
         """The kernel drops the single frames of messages no stream uses (:mod:`.mavlink_filter`);
         HEARTBEAT kept: the sign of a live autopilot (``idle_timeout_s``)."""
@@ -172,10 +242,12 @@ class MavlinkLink(Link):
         return mavlink_filter.attach(sock, keep_v2, keep_v1)
 
     def pump(self) -> None:
-        """Decode the datagrams the thread queued (``deferred``) and deliver their records."""
+        """Decode the datagrams the thread queued (``deferred``), or read (``polled``), and
+        deliver their records."""
         raw = self._raw
         while raw:
             self._decode(*raw.popleft())
+        self._read_polled()
 
     def _decode(self, conn, arrival: float, data: bytes) -> None:
         """One datagram: counted if it is a valid frame of a message no stream uses, else

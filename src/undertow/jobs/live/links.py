@@ -41,7 +41,10 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
     bad address. Ping requests run at ``ping_rate_hz`` of sensor time (``time_scale`` times as
     often in wall time, at most :data:`MAX_PING_RATE_HZ`). The A50 and MAVLink links are
     ``deferred``: the caller's loop decodes what they receive (``Link.pump`` each turn);
-    ``wake`` is called for what may hold a DVL report (A50 bytes, MAVLink DVL messages)."""
+    ``wake`` is called for what may hold a DVL report (A50 bytes, MAVLink DVL messages). With
+    an A50 link (whose reports wake the loop), MAVLink over UDP is ``polled``: the loop reads
+    its socket itself, each datagram stamped with its kernel receive time (no thread wakes for
+    each; a DVL message on MAVLink then waits for the loop's next turn)."""
     links: dict[str, Link] = {}
     # a wall-time delay d is d * time_scale sensor seconds: the clock tolerance scales with it
     max_offset = live.max_clock_offset_s * live.time_scale
@@ -60,7 +63,8 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
         from ...io.links.mavlink_udp import MavlinkLink
 
         links["mavlink"] = MavlinkLink(live.mavlink, callback, now=now, max_offset_s=max_offset,
-                                       deferred=True, wake=wake, kernel_filter=True)  # fmt: skip
+                                       deferred=True, wake=wake, kernel_filter=True,
+                                       polled="dvl" in links)  # fmt: skip
     if not links:
         raise ConfigError("live: no sensor link given (--dvl, --sonar and/or --mavlink)")
     return links
