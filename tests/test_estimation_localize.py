@@ -281,3 +281,35 @@ def test_explicit_settings_win_over_the_log_and_the_calibration():
     assert given["water_density_kg_m3"] == 997.0 and given["dvl_scale_factor"] == 1.0
     origin = localize(log, "baseline", initial_position=None).metadata["config"]
     assert origin["initial_position"] is None
+
+
+def test_measurement_rows_noise_in_closed_form():
+    """The DVL rows' R: the log's covariance scaled by 1 / s^2 and symmetrized (or the
+    configured diagonal without one), its diagonal floored at dvl_std_floor_m_s^2, plus the
+    wave noise gamma_DVL^2 (proposed); every row's diagonal at least std_floor^2 after the merge,
+    the off-diagonal entries untouched."""
+    from undertow.estimation.config import LocalizerConfig
+    from undertow.estimation.localizer import _dvl_rows, merged_rows
+    from undertow.estimation.noise import WaveNoise
+
+    cfg = LocalizerConfig(variant="proposed", dvl_scale_factor=2.0, dvl_std_floor_m_s=0.01,
+                          std_floor=0.05)  # fmt: skip
+    t = np.arange(3.0)
+    cov = np.array([[[4e-6, 1e-6, 0.0], [3e-6, 1e-2, 0.0], [0.0, 0.0, 1.0]]] * 3)
+    cov[2] = np.nan  # no covariance: the configured diagonal
+    dvl = Dvl.from_velocity(t, np.zeros((3, 3)), covariance=cov)
+    gamma = np.array([0.02, 0.03, 0.04])
+    noise = WaveNoise("test", 0.1, 1.0, dvl_std=gamma, dr_std=np.zeros(3), how="node")
+    _, kind, z, R, ok = _dvl_rows(Log(dvl=dvl), cfg, noise, {}, warn=False)
+    scaled = cov[0] / 4.0
+    expect = 0.5 * (scaled + scaled.T)
+    np.fill_diagonal(expect, np.maximum(np.diag(expect), 0.01**2) + gamma**2)
+    np.testing.assert_allclose(R[0], expect, rtol=1e-15, atol=0)
+    configured = np.maximum(np.asarray(cfg.dvl_velocity_std_m_s), cfg.std_floor) ** 2
+    np.testing.assert_allclose(np.diag(R[2]), np.maximum(configured, 0.01**2) + gamma**2)
+    assert ok.all() and np.all(R[2] == np.diag(np.diag(R[2])))
+    rows, _ = merged_rows([(t, kind, z, R)], cfg.std_floor**2)
+    diagonal = np.einsum("nii->ni", rows["R"])
+    np.testing.assert_array_equal(diagonal, np.maximum(np.einsum("nii->ni", R), 0.05**2))
+    off = ~np.eye(3, dtype=bool)
+    np.testing.assert_array_equal(rows["R"][:, off], R[:, off])

@@ -397,3 +397,34 @@ def test_pushes_that_take_the_previews_states_are_the_offline_run(session, varia
     rows = sum(v["total"] for v in traj.metadata["sensors"].values())
     assert traj.metadata["online"]["rows_from_previews"] > 0.8 * rows
     assert revised > 0
+
+
+def test_depth_rate_verdicts_are_those_of_the_whole_history():
+    """_DepthRate (the online depth-rate check) against depth_jumps over every depth so far:
+    depths added in random pieces (a spike, a plateau, noise), each piece first peeked (its
+    verdicts as if the log ended with it), then added; the verdicts in use once everything is
+    in, and every peek, are those of the whole history cut where it was."""
+    from undertow.estimation.config import LocalizerConfig
+    from undertow.estimation.health import depth_jumps
+    from undertow.estimation.online import _DepthRate
+
+    cfg = LocalizerConfig()
+    rng = np.random.default_rng(4)
+    t = np.cumsum(rng.uniform(0.05, 0.15, 400))
+    d = 2.0 + 0.02 * rng.standard_normal(400)
+    d[50] += 3.0
+    d[200:204] += 4.0
+    d[300:330] += 2.0
+    rate = _DepthRate(cfg)
+    k = 0
+    for n in rng.integers(1, 9, 200):
+        part = slice(k, min(k + int(n), t.size))
+        whole = depth_jumps(t[: part.stop], d[: part.stop], cfg)
+        assert np.array_equal(rate.peek(t[part], d[part]), whole[part])
+        rate.add(t[part], d[part])
+        rate.trim()
+        k = part.stop
+        if k == t.size:
+            break
+    whole = depth_jumps(t, d, cfg)
+    assert whole.sum() > 3 and rate.rejected() == int(whole.sum())

@@ -48,9 +48,10 @@ def dvl_inside(t, velocity, ok, max_speed, rejected: dict, warn: bool = True) ->
     one warning when any is rejected."""
     bad = np.zeros(len(t), bool)
     if max_speed is not None:
-        with np.errstate(invalid="ignore", over="ignore"):
-            bad = ok & ~(np.linalg.norm(np.where(ok[:, None], velocity, 0.0), axis=1) <= max_speed)
-    rejected["rejected_dvl_speed"] = int(bad.sum())
+        w = np.where(ok[:, None], velocity, 0.0)
+        with np.errstate(invalid="ignore", over="ignore"):  # |v| as numpy.linalg.norm sums it
+            bad = ok & ~(np.sqrt(np.add.reduce(w * w, axis=1)) <= max_speed)
+    rejected["rejected_dvl_speed"] = int(np.count_nonzero(bad))
     if warn and bad.any():
         _warn(f"dvl: {int(bad.sum())} of {len(t)} reports faster than {max_speed:g} m/s (the "
               f"rated maximum, dvl_max_speed_m_s) rejected, {_first(t, bad)}")  # fmt: skip
@@ -62,8 +63,8 @@ def imu_inside(t, rate, ok, max_rate, rejected: dict, warn: bool = True) -> np.n
     ``warn``: one warning when any is rejected."""
     bad = np.zeros(len(t), bool)
     if max_rate is not None:
-        bad = ok & ~np.all(np.abs(np.where(ok[:, None], rate, 0.0)) <= max_rate, axis=1)
-    rejected["rejected_imu_range"] = int(bad.sum())
+        bad = ok & ~(np.abs(np.where(ok[:, None], rate, 0.0)) <= max_rate).all(axis=1)
+    rejected["rejected_imu_range"] = int(np.count_nonzero(bad))
     if warn and bad.any():
         _warn(f"imu: {int(bad.sum())} of {len(t)} angular velocities beyond {max_rate:g} rad/s "
               f"(the gyro's range, gyro_max_rate_rad_s) rejected, {_first(t, bad)}")  # fmt: skip

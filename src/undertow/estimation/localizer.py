@@ -52,6 +52,7 @@ refused before anything runs (:func:`check_options`).
 
 from __future__ import annotations
 
+import functools
 import warnings
 from pathlib import Path
 
@@ -429,16 +430,24 @@ def merged_rows(parts, floor2: float) -> tuple[np.ndarray, np.ndarray]:
         rz[a:b, :d] = z
         rR[a:b, :d, :d] = R
         a = b
-    i = np.arange(3)
-    rR[:, i, i] = np.maximum(rR[:, i, i], floor2)
+    diagonal = rR.reshape(n, 9)[:, ::4]  # (a view: each row's 3 x 3 are contiguous)
+    np.maximum(diagonal, floor2, out=diagonal)
     order = np.lexsort((rk, rt))
     return rows[order], order
 
 
 def _diag(std, n: int, cfg: LocalizerConfig) -> np.ndarray:
     """n copies of diag(max(std, std_floor)^2)."""
-    D = np.diag(np.maximum(np.asarray(std, float), cfg.std_floor) ** 2)
-    return np.repeat(D[None], n, axis=0)  # (np.tile, without its Python-level set-up)
+    std = tuple(std) if isinstance(std, (list, tuple)) else float(std)
+    return np.repeat(_diag_one(std, cfg.std_floor), n, axis=0)  # (np.tile, without its set-up)
+
+
+@functools.lru_cache(maxsize=64)
+def _diag_one(std, floor: float) -> np.ndarray:
+    """diag(max(std, floor)^2) as a (1, 3, 3) array (read-only: shared by every call)."""
+    D = np.diag(np.maximum(np.asarray(std, float), floor) ** 2)[None]
+    D.flags.writeable = False
+    return D
 
 
 def _imu_rows(
@@ -451,7 +460,7 @@ def _imu_rows(
         return None
     w = imu.angular_velocity
     ok = _finite_rows(w)
-    rejected["rejected_imu"] = int(np.sum(~ok))
+    rejected["rejected_imu"] = _count_false(ok)
     ok = imu_inside(imu.t, w, ok, cfg.gyro_max_rate_rad_s, rejected, warn)
     return imu.t, model.IMU, w, _diag(cfg.imu_gyro_std_rad_s, len(imu), cfg), ok
 
@@ -467,15 +476,15 @@ def _dvl_rows(
     v = dvl.velocity / cfg.dvl_scale_factor
     cov = np.array(dvl.covariance, float) / cfg.dvl_scale_factor**2
     cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
-    has_cov = np.all(np.isfinite(cov), axis=(1, 2))
+    has_cov = np.isfinite(cov).all(axis=(1, 2))
     R = np.where(has_cov[:, None, None], cov, _diag(cfg.dvl_velocity_std_m_s, len(dvl), cfg))
-    i = np.arange(3)
-    R[:, i, i] = np.maximum(R[:, i, i], cfg.dvl_std_floor_m_s**2)
+    diagonal = R.reshape(-1, 9)[:, ::4]  # (a view: R is a new contiguous array)
+    np.maximum(diagonal, cfg.dvl_std_floor_m_s**2, out=diagonal)
     if cfg.adds_wave_noise:
-        R[:, i, i] += noise.std_at("dvl", dvl.t) ** 2
+        diagonal += noise.std_at("dvl", dvl.t) ** 2
     finite = _finite_rows(v)
-    rejected["rejected_dvl_invalid"] = int(np.sum(~dvl.valid))
-    rejected["rejected_dvl_nonfinite"] = int(np.sum(dvl.valid & ~finite))
+    rejected["rejected_dvl_invalid"] = _count_false(dvl.valid)
+    rejected["rejected_dvl_nonfinite"] = int(np.count_nonzero(dvl.valid & ~finite))
     ok = dvl_inside(dvl.t, dvl.velocity, finite & dvl.valid, cfg.dvl_max_speed_m_s, rejected, warn)
     return dvl.t, model.DVL, v, R, ok
 
@@ -497,7 +506,7 @@ def _dr_rows(
     if cfg.adds_wave_noise:
         i = np.arange(3)
         R[:, i, i] += noise.std_at("dr", dr.t) ** 2
-    rejected["rejected_dead_reckoning"] = int(np.sum(~ok))
+    rejected["rejected_dead_reckoning"] = _count_false(ok)
     return dr.t, model.DR, rpy, R, ok
 
 
@@ -517,13 +526,17 @@ def _pressure_rows(
         return None
     d = p.depth(cfg.water_density_kg_m3, cfg.surface_pressure_pa)[:, None]
     ok = _finite_rows(d)
-    rejected["rejected_pressure"] = int(np.sum(~ok))
+    rejected["rejected_pressure"] = _count_false(ok)
     ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected, warn, jumps)
     return p.t, model.BARO, d, _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1], ok
 
 
 def _finite_rows(a: np.ndarray) -> np.ndarray:
-    return np.all(np.isfinite(a), axis=1)
+    return np.isfinite(a).all(axis=1)
+
+
+def _count_false(ok: np.ndarray) -> int:
+    return ok.size - int(np.count_nonzero(ok))
 
 
 def _initial_state(log: Log, cfg: LocalizerConfig):

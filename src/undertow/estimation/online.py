@@ -379,9 +379,12 @@ class _DepthRate:
         return None if changed.size == 0 else self.base + int(changed[0])
 
     def peek(self, t, d) -> np.ndarray:
-        """The verdicts the new depths (t, d) would get now (nothing kept)."""
-        jump = depth_jumps(np.concatenate([self.t, t]), np.concatenate([self.d, d]), self.cfg)
-        return jump[self.t.size :]
+        """The verdicts the new depths (t, d) would get now (nothing kept): judged with the
+        HALF_WINDOW depths before them, all their window reaches."""
+        k = max(self.t.size - HALF_WINDOW, 0)
+        jump = depth_jumps(np.concatenate([self.t[k:], t]), np.concatenate([self.d[k:], d]),
+                           self.cfg)  # fmt: skip
+        return jump[self.t.size - k :]
 
     def jumped(self, j: np.ndarray) -> np.ndarray:
         return self.jump[np.asarray(j) - self.base]
