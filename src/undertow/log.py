@@ -240,8 +240,8 @@ class Dvl(_Stream):
             fom=nan if fom is None else fom,
             covariance=np.full((n, 3, 3), np.nan) if covariance is None else covariance,
             altitude=nan if altitude is None else altitude,
-            beam_id=np.tile(np.arange(4), (n, 1)),
-            beam_unit=np.tile(A50_UNITS, (n, 1, 1)),
+            beam_id=np.repeat(_BEAM_IDS, n, axis=0),  # (np.tile, without its set-up)
+            beam_unit=np.repeat(A50_UNITS[None], n, axis=0),
             beam_range=np.full((n, 4), np.nan) if beam_range is None else beam_range,
             beam_valid=np.zeros((n, 4), bool) if beam_valid is None else beam_valid,
             beam_velocity=np.full((n, 4), np.nan) if beam_velocity is None else beam_velocity,
@@ -506,6 +506,8 @@ def dvl_beam_units(tilt_deg: float, azimuths_deg) -> np.ndarray:
 
 A50_UNITS = a50_beam_units()  # the default geometry's beams, made once (read-only)
 A50_UNITS.setflags(write=False)
+_BEAM_IDS = np.arange(4)[None]  # (1, 4): beam ids 0..3
+_BEAM_IDS.setflags(write=False)
 
 
 @dataclass(frozen=True)
