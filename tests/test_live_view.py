@@ -138,3 +138,30 @@ def test_uncertainty_ellipsoid_gives_back_the_covariance():
         assert q[3] >= 0 and min(size) >= 0
         left_handed += np.linalg.det(np.linalg.eigh(cov)[1]) < 0
     assert left_handed > 0  # the flip was exercised
+
+
+def test_path_is_at_most_max_poses_evenly_spaced_newest_last():
+    from undertow.jobs.live.view import MAX_PATH_POSES, path_points
+
+    for n in (1, 5, MAX_PATH_POSES, MAX_PATH_POSES + 1, 3 * MAX_PATH_POSES + 7, 36_000):
+        p = np.arange(3.0 * n).reshape(n, 3)
+        out = path_points(p)
+        assert 1 <= len(out) <= MAX_PATH_POSES
+        assert np.array_equal(out[0], p[0]) and np.array_equal(out[-1], p[-1])
+        rows = out[:, 0] // 3
+        if n <= MAX_PATH_POSES:
+            assert np.array_equal(out, p)
+        else:  # every k-th, k the smallest step that fits, then the newest
+            k = int(np.ceil(n / (MAX_PATH_POSES - 1)))
+            assert np.all(np.diff(rows[:-1]) == k) and rows[-1] - rows[-2] <= k
+    assert len(path_points(np.zeros((10, 3)), max_poses=4)) == 4
+
+
+def test_the_views_map_takes_at_most_its_share_of_the_loop():
+    from undertow.jobs.live.pipeline import MAP_VIEW_SHARE, STATUS_PERIOD_S, map_view_due
+
+    assert map_view_due(100.0, 0.004) == 100.0 + STATUS_PERIOD_S  # cheap: every period
+    slow = 4 * STATUS_PERIOD_S * MAP_VIEW_SHARE  # a rebuild 4 times the share of a period
+    due = map_view_due(100.0, slow)
+    assert due == pytest.approx(100.0 + 4 * STATUS_PERIOD_S)
+    assert slow / (due - 100.0) == pytest.approx(MAP_VIEW_SHARE)

@@ -72,6 +72,10 @@ STATUS_PERIOD_S = 1.0
 POLL_S = 0.02
 #: every n-th committed state goes into the path shown in the view
 PATH_DECIMATION = 10
+#: the largest share of the loop's time the view's map may take: rebuilt from every cell, it is
+#: republished each STATUS_PERIOD_S, or less often once one rebuild takes longer than this share
+#: of that (a long survey's map), :func:`map_view_due`
+MAP_VIEW_SHARE = 0.05
 #: sensor seconds between online map updates (the chunks released meanwhile at once: the map
 #: is the same to rounding, module :mod:`undertow.mapping.online`, for a tenth of the calls)
 MAP_EVERY_S = 1.0
@@ -157,6 +161,7 @@ class LiveSession:
         self._first_wall: float | None = None
         self._last_wall: float | None = None
         self._next_status = 0.0
+        self._next_map_view = 0.0
         self._path: list = []
         self._early: list = []  # chunks released before the filter started (for the map)
         self._first_t: float | None = None
@@ -441,8 +446,10 @@ class LiveSession:
             self.recorder.write_status(status["clock"], status)
         view = self.view
         if view is not None and self.mapper is not None and self.stats.pings:
-            if view.subscribed("/undertow/map"):
+            start = time.perf_counter()
+            if view.subscribed("/undertow/map") and start >= self._next_map_view:
                 view.publish_map(status["clock"], self.mapper.occupancy())
+                self._next_map_view = map_view_due(start, time.perf_counter() - start)
         if view is not None and self._path and view.subscribed("/undertow/path"):
             view.publish_path(status["clock"], np.asarray(self._path))
         if self.status_callback is not None:
@@ -508,6 +515,14 @@ class LiveSession:
             "wave": self.sea.to_dict() if self.sea is not None else None,
             "notes": list(self.notes),
         })  # fmt: skip
+
+
+def map_view_due(start: float, cost: float, period: float = STATUS_PERIOD_S,
+                 share: float = MAP_VIEW_SHARE) -> float:  # fmt: skip
+    """When to rebuild the view's map next, after a rebuild that began at ``start`` and took
+    ``cost`` s: start + max(period, cost / share), so that it takes at most ``share`` of the
+    loop's time once it costs more than share x period."""
+    return start + max(period, cost / share)
 
 
 def received_at(clock: ScaledClock, arrival: float, queued: float) -> float:

@@ -18,7 +18,9 @@ Topics (:data:`TOPICS`, topic -> schema name):
   position, axes 2 * 3 sqrt(lambda_i) along the eigenvectors of P[0:3, 0:3];
 - ``/tf`` (``foxglove.FrameTransform``): ``world`` -> ``base_link`` (the same pose), so panels
   can follow the robot;
-- ``/undertow/path`` (``foxglove.PosesInFrame``): the positions so far (orientation identity);
+- ``/undertow/path`` (``foxglove.PosesInFrame``): the positions so far (orientation identity),
+  at most :data:`MAX_PATH_POSES` of them, evenly spaced over the whole path, the newest last
+  (:func:`path_points`: an hour's path stays a message the app draws at once);
 - ``/undertow/rays/dvl``, ``/undertow/rays/sonar`` (``foxglove.SceneUpdate``): one line
   segment per beam from its origin to its end point (world frame, m), DVL green, sonar orange;
 - ``/undertow/map`` (``foxglove.PointCloud``): the occupied cells' centres (mean occupancy above
@@ -70,6 +72,8 @@ WAVE_SCHEMA = {
     },
 }
 RAY_COLORS = {"dvl": (0.2, 0.9, 0.3, 1.0), "sonar": (1.0, 0.6, 0.1, 1.0)}
+#: the most positions ``/undertow/path`` carries (:func:`path_points`)
+MAX_PATH_POSES = 2000
 
 
 def _foxglove():
@@ -101,6 +105,16 @@ def _colors(values: np.ndarray) -> np.ndarray:
     rgba[:, 2] = np.round(255 * (1 - s))
     rgba[:, 3] = 255
     return rgba
+
+
+def path_points(positions, max_poses: int = MAX_PATH_POSES) -> np.ndarray:
+    """At most ``max_poses`` (>= 2) of the positions (N, 3): all of them, or every k-th from the
+    first with k = ceil(N / (max_poses - 1)), and the newest last."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(p) <= max_poses:
+        return p
+    step = -(-len(p) // (max_poses - 1))
+    return np.concatenate([p[: len(p) - 1 : step], p[-1:]])
 
 
 def ellipsoid_axes(cov) -> tuple[list[float], tuple[float, float, float, float]]:
@@ -237,12 +251,12 @@ class LiveView:
         return m.SceneUpdate(entities=[entity])
 
     def publish_path(self, t: float, positions) -> None:
-        """The path: positions (N, 3) in ``world``."""
+        """The path: positions (N, 3) in ``world`` (at most MAX_PATH_POSES, :func:`path_points`)."""
         if not self.subscribed(PATH):
             return
         m = self._m
         stamp, ns = _stamp(m, t)
-        p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        p = path_points(positions)
         identity = m.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
         poses = [
             m.Pose(position=m.Vector3(x=float(a), y=float(b), z=float(c)), orientation=identity)
