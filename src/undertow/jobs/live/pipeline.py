@@ -68,8 +68,12 @@ from .reorder import ReorderBuffer
 
 #: wall seconds between status updates (status line, /undertow/status, the view's map)
 STATUS_PERIOD_S = 1.0
-#: wall seconds the main loop waits for a record before it checks the clock again
+#: wall seconds the main loop waits for a record before it checks the clock again, or
+#: POLL_SENSOR_S of sensor time when that is longer (real time: 0.1 s, a fifth of the commit
+#: interval; each turn has more to do and the turns' fixed costs, which run cold after a
+#: wait, are paid 10 rather than 50 times a second). A DVL report wakes the loop at once.
 POLL_S = 0.02
+POLL_SENSOR_S = 0.1
 #: every n-th committed state goes into the path shown in the view
 PATH_DECIMATION = 10
 #: the largest share of the loop's time the view's map may take: rebuilt from every cell, it is
@@ -208,8 +212,9 @@ class LiveSession:
     def run(self) -> LiveResult:
         """Work until stopped (module docstring), then finish."""
         started = time.monotonic()
+        poll = max(POLL_S, POLL_SENSOR_S / self.live.time_scale)
         while not self._stop.is_set():
-            self.step(POLL_S)
+            self.step(poll)
             if (
                 self.live.duration_s is not None
                 and time.monotonic() - started > self.live.duration_s
