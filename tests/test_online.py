@@ -214,7 +214,8 @@ def test_never_starts_without_an_orientation_source(session):
 
 def test_set_wave_applies_to_later_rows(session):
     """A step of the wave condition between two DVL/DR rows is exactly a two-node WaveTrack
-    (interpolation returns the node value at and beyond a node)."""
+    (interpolation returns the node value at and beyond a node). A preview made before the
+    step (its DVL rows with the old noise) is not taken by the push after it."""
     recs, mounting = session
     k = next(i for i, r in enumerate(recs) if r.t >= 30.0)
     noisy = [r.t for r in recs if r.stream in ("dvl", "dead_reckoning")]
@@ -227,6 +228,8 @@ def test_set_wave_applies_to_later_rows(session):
         ref = Localizer("proposed", wave=track).run(_whole(recs, mounting))
         online = OnlineLocalizer("proposed", wave=(0.1, 1.0), mounting=mounting, expected=EXPECTED)
         _push_all(online, recs[:k], np.arange(50, k, 50))
+        assert any(r.stream == "dvl" for r in recs[k : k + 50])
+        online.peek(records_to_log(recs[k : k + 50]))  # the old noise: not to be taken
         online.set_wave("wave-a0.05-f0.75")
         _push_all(online, recs[k:], np.arange(50, len(recs) - k, 50))
         constant = Localizer("proposed", wave=WAVE).run(_whole(recs, mounting))
