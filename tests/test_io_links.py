@@ -572,7 +572,7 @@ def test_polled_mavlink_counts_the_kernels_drops_and_stamps_on_its_clock():
     with link:
         _wait(lambda: link._polling is not None, link)
         # a small receive buffer (the kernel's minimum: a few datagrams) to make it drop some
-        link._polling[1].setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        link._polling[1].sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         first = clock()
         for k in range(n):
             msg = mavlink2.MAVLink_attitude_message(k, 0.0, 0.0, 0.0, 0.01, 0.0, 0.0)

@@ -40,19 +40,15 @@ from __future__ import annotations
 import importlib
 import math
 import socket
-import struct
 import sys
 import time
 
 from ...errors import ConfigError
 from ..mavlink import MavlinkConfig, MavlinkMapper
-from . import mavlink_filter
+from . import mavlink_filter, stamped
 from .common import Backoff, ClockPolicy, Link, LinkCounters
 
 TIME_SOURCES = ("arrival", "sensor")
-#: socket(7) options for a polled socket (Linux values where Python does not name them)
-SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)
-SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
 
 
 class MavlinkLink(Link):
@@ -103,7 +99,6 @@ class MavlinkLink(Link):
         self.polled = bool(polled)
         self._polling = None  # (conn, socket) that pump() reads (polled, while connected)
         self._last_read = 0.0  # time.monotonic() of pump()'s last datagram
-        self._kernel_drops = 0  # SO_RXQ_OVFL: the socket's drop count so far
         self._frames: _SingleFrames | None = None
 
     def load(self) -> None:
@@ -186,15 +181,9 @@ class MavlinkLink(Link):
     def _watch(self, conn, sock) -> None:
         """``polled``: hand the socket to :meth:`pump` and watch for silence (no datagram read
         for ``idle_timeout_s``: the session ends, and the connection is opened again)."""
-        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
-        except OSError:  # (not Linux: no drop count)
-            pass
-        sock.setblocking(False)
-        self._kernel_drops = 0
+        stamped.enable(sock)
         self._last_read = time.monotonic()
-        self._polling = (conn, sock)
+        self._polling = (conn, stamped.Reader(sock, self.now))
         try:
             while not self._stop.wait(0.2):
                 if time.monotonic() - self._last_read > self.idle_timeout_s:
@@ -208,29 +197,12 @@ class MavlinkLink(Link):
         polling = self._polling
         if polling is None:
             return
-        conn, sock = polling
-        at = getattr(self.now, "at", None)
-        if at is None and self.now is time.time:
-            at = float
-        while True:
-            try:
-                data, ancillary, _, _ = sock.recvmsg(65535, 256)
-            except OSError:  # nothing waiting (BlockingIOError), or closed by a reconnect
-                return
+        conn, reader = polling
+        dropped = reader.dropped
+        while (got := reader.read()) is not None:
             self._last_read = time.monotonic()
-            wall = None
-            for level, kind, value in ancillary:
-                if level != socket.SOL_SOCKET:
-                    continue
-                if kind == SO_TIMESTAMPNS and len(value) >= 16:
-                    sec, nsec = struct.unpack_from("@qq", value)
-                    wall = sec + nsec * 1e-9
-                elif kind == SO_RXQ_OVFL and len(value) >= 4:
-                    drops = struct.unpack_from("@I", value)[0]
-                    self.counters.overflow += (drops - self._kernel_drops) % (1 << 32)
-                    self._kernel_drops = drops
-            arrival = at(wall) if at is not None and wall is not None else self.now()
-            self._decode(conn, arrival, data)
+            self._decode(conn, got[1], got[0])
+        self.counters.overflow += reader.dropped - dropped
 
     def _attach_filter(self, conn, sock) -> bool:
         """The kernel drops the single frames of messages no stream uses (:mod:`.mavlink_filter`);
