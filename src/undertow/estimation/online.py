@@ -422,8 +422,10 @@ class _Run:
     rows since the oldest checkpoint, the outputs, and the recent previews a push may take
     (:meth:`_adopt`)."""
 
-    #: previews kept for a push to take (the live pipeline chains a few between commits)
-    MAX_PREVIEWS = 32
+    #: previews kept for a push to take, the oldest dropped first (the live pipeline chains
+    #: one per DVL report between commits: 4 at 8 Hz and the default 0.5 s commits, 128 cover
+    #: 16 s; each holds its states, about 40 kB)
+    MAX_PREVIEWS = 128
 
     def __init__(self, cfg, noise, x0, P0, process, sensors) -> None:
         self.cfg, self.noise, self.process, self.sensors = cfg, noise, process, sensors
