@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import socket
 import struct
+import sys
 import time
 
-SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)  # (Linux values where Python lacks them)
-SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40)
+_LINUX = sys.platform.startswith("linux")  # (its values where Python lacks the names)
+SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if _LINUX else None)
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40 if _LINUX else None)
 _TIMESPEC = struct.Struct("@qq")
 _DROPS = struct.Struct("@I")
 
@@ -22,9 +24,11 @@ _DROPS = struct.Struct("@I")
 def enable(sock: socket.socket) -> None:
     """Receive times and drop counts on ``sock``, made non-blocking (for :class:`Reader`)."""
     for option in (SO_TIMESTAMPNS, SO_RXQ_OVFL):
+        if option is None:
+            continue
         try:
             sock.setsockopt(socket.SOL_SOCKET, option, 1)
-        except OSError:  # (not Linux)
+        except OSError:  # (a kernel without it)
             pass
     sock.setblocking(False)
 
