@@ -97,7 +97,7 @@ class MavlinkLink(Link):
         self.wake = wake
         self.kernel_filter = bool(kernel_filter)
         self.polled = bool(polled)
-        self._polling = None  # (conn, socket) that pump() reads (polled, while connected)
+        self._polling = None  # (conn, stamped.Reader) that pump() reads (polled, connected)
         self._last_read = 0.0  # time.monotonic() of pump()'s last datagram
         self._frames: _SingleFrames | None = None
 
@@ -198,11 +198,11 @@ class MavlinkLink(Link):
         if polling is None:
             return
         conn, reader = polling
-        dropped = reader.dropped
         while (got := reader.read()) is not None:
             self._last_read = time.monotonic()
+            self.counters.overflow += reader.dropped  # (told with this datagram)
+            reader.dropped = 0
             self._decode(conn, got[1], got[0])
-        self.counters.overflow += reader.dropped - dropped
 
     def _attach_filter(self, conn, sock) -> bool:
         """The kernel drops the single frames of messages no stream uses (:mod:`.mavlink_filter`);

@@ -37,7 +37,8 @@ class Reader:
     """Reads the datagrams waiting on a socket :func:`enable` set up, each with its receive
     time on the link's clock ``now`` (its ``at(wall)`` maps a ``time.time`` instant, as
     :class:`~undertow.io.links.common.ScaledClock` does; ``time.time`` itself needs none; any
-    other clock gets the read time). ``dropped`` counts the datagrams the kernel dropped."""
+    other clock gets the read time). ``dropped`` counts the datagrams the kernel dropped (the
+    caller may take and reset it)."""
 
     def __init__(self, sock: socket.socket, now) -> None:
         self.sock = sock
