@@ -136,7 +136,7 @@ class LiveSession:
         self.mounting = mounting or Mounting()
         self.clock = ScaledClock(self.live.time_scale)
         # records from the link threads; only a DVL report (whose pose is previewed at once)
-        # wakes the loop, the rest wait for its next tick (POLL_S): fewer wake-ups per record
+        # wakes the loop, the rest wait for its next turn (POLL_S): fewer wake-ups per record
         self._queue: collections.deque = collections.deque()
         self._wake = threading.Event()
         self._loop_thread = threading.get_ident()  # the thread that runs step() (set by it)
