@@ -23,9 +23,9 @@ Figures:
   on the A50's clock, which a late arrival may relatch; ``filter_span_s``: of the filter's
   states, which also counts the arrival stamps of the clockless MAVLink and Ping records,
   stretched when this process falls behind);
-  ``cpu_s_by_thread``: where the CPU went (MainThread: decoding the A50's and MAVLink's data,
-  which their threads only receive, recording, filter, map, view; the rest of ``cpu_s`` is the
-  view server's native threads).
+  ``cpu_s_by_thread``: where the CPU went (MainThread: decoding the A50's data, which its
+  thread only receives, reading and decoding MAVLink's socket, recording, filter, map, view; the
+  rest of ``cpu_s`` is the view server's native threads).
 - ``latency_ms``: wall time from a DVL report's arrival (its bytes received by the link's thread)
   to its pose being published (the preview on the committed filter), median and p99. Target:
   p99 < 10 ms.

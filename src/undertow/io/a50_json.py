@@ -133,6 +133,13 @@ def position_row(obj: dict) -> tuple:
     )
 
 
+def position_fields(obj: dict) -> tuple[dict, float]:
+    """(the fields of a ``dead_reckoning`` record, the report's ``ts`` s) of one
+    ``position_local`` report: :func:`position_row` as a record's fields."""
+    ts, x, y, z, std, roll, pitch, yaw = position_row(obj)
+    return {"position": (x, y, z), "orientation": (roll, pitch, yaw), "std": std}, ts
+
+
 def dead_reckoning_from_rows(rows: list[tuple], notes: Notes) -> DeadReckoning | None:
     """A time-ordered DeadReckoning stream from :func:`position_row` tuples (None, with a note,
     when no row has a finite time)."""

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from .._collect import MALFORMED
-from ..a50_json import is_position_report, is_velocity_report, position_row, velocity_fields
+from ..a50_json import is_position_report, is_velocity_report, position_fields, velocity_fields
 from .common import Backoff, ClockPolicy, Link, LinkCounters, Record
 
 DEFAULT_PORT = 16171
@@ -75,8 +75,7 @@ class A50LineDecoder:
             self.responses = [*self.responses[-(MAX_RESPONSES - 1) :], obj]
             return []
         if is_position_report(obj):
-            ts, x, y, z, std, roll, pitch, yaw = position_row(obj)
-            data = {"position": (x, y, z), "orientation": (roll, pitch, yaw), "std": std}
+            data, ts = position_fields(obj)
             return self._stamped("dead_reckoning", data, arrival, ts, text)
         if is_velocity_report(obj):
             fields, tov = velocity_fields(obj)

@@ -9,7 +9,7 @@ import json
 import math
 from collections.abc import Iterable
 
-from ..a50_json import is_position_report, position_row, velocity_fields
+from ..a50_json import is_position_report, position_fields, velocity_fields
 from ..links.common import Record, records_to_log
 from ..mavlink import MavlinkConfig, MavlinkMapper
 from .player import Served
@@ -18,8 +18,7 @@ from .player import Served
 def _a50(entry: Served) -> list[Record]:
     obj = json.loads(entry.payload)
     if is_position_report(obj):
-        _, x, y, z, std, roll, pitch, yaw = position_row(obj)
-        data = {"position": (x, y, z), "orientation": (roll, pitch, yaw), "std": std}
+        data, _ = position_fields(obj)
         return [Record("dead_reckoning", entry.t, data, entry.wall, entry.sensor_time, "a50")]
     fields, _ = velocity_fields(obj)
     return [Record("dvl", entry.t, fields, entry.wall, entry.sensor_time, "a50")]
