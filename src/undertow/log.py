@@ -475,6 +475,58 @@ class GroundTruth(_Stream):
         return world_to_body(rpy, vel)
 
 
+@dataclass(frozen=True, eq=False)
+class AutopilotPose(GroundTruth):
+    """The autopilot's own navigation estimate (ArduPilot EKF3's ``XKF1``: position north-east-
+    down about its origin, roll-pitch-yaw, world velocity): a *reference* to compare with, not a
+    truth. Same fields and helpers as :class:`GroundTruth`."""
+
+    kind: ClassVar[str] = "autopilot"
+
+
+@dataclass(frozen=True, eq=False)
+class Depth(_Stream):
+    """Depth below the surface (m, positive down) as the vehicle itself reports it (a depth
+    topic, a pose's z with its sign resolved), not converted by undertow from a pressure."""
+
+    kind: ClassVar[str] = "depth"
+    _shapes: ClassVar[dict[str, tuple]] = {"depth": ()}
+    t: np.ndarray
+    depth: np.ndarray
+
+    def invalid_count(self) -> int:
+        return int(np.sum(~np.isfinite(self.depth)))
+
+
+@dataclass(frozen=True, eq=False)
+class GpsFix(_Stream):
+    """Position fixes (GNSS at the surface, or a position reference in a local frame).
+
+    ``position`` (m): x north, y east, z down about ``origin`` (latitude deg, longitude deg,
+    altitude m; NaN where the fixes came in local metres already); ``latitude``/``longitude``
+    (deg) and ``altitude`` (m) as received (NaN for local fixes); ``horizontal_std`` (m, NaN if
+    absent). Only usable fixes are kept (the readers drop and count the rest)."""
+
+    kind: ClassVar[str] = "gps"
+    _shapes: ClassVar[dict[str, tuple]] = {
+        "position": (3,),
+        "latitude": (),
+        "longitude": (),
+        "altitude": (),
+        "horizontal_std": (),
+    }
+    t: np.ndarray
+    position: np.ndarray
+    latitude: np.ndarray | None = None
+    longitude: np.ndarray | None = None
+    altitude: np.ndarray | None = None
+    horizontal_std: np.ndarray | None = None
+    origin: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+
+    def invalid_count(self) -> int:
+        return int(np.sum(~np.all(np.isfinite(self.position), axis=1)))
+
+
 #: Azimuths (deg, about +z from +x toward +y) of the A50's beams for protocol ids 0..3.
 A50_AZIMUTHS_DEG = (135.0, -135.0, -45.0, 45.0)
 
@@ -690,6 +742,9 @@ STREAM_NAMES = (
     "wave_probe",
     "ground_truth",
     "multibeam",
+    "depth",
+    "gps",
+    "autopilot",
 )
 
 
@@ -712,6 +767,12 @@ class Log:
     source: str = ""
     metadata: dict = field(default_factory=dict)
     multibeam: Multibeam | None = None
+    #: the vehicle's own depth report (a reference for the pressure's depth, or its stand-in)
+    depth: Depth | None = None
+    #: position fixes (GNSS at the surface): a reference, never fused by the paper's filter
+    gps: GpsFix | None = None
+    #: the autopilot's own estimate (e.g. ArduPilot EKF3): a reference, never fused
+    autopilot: AutopilotPose | None = None
 
     def streams(self) -> dict[str, _Stream]:
         """The streams present, by name, in :data:`STREAM_NAMES` order."""
