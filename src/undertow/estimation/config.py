@@ -13,7 +13,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PlainValidator, field_validator
 from pydantic_core import PydanticCustomError
 
-from ..log import FRESH_WATER_DENSITY, P_ATM, Mounting
+from ..log import Mounting
 from . import model
 from .ukf import _weights
 
@@ -101,8 +101,11 @@ class LocalizerConfig(BaseModel):
     )  # fmt: skip
     # sensors
     dvl_scale_factor: Positive = 1.0  # v_used = v_measured / scale
-    water_density_kg_m3: Positive = FRESH_WATER_DENSITY
-    surface_pressure_pa: Positive = P_ATM
+    # depth from pressure: None takes what the log reader resolved and stated (the log's
+    # metadata: the surface pressure found in the log, the water of the settings' log section),
+    # else fresh water (FRESH_WATER_DENSITY) and the standard atmosphere (P_ATM)
+    water_density_kg_m3: Positive | None = None
+    surface_pressure_pa: Positive | None = None
     # robustness and output
     # Mahalanobis gate: chi-square probability of the NIS quantile (every sensor), "default"
     # (DEFAULT_GATE_NIS for the DVL, DR and barometer) or None (off)

@@ -78,6 +78,12 @@ class Notes:
         self.source = source
         self.counts: Counter[str] = Counter()
         self.details: dict[str, str] = {}
+        self.statements: list[str] = []
+
+    def state(self, line: str) -> None:
+        """A one-off statement of a choice made while reading (no count), e.g. the time base."""
+        if line not in self.statements:
+            self.statements.append(line)
 
     def add(self, kind: str, n: int = 1, detail: str = "") -> None:
         if n <= 0:
@@ -87,8 +93,9 @@ class Notes:
             self.details[kind] = detail
 
     def lines(self) -> list[str]:
-        """One line per kind of note: source, kind, count and the first occurrence."""
-        lines = []
+        """One line per statement and per kind of note: source, kind, count and the first
+        occurrence."""
+        lines = [f"{self.source}: {line}" for line in self.statements]
         for kind, n in self.counts.items():
             extra = f" (first: {self.details[kind]})" if kind in self.details else ""
             lines.append(f"{self.source}: {kind}: {n}{extra}")

@@ -1,10 +1,18 @@
 """Decoded ROS messages -> measurement rows -> :mod:`undertow.log` streams.
 
-One small accumulator per stream; each knows the message types it accepts (DVL by type:
-``waterlinked_a50_ros_driver/msg/DVL`` or ``marine_acoustic_msgs/msg/Dvl``; the multibeam a
-``sensor_msgs/msg/PointCloud2`` of detections, :func:`cloud_points`). Times are
-``header.stamp`` in float seconds (the bag's record time when a message has no header or a
-zero stamp). Used by :mod:`undertow.io.rosbag`.
+One small accumulator per stream; each knows the message types it accepts (:data:`ACCEPTED`;
+DVL types are read by the meaning of their fields, :mod:`undertow.io.ros_dvl`; the multibeam a
+``sensor_msgs/msg/PointCloud2`` of detections, :func:`cloud_points`). Every message's two times
+(``header.stamp``, NaN when zero or absent, and the bag's record time) go to a
+:class:`~undertow.io.clock.ClockTable`; a row holds its message's index there until
+:meth:`Rows.apply_times` puts the chosen time base in (:mod:`undertow.io.clock`). Used by
+:mod:`undertow.io.rosbag`.
+
+Depth comes from a pose's z (``PoseWithCovarianceStamped``, ``PoseStamped``: its sign resolved
+by the reader) or a ``std_msgs/Float64``/``Float32`` (positive down); position fixes from
+``sensor_msgs/NavSatFix`` (status < 0 and non-finite fixes dropped and counted; projected to
+local metres, :mod:`undertow.io.geo`) or a ``nav_msgs/Odometry`` in a local frame (east-north-up
+as REP-103 says, made north-east-down about the first fix).
 """
 
 from __future__ import annotations
@@ -14,25 +22,35 @@ import math
 
 import numpy as np
 
-from ..log import GroundTruth, Imu, Multibeam, Pressure, SonarRange, WaveProbe
+from ..log import Depth, GpsFix, GroundTruth, Imu, Multibeam, Pressure, SonarRange, WaveProbe
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
 from ._collect import MALFORMED, DvlRows, Notes, count_nan_rows, time_order
 from .a50_json import add_velocity_report, is_position_report, is_velocity_report, position_row
-from .msgdefs import A50_DVL, MARINE_DVL
+from .clock import ClockTable
+from .geo import local_ned
+from .msgdefs import WL_DVLDR
+from .ros_dvl import DVL_TYPES, dvl_report
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+POSE_COV = "geometry_msgs/msg/PoseWithCovarianceStamped"
+POSE = "geometry_msgs/msg/PoseStamped"
+FLOAT_TYPES = ("std_msgs/msg/Float64", "std_msgs/msg/Float32")
+NAVSATFIX = "sensor_msgs/msg/NavSatFix"
+ODOMETRY = "nav_msgs/msg/Odometry"
 #: sensor_msgs/PointField datatype constants -> numpy type codes
 POINT_FIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
 ACCEPTED = {
-    "dvl": (A50_DVL, MARINE_DVL),
-    "dead_reckoning": ("geometry_msgs/msg/PoseWithCovarianceStamped",),
+    "dvl": tuple(DVL_TYPES),
+    "dead_reckoning": (POSE_COV, WL_DVLDR),
     "dvl_json": ("std_msgs/msg/String",),
     "imu": ("sensor_msgs/msg/Imu",),
     "pressure": ("sensor_msgs/msg/FluidPressure",),
+    "depth": (POSE_COV, POSE, *FLOAT_TYPES),
     "sonar": ("sensor_msgs/msg/Range",),
     "wave_probe": ("geometry_msgs/msg/PointStamped",),
-    "ground_truth": ("nav_msgs/msg/Odometry",),
+    "ground_truth": (ODOMETRY,),
+    "gps": (NAVSATFIX, ODOMETRY),
     "multibeam": (POINTCLOUD2,),
     "tf_static": (TF_MESSAGE,),
 }
@@ -44,12 +62,14 @@ def ns_to_s(ns: int) -> float:
     return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
 
 
-def stamp(msg, record_ns: int, notes: Notes) -> float:
-    """header.stamp in seconds; the record time (with a note) when the stamp is zero."""
-    st = msg.header.stamp
-    if st.sec == 0 and st.nanosec == 0 and record_ns != 0:  # a stamp the driver never filled
-        notes.add("messages with a zero header.stamp (bag record time used)")
-        return ns_to_s(record_ns)
+def header_stamp(msg) -> float:
+    """``header.stamp`` in seconds; NaN for a zero stamp (never filled) or no header."""
+    header = getattr(msg, "header", None)
+    if header is None:
+        return math.nan
+    st = header.stamp
+    if st.sec == 0 and st.nanosec == 0:
+        return math.nan
     return st.sec + st.nanosec * 1e-9
 
 
@@ -102,10 +122,15 @@ def cloud_points(msg) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 class Rows:
-    """Plain row lists per stream, filled by :meth:`add` and turned into streams by builders."""
+    """Plain row lists per stream, filled by :meth:`add` and turned into streams by builders.
+
+    A row's time is its message's index in :attr:`clock` until :meth:`apply_times` replaces
+    it with the time base's time (builders called without it take the rows' times as they
+    are)."""
 
     def __init__(self, notes: Notes) -> None:
         self.notes = notes
+        self.clock = ClockTable()
         self.dvl = DvlRows()
         self.dvl_mode_given: list[bool] = []
         self.json_velocity: list[tuple[float, dict]] = []
@@ -119,9 +144,24 @@ class Rows:
         self.pings: list[tuple] = []
         #: the DVL messages carried their own beam unit vectors (marine_acoustic_msgs/Dvl)
         self.dvl_units_given = False
+        #: header.frame_id of the DVL messages (a twist may be in the body frame)
+        self.dvl_frames: set[str] = set()
+        #: the depth topic's kind: "pose" (z, sign to resolve) or "float" (positive down)
+        self.depth_kind: str | None = None
+        #: gps rows: (t, lat, lon, alt, std) of NavSatFix, or (t, x, y, z, std) local (Odometry)
+        self.gps_local = False
+
+    def stamp(self, stream: str, msg, record_ns: int) -> float:
+        """Register the message's two times; the row's time placeholder (its index). A zero stamp
+        recorded within a second of time zero is a clock that starts at zero (a simulation), not
+        a stamp never filled."""
+        record_s = ns_to_s(record_ns)
+        header_s = header_stamp(msg)
+        if math.isnan(header_s) and abs(record_s) < 1.0 and hasattr(msg, "header"):
+            header_s = 0.0
+        return self.clock.add(stream, header_s, record_s)
 
     def add(self, stream: str, msgtype: str, msg, record_ns: int) -> None:
-        notes = self.notes
         if stream == "dvl_json":
             self._add_json(msg.data, record_ns)
         elif stream == "tf_static":
@@ -135,93 +175,131 @@ class Rows:
                         _quat(r.rotation),
                     )
                 )
-        elif msgtype == A50_DVL:
-            beams = [(b.id, b.velocity, b.distance, b.valid) for b in msg.beams]
-            self.dvl.append(
-                stamp(msg, record_ns, notes),
-                _xyz(msg.velocity),
-                msg.velocity_valid,
-                fom=msg.fom,
-                altitude=msg.altitude,
-                beams=beams,
-                key=(msg.time, *_xyz(msg.velocity)),
-            )
-        elif msgtype == MARINE_DVL:
-            self._add_marine(msg, record_ns)
+        elif stream == "dvl":
+            self._add_dvl(msgtype, msg, record_ns)
         elif stream == "multibeam":
             points, intensity = cloud_points(msg)
-            self.pings.append((stamp(msg, record_ns, notes), points, intensity))
+            self.pings.append((self.stamp(stream, msg, record_ns), points, intensity))
         elif stream == "dead_reckoning":
-            p = msg.pose.pose
-            cov = msg.pose.covariance[0]
-            std = math.sqrt(cov) if cov >= 0 else math.nan
-            self.rows[stream].append(
-                (stamp(msg, record_ns, notes), *_xyz(p.position), std, *_quat(p.orientation))
-            )
+            self._add_dead_reckoning(msgtype, msg, record_ns)
+        elif stream == "depth":
+            self._add_depth(msgtype, msg, record_ns)
+        elif stream == "gps":
+            self._add_gps(msgtype, msg, record_ns)
         elif stream == "imu":
             has_q = msg.orientation_covariance[0] != -1
             has_a = msg.linear_acceleration_covariance[0] != -1
-            self.rows[stream].append(
-                (
-                    stamp(msg, record_ns, notes),
-                    *_xyz(msg.angular_velocity),
-                    *_xyz(msg.linear_acceleration),
-                    *_quat(msg.orientation),
-                    has_a,
-                    has_q,
-                )
+            row = (
+                *_xyz(msg.angular_velocity),
+                *_xyz(msg.linear_acceleration),
+                *_quat(msg.orientation),
+                has_a,
+                has_q,
             )
+            self.rows[stream].append((self.stamp(stream, msg, record_ns), *row))
         elif stream == "pressure":
-            self.rows[stream].append((stamp(msg, record_ns, notes), msg.fluid_pressure))
+            value = float(msg.fluid_pressure)
+            self.rows[stream].append((self.stamp(stream, msg, record_ns), value))
         elif stream == "sonar":
-            self.sonar_limits = self.sonar_limits or (
-                msg.field_of_view,
-                msg.min_range,
-                msg.max_range,
-            )
-            self.rows[stream].append((stamp(msg, record_ns, notes), msg.range))
+            limits = (msg.field_of_view, msg.min_range, msg.max_range)
+            value = float(msg.range)
+            self.sonar_limits = self.sonar_limits or limits
+            self.rows[stream].append((self.stamp(stream, msg, record_ns), value))
         elif stream == "wave_probe":
-            self.probe_x = msg.point.x if self.probe_x is None else self.probe_x
-            self.rows[stream].append((stamp(msg, record_ns, notes), msg.point.z))
+            x, z = float(msg.point.x), float(msg.point.z)
+            self.probe_x = x if self.probe_x is None else self.probe_x
+            self.rows[stream].append((self.stamp(stream, msg, record_ns), z))
         elif stream == "ground_truth":
             p, tw = msg.pose.pose, msg.twist.twist.linear
-            self.rows[stream].append(
-                (stamp(msg, record_ns, notes), *_xyz(p.position), *_quat(p.orientation), *_xyz(tw))
-            )
+            row = (*_xyz(p.position), *_quat(p.orientation), *_xyz(tw))
+            self.rows[stream].append((self.stamp(stream, msg, record_ns), *row))
 
-    def _add_marine(self, msg, record_ns: int) -> None:
-        units = np.array([_xyz(u) for u in msg.beam_unit_vec])
-        rng = np.asarray(msg.range, dtype=np.float64)
-        ok = msg.beam_ranges_valid & np.isfinite(rng) & (rng > 0)
-        vel = np.asarray(msg.beam_velocity, dtype=np.float64)
-        cov = np.asarray(msg.velocity_covar, dtype=np.float64).reshape(3, 3)
-        if np.all(cov == -1):
-            cov = None
-        v = _xyz(msg.velocity)
-        self.dvl_mode_given.append(msg.velocity_mode != 0)
-        self.dvl_units_given = True
-        valid = msg.velocity_mode != 0 and all(math.isfinite(x) for x in v)
-        self.dvl.append(
-            stamp(msg, record_ns, self.notes),
-            v,
-            valid,
-            covariance=cov,
-            altitude=msg.altitude,
-            beams=list(zip(range(4), vel, rng, ok, strict=True)),
-            beam_units=units,
-            good_beams=int(msg.num_good_beams),
-        )
+    def _add_dvl(self, msgtype: str, msg, record_ns: int) -> None:
+        report = dvl_report(msgtype, msg)
+        extra = report.pop("extra")
+        if "mode_given" in extra:
+            self.dvl_mode_given.append(extra.pop("mode_given"))
+        if report.get("beam_units") is not None:
+            self.dvl_units_given = True
+        header = getattr(msg, "header", None)
+        if header is not None:
+            self.dvl_frames.add(str(header.frame_id))
+        self.dvl.append(self.stamp("dvl", msg, record_ns), **report, **extra)
+
+    def _add_dead_reckoning(self, msgtype: str, msg, record_ns: int) -> None:
+        if msgtype == WL_DVLDR:  # position (m), pos_std (m), roll/pitch/yaw in degrees
+            rpy = np.deg2rad([float(msg.roll), float(msg.pitch), float(msg.yaw)])
+            row = (*_xyz(msg.position), float(msg.pos_std), *rpy)
+            self.rows["dead_reckoning"].append((self.stamp("dead_reckoning", msg, record_ns), *row))
+            return
+        p = msg.pose.pose
+        cov = float(msg.pose.covariance[0])
+        std = math.sqrt(cov) if cov >= 0 else math.nan
+        rpy = quaternion_to_rpy(np.array(_quat(p.orientation), dtype=np.float64))
+        row = (*_xyz(p.position), std, *(float(a) for a in rpy))
+        self.rows["dead_reckoning"].append((self.stamp("dead_reckoning", msg, record_ns), *row))
+
+    def _add_depth(self, msgtype: str, msg, record_ns: int) -> None:
+        if msgtype in FLOAT_TYPES:
+            value, kind = float(msg.data), "float"
+        else:
+            pose = msg.pose.pose if msgtype == POSE_COV else msg.pose
+            value, kind = float(pose.position.z), "pose"
+        self.depth_kind = kind
+        self.rows["depth"].append((self.stamp("depth", msg, record_ns), value))
+
+    def _add_gps(self, msgtype: str, msg, record_ns: int) -> None:
+        if msgtype == ODOMETRY:
+            self.gps_local = True
+            p = msg.pose.pose.position
+            cov = float(msg.pose.covariance[0])
+            std = math.sqrt(cov) if math.isfinite(cov) and cov > 0 else math.nan
+            row = (float(p.x), float(p.y), float(p.z), std)
+            if not all(math.isfinite(v) for v in row[:3]):
+                self.notes.add("gps: odometry fixes with non-finite positions (dropped)")
+                return
+        else:
+            lat, lon, alt = float(msg.latitude), float(msg.longitude), float(msg.altitude)
+            if int(msg.status.status) < 0:
+                self.notes.add("gps: fixes with status NO_FIX (< 0) (dropped)")
+                return
+            if not (math.isfinite(lat) and math.isfinite(lon) and abs(lat) <= 90
+                    and abs(lon) <= 180):  # fmt: skip
+                self.notes.add("gps: fixes with a non-finite or out-of-range latitude/longitude"
+                               " (dropped)")  # fmt: skip
+                return
+            c = np.asarray(msg.position_covariance, dtype=np.float64)
+            known = int(msg.position_covariance_type) > 0 and c.size == 9
+            std = math.sqrt(max(c[0], 0) + max(c[4], 0)) if known else math.nan
+            row = (lat, lon, alt if math.isfinite(alt) else 0.0, std)
+        self.rows["gps"].append((self.stamp("gps", msg, record_ns), *row))
 
     def _add_json(self, text: str, record_ns: int) -> None:
         try:
             obj = json.loads(text.strip())
             if is_velocity_report(obj):
                 add_velocity_report(DvlRows(), obj, 0.0)
-                self.json_velocity.append((ns_to_s(record_ns), obj))
+                t = self.clock.add("dvl_json", math.nan, ns_to_s(record_ns))
+                self.json_velocity.append((t, obj))
             elif is_position_report(obj):
-                self.json_position.append(position_row(obj))
+                row = position_row(obj)  # its ts is the DVL's own clock: record time used
+                t = self.clock.add("dvl_json", math.nan, ns_to_s(record_ns))
+                self.json_position.append((t, *row[1:]))
         except MALFORMED:
             self.notes.add("dvl_json: malformed JSON messages skipped")
+
+    def apply_times(self, times: np.ndarray) -> None:
+        """Replace every row's time placeholder (its message index) by ``times[index]``."""
+        def at(k: float) -> float:
+            return float(times[int(k)])
+
+        self.dvl.t = [at(k) for k in self.dvl.t]
+        for stream, rows in self.rows.items():
+            if stream != "tf_static":
+                self.rows[stream] = [(at(r[0]), *r[1:]) for r in rows]
+        self.pings = [(at(p[0]), *p[1:]) for p in self.pings]
+        self.json_velocity = [(at(t), obj) for t, obj in self.json_velocity]
+        self.json_position = [(at(r[0]), *r[1:]) for r in self.json_position]
 
     # -- builders ---------------------------------------------------------------------------
 
@@ -324,6 +402,32 @@ class Rows:
         return Multibeam(t=[p[0] for p in pings], points=points, intensity=intensity, **limits)
 
     def dead_reckoning_rows(self) -> np.ndarray:
-        """(t, x, y, z, std, roll, pitch, yaw) rows from the pose topic."""
-        a = np.array(self.rows["dead_reckoning"], dtype=np.float64).reshape(-1, 9)
-        return np.column_stack([a[:, :5], quaternion_to_rpy(a[:, 5:9]).reshape(-1, 3)])
+        """(t, x, y, z, std, roll, pitch, yaw) rows of the dead-reckoning topic."""
+        return np.array(self.rows["dead_reckoning"], dtype=np.float64).reshape(-1, 8)
+
+    def depth(self, sign: float = 1.0) -> Depth | None:
+        """The depth topic as depth positive down (``sign`` -1 for a pose z that points up)."""
+        if not self.rows["depth"]:
+            return None
+        a = self._table("depth", 2)
+        if a is None:
+            return None
+        count_nan_rows(self.notes, "depth", a[:, 1])
+        return Depth(t=a[:, 0], depth=sign * a[:, 1])
+
+    def gps(self, origin=None) -> GpsFix | None:
+        """The fixes in north-east-down metres about ``origin`` (lat, lon, alt; default the
+        first fix); Odometry fixes (east-north-up, REP-103) about the first one."""
+        if not self.rows["gps"]:
+            return None
+        a = self._table("gps", 5)
+        if a is None:
+            return None
+        if self.gps_local:
+            enu = a[:, 1:4] - a[0, 1:4]
+            ned = np.column_stack([enu[:, 1], enu[:, 0], -enu[:, 2]])
+            return GpsFix(t=a[:, 0], position=ned, horizontal_std=a[:, 4])
+        origin = tuple(a[0, 1:4]) if origin is None else tuple(origin)
+        ned = local_ned(a[:, 1], a[:, 2], a[:, 3], origin)
+        return GpsFix(t=a[:, 0], position=ned, latitude=a[:, 1], longitude=a[:, 2],
+                      altitude=a[:, 3], horizontal_std=a[:, 4], origin=origin)  # fmt: skip

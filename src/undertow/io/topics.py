@@ -30,9 +30,11 @@ STREAM_FIELDS = (
     "dvl_json",
     "imu",
     "pressure",
+    "depth",
     "sonar",
     "wave_probe",
     "ground_truth",
+    "gps",
     "multibeam",
 )
 
@@ -82,9 +84,11 @@ class TopicMap(BaseModel):
     dvl_json: list[str] = ["/dvl/json_data"]
     imu: list[str] = ["/imu/data", "/vectornav/IMU", "/mavros/imu/data", "/BlueROV/imu"]
     pressure: list[str] = ["/fluid_pressure", "/BlueROV/pressure2_fluid", "/pressure"]
+    depth: list[str] = ["/depth"]
     sonar: list[str] = ["/ping_sonar/range", "/ping_sonar/data", "/sonar/range"]
     wave_probe: list[str] = ["/wave_probe"]
     ground_truth: list[str] = ["/ground_truth/odom", "/ground_truth"]
+    gps: list[str] = ["/gps/fix", "/fix", "/mavros/global_position/raw/fix"]
     multibeam: list[str] = ["/mbes/points", "/multibeam/points"]
     tf_static: list[str] = ["/tf_static"]
     base_frame: str = "base_link"
@@ -94,6 +98,10 @@ class TopicMap(BaseModel):
     @classmethod
     def _one_or_many(cls, value):
         return _as_list(value)
+
+    def is_default(self, stream: str) -> bool:
+        """The stream's candidate list is the default one (the user did not name topics)."""
+        return getattr(self, stream) == type(self).model_fields[stream].default
 
     def first(self, stream: str) -> str:
         """The preferred (first) topic name of ``stream`` (used by the writer)."""
