@@ -60,7 +60,7 @@ import numpy as np
 
 from .._util.validate import validate
 from ..errors import ConfigError, MissingStreamError
-from ..log import Log
+from ..log import FRESH_WATER_DENSITY, P_ATM, Log
 from ..rotations import matrix_to_rpy, quaternion_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
 from ..wavetrack import WaveTrack
@@ -524,11 +524,30 @@ def _pressure_rows(
     p = log.pressure
     if p is None or not len(p):
         return None
-    d = p.depth(cfg.water_density_kg_m3, cfg.surface_pressure_pa)[:, None]
+    d = p.depth(*depth_reference(log, cfg))[:, None]
     ok = _finite_rows(d)
     rejected["rejected_pressure"] = _count_false(ok)
     ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected, warn, jumps)
     return p.t, model.BARO, d, _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1], ok
+
+
+def depth_reference(log: Log, cfg: LocalizerConfig) -> tuple[float, float]:
+    """(water density rho kg/m^3, surface pressure p_surface Pa) of d = (p - p_surface) / (rho g):
+    the config's when set, else the log's (``metadata`` ``water_density_kg_m3`` and
+    ``surface_pressure_pa``, as its reader resolved them), else fresh water and one standard
+    atmosphere."""
+    meta = log.metadata
+    rho = cfg.water_density_kg_m3 or _positive(meta.get("water_density_kg_m3"))
+    p0 = cfg.surface_pressure_pa or _positive(meta.get("surface_pressure_pa"))
+    return rho or FRESH_WATER_DENSITY, p0 or P_ATM
+
+
+def _positive(value) -> float | None:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    return value if np.isfinite(value) and value > 0 else None
 
 
 def _finite_rows(a: np.ndarray) -> np.ndarray:
@@ -560,7 +579,7 @@ def _initial_state(log: Log, cfg: LocalizerConfig):
         if rpy is not None:
             x0[3:6] = rpy
     if log.pressure is not None and len(log.pressure):
-        d = log.pressure.depth(cfg.water_density_kg_m3, cfg.surface_pressure_pa)
+        d = log.pressure.depth(*depth_reference(log, cfg))
         lo, hi = cfg.min_depth_m, cfg.max_depth_m  # the first depth within the envelope
         with np.errstate(invalid="ignore"):
             inside = np.isfinite(d) & (d >= (-np.inf if lo is None else lo))
