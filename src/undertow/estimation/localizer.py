@@ -66,6 +66,7 @@ from ..trajectory import Trajectory
 from ..wavetrack import WaveTrack
 from . import model
 from .calibration import Calibration
+from .consistency import innovation_consistency
 from .config import LocalizerConfig
 from .health import (
     check_mounting,
@@ -118,8 +119,9 @@ class Localizer:
 
     def run(self, log: Log) -> Trajectory:
         """Filter the whole log; (x, P) at every processed measurement time (or output rate).
-        The metadata records the wave condition used and where it came from, and the states
-        the log's sensors leave unobserved."""
+        The metadata records the wave condition used and where it came from, the states the
+        log's sensors leave unobserved, and the innovations' consistency per sensor
+        (``consistency``, :mod:`undertow.estimation.consistency`)."""
         cfg = self.config
         unobserved, held = sensor_coverage(log, cfg)
         check_mounting(log.mounting)
@@ -129,10 +131,11 @@ class Localizer:
             raise ConfigError("Localizer: the log has no finite, valid DVL/IMU measurements")
         x0, P0 = _initial_state(log, cfg)
         r_adapted = np.zeros((len(model.KIND_NAMES), 3, 3))
+        whitened = np.full((meas.size, 3), np.nan)  # each row's innovation, for the report
         out_t, out_x, out_P, counts, nis = model._run_filter(
             meas, float(meas["t"][0]), x0, P0, cfg.process_model(held=held),
             cfg.sensor_model(log.mounting), _output_times(meas["t"], cfg.output_rate_hz),
-            r_adapted,
+            r_adapted, whitened,
         )  # fmt: skip
         counts = {**rejected, **dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))}
         _warn_if_frozen(counts, int(meas.size))
@@ -144,6 +147,7 @@ class Localizer:
             "counts": counts,
             "sensors": sensors,
             "nis": _nis_summary(nis),
+            "consistency": innovation_consistency(meas["kind"], whitened).to_dict(),
             **wave_meta,
             "unobserved": unobserved,
             "held_bias": held,

@@ -190,7 +190,9 @@ def resume_filter(meas, state: FilterState, process, sensors, flush: bool):
     final state of one :func:`_run_filter` over them all, bit for bit."""
     t, kind, z, R = _columns(meas)
     n_out = _distinct_times(t) + 1 if t.size else 1
-    return _filter_from(t, kind, z, R, state, process, sensors, None, n_out, flush)
+    return _filter_from(
+        t, kind, z, R, state, process, sensors, None, n_out, flush, np.empty((0, 3))
+    )
 
 
 def pack_measurements(t, kind, z, R) -> np.ndarray:
@@ -372,7 +374,7 @@ def _predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
 
 
 @njit(cache=True)
-def _run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None):
+def _run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None, innovations=None):
     """Walk the merged measurements ``meas`` (:data:`MEASUREMENT`, time-sorted) from (t0, x0,
     P0) with the model ``process`` (:class:`ProcessModel`) and ``sensors``
     (:class:`SensorModel`): predict to each measurement time (none if dt <= 0, dt capped at
@@ -392,6 +394,12 @@ def _run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None):
     ``sensors.adapt_r`` (the nominal R of the first row of a kind never adapted; zeros for a
     kind without rows).
 
+    ``innovations`` (N, 3), optional, filled with NaN by the caller: row k receives the whitened
+    innovation w_k = L_S^-1 (z_k - h(x_k^-)) of measurement k (S = L_S L_S^T; its first
+    KIND_DIM entries, NIS_k = w_k^T w_k), for every innovation evaluated (applied or gated);
+    NaN where none was (a non-finite row, S not factorizable). For a consistent filter the
+    w_k are N(0, I) and white (:mod:`undertow.estimation.consistency`).
+
     The loop's whole state is a :class:`FilterState` (:func:`start_state`), advanced in place,
     so a caller may also feed the rows in pieces (:func:`resume_filter`, the online filter)
     with the same arithmetic in the same order.
@@ -410,20 +418,25 @@ def _run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None):
     else:
         Ra = r_adapted
     state = start_state(t0, x0, P0, process, Ra)
-    out = _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, True)
+    if innovations is None:
+        record = np.empty((0, 3))
+    else:
+        record = innovations
+    out = _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, True, record)
     return out[0], out[1], out[2], state.counts, state.nis
 
 
 @njit(cache=True, nogil=True)  # the link threads run while the filter loops
-def _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, flush):
-    """:func:`_filter` from ``state`` (:class:`FilterState`, advanced in place)."""
+def _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, flush, record):
+    """:func:`_filter` from ``state`` (:class:`FilterState`, advanced in place); ``record``:
+    the whitened innovations per row (:func:`_run_filter`), or (0, 3) for none."""
     wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias, hold_dr, hold_gyro = process
     first, last = held_range(freeze_bias, hold_dr, hold_gyro)
     x, P, L, clock, Ra, adapted, counts, nis = state
     return _filter(t, kind, z, R, x, P, L, clock, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
                    last > first, first, last, _jacobians(sensors), sensors.gate, sensors,
                    out_times, n_out, sensors.adapt_r, sensors.adapt_alpha, Ra, adapted, counts,
-                   nis, flush)  # fmt: skip
+                   nis, flush, record)  # fmt: skip
 
 
 @njit(cache=True)
@@ -464,13 +477,13 @@ def _distinct_times(t):
 @njit(cache=True)
 def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze,
             first, last, H, gate, sensors, out_times, n_out, adapt, alpha, Ra, adapted, counts,
-            nis, flush):  # fmt: skip
+            nis, flush, record):  # fmt: skip
     """The loop of :func:`_run_filter` over its unpacked records, from the state (x, P, L_in,
     clock, Ra, adapted, counts, nis) of a :class:`FilterState`, advanced in place;
     H = _jacobians(sensors); states first..last-1 held when ``freeze``; ``adapt``: the DVL and
     DR use the adapted R of :func:`_adapt_r` (in Ra, per kind) instead of their rows' R.
     The state at a time is recorded when the next row's time differs, the last one only when
-    ``flush``."""
+    ``flush``; ``record`` (N, 3) or (0, 3): row k's whitened innovation (:func:`_run_filter`)."""
     out_t = np.empty(n_out)
     out_x = np.empty((n_out, N_STATE))
     out_P = np.empty((n_out, N_STATE, N_STATE))
@@ -479,6 +492,8 @@ def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt
     xb = np.empty(N_STATE)  # (x, P) before a step, restored when it fails
     Pb = np.empty((N_STATE, N_STATE))
     z3, R3, z1, R1 = np.empty(3), np.empty((3, 3)), np.empty(1), np.empty((1, 1))
+    w3 = np.empty(3)  # the whitened innovation of the row being updated
+    recording = record.shape[0] > 0
     t_cur, t_last = clock[0], clock[1]
     factored = clock[2] != 0.0  # L holds the Cholesky factor of the current P
     emit_due = clock[3] != 0.0  # the state at t_last is not recorded yet
@@ -523,8 +538,11 @@ def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt
             else:
                 counts[NO_PREDICT] += 1
             factored = False
+            w3[:] = np.nan
             used = _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, first, last, H, gate,
-                                sensors, ws, xb, Pb, counts, nis)  # fmt: skip
+                                sensors, ws, xb, Pb, counts, nis, w3)  # fmt: skip
+            if recording:
+                record[k, 0], record[k, 1], record[k, 2] = w3[0], w3[1], w3[2]
             if use_ra and used:
                 _adapt_r(Ra[kd], alpha, zk, x, P, H[kd], kd == DR)
         if out_times is None:
@@ -590,11 +608,11 @@ def _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, first, last,
 
 @njit(cache=True)
 def _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, first, last, H, gate, sensors, ws, xb, Pb,
-                 counts, nis):  # fmt: skip
+                 counts, nis, w_row):  # fmt: skip
     """Update (x, P) with z of kind kd: in closed form for the linear IMU, DVL and DR models,
     through sigma points for the barometer. A gated, failed or non-finite update is undone
-    (counted); every innovation evaluated adds to the NIS accumulators. Returns whether the
-    update was applied."""
+    (counted); every innovation evaluated adds to the NIS accumulators and leaves its whitened
+    innovation in ``w_row``. Returns whether the update was applied."""
     xb[:] = x
     Pb[:, :] = P
     if kd == BARO:
@@ -604,10 +622,12 @@ def _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, first, last, H, gate, se
         for i in range(N_SIGMA):
             _h(kd, chi[i], sensors, zi, Rw)
             Zs[i, 0] = zi[0]
-        status, v = _update(x, P, chi, Zs, zk, Rk, wm, wc, STATE_ANGLES, Z_LINEAR[:1], gate[kd])
+        status, v = _update(
+            x, P, chi, Zs, zk, Rk, wm, wc, STATE_ANGLES, Z_LINEAR[:1], gate[kd], w_row
+        )
     else:
         z_angles = Z_ANGLES if kd == DR else Z_LINEAR
-        status, v = _update_linear(x, P, H[kd], zk, Rk, STATE_ANGLES, z_angles, gate[kd])
+        status, v = _update_linear(x, P, H[kd], zk, Rk, STATE_ANGLES, z_angles, gate[kd], w_row)
     if status < 2 and np.isfinite(v):
         nis[kd, 0] += v
         nis[kd, 1] += 1.0

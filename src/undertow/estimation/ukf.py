@@ -256,12 +256,14 @@ def _gain(C, L, out, row):
 
 
 @njit(cache=True)
-def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate):
+def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate, w_out=None):
     """Unscented measurement update with additive noise R, in place on (x, P).
 
     chi: sigma points (2n+1, n) drawn from (x, P); Zs: h(chi_i) as rows (2n+1, m).
     Returns (status, nis): status 0 applied, 1 rejected by the gate (nis > gate), 2 S not
-    factorizable. nis = y^T S^-1 y is the normalized innovation squared.
+    factorizable. nis = y^T S^-1 y is the normalized innovation squared. ``w_out`` (optional,
+    at least m long): receives the whitened innovation w = L_S^-1 y (S = L_S L_S^T), so that
+    nis = w^T w (not written when S is not factorizable).
     """
     npts, n = chi.shape
     m = z.size
@@ -279,11 +281,11 @@ def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate):
     _symmetrize(S)
     C = np.empty((n, m))
     _weighted_outer(Dx, Dz, wc, C)
-    return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate)
+    return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate, w_out)
 
 
 @njit(cache=True)
-def _update_linear(x, P, H, z, R, x_angles, z_angles, gate):
+def _update_linear(x, P, H, z, R, x_angles, z_angles, gate, w_out=None):
     """Measurement update for a linear h(x) = H x (angle entries of z wrapped), in place.
 
     The unscented transform is exact for a linear function: with sigma points of N(x, P),
@@ -316,7 +318,7 @@ def _update_linear(x, P, H, z, R, x_angles, z_angles, gate):
                 s += H[a, j] * C[j, b]
             S[a, b] = s
     _symmetrize(S)
-    return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate)
+    return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate, w_out)
 
 
 @njit(cache=True)
@@ -331,9 +333,10 @@ def _innovation(z, zhat, z_angles):
 
 
 @njit(cache=True)
-def _correct(x, P, C, S, y, x_angles, gate):
+def _correct(x, P, C, S, y, x_angles, gate, w_out=None):
     """Kalman correction from the moments: K = C S^-1, x += K y, P -= K S K^T (upper triangle
-    mirrored), gated on nis = y^T S^-1 y. Returns (status, nis) as :func:`_update`."""
+    mirrored), gated on nis = y^T S^-1 y = w^T w, w = L_S^-1 y. Returns (status, nis) as
+    :func:`_update`; ``w_out`` receives w."""
     n, m = C.shape
     Ls = np.zeros((m, m))
     if _cholesky_repair(S, Ls) < 0:
@@ -343,6 +346,9 @@ def _correct(x, P, C, S, y, x_angles, gate):
     nis = 0.0
     for a in range(m):
         nis += w[a] * w[a]
+    if w_out is not None:
+        for a in range(m):
+            w_out[a] = w[a]
     if not nis <= gate:
         return 1, nis
     _solve_upper_t(Ls, w)  # w = S^-1 y
