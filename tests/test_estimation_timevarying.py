@@ -96,20 +96,27 @@ def test_time_varying_metadata_and_effect(wave_log):
 
 
 def test_nodes_outside_the_profile(wave_log):
-    """Estimated tracks use the nearest characterized condition (one warning naming the count);
-    other sources keep the extrapolate policy (an error naming the node's time)."""
+    """Nodes outside the profile are extrapolated by the orbital velocity (one warning naming the
+    count), whatever the track's source; extrapolate=True keeps the nearest characterized
+    condition as is (no warning), extrapolate="refuse" an error naming the node's time (never
+    for an estimated track)."""
     t, a, f = np.array([0.0, 20.0, 40.0]), np.array([0.1, 0.5, 0.6]), np.array([1.0, 3.0, 3.0])
     given = WaveTrack(t, a, f, "scenario")
     with pytest.raises(ConfigError, match=r"node at t = 20\.000 s: wave condition wave-a0\.50"):
-        localize(wave_log, "proposed", wave=given)
+        localize(wave_log, "proposed", wave=given, extrapolate="refuse")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # --extrapolate: asked for, no warning
-        extrapolated = localize(wave_log, "proposed", wave=given, extrapolate=True)
-    with pytest.warns(RuntimeWarning, match=r"2 of 3 estimated wave condition node") as record:
-        estimated = localize(wave_log, "proposed", wave=WaveTrack(t, a, f, "estimated"))
-    assert sum("estimated wave condition" in str(w.message) for w in record) == 1
-    assert [n["how"] for n in estimated.metadata["wave_noise"]] == ["node", "nearest", "nearest"]
-    assert _same(estimated, extrapolated)
+        nearest = localize(wave_log, "proposed", wave=given, extrapolate=True)
+    assert [n["how"] for n in nearest.metadata["wave_noise"]] == ["node", "nearest", "nearest"]
+    with pytest.warns(RuntimeWarning, match=r"2 of 3 wave track node\(s\) are outside") as record:
+        physics = localize(wave_log, "proposed", wave=given)
+    assert sum("wave track node" in str(w.message) for w in record) == 1
+    how = [n["how"] for n in physics.metadata["wave_noise"]]
+    assert how == ["node", "extrapolated", "extrapolated"]
+    with pytest.warns(RuntimeWarning, match=r"2 of 3 wave track node"):
+        estimated = localize(wave_log, "proposed", wave=WaveTrack(t, a, f, "estimated"),
+                             extrapolate="refuse")  # fmt: skip
+    assert _same(estimated, physics)
 
 
 def test_auto_uses_the_estimate_from_the_log(wave_log, monkeypatch):

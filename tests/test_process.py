@@ -89,7 +89,6 @@ LOCALIZE_OPTIONS = [
     (["--calibration", "{tmp}/missing_cal.yaml"], "missing_cal.yaml"),
     (["--profile", "{tmp}/missing_profile.yaml"], "missing_profile.yaml"),
     (["--wave", "heavy-seas"], "heavy-seas"),
-    (["--wave", "wave-a0.30-f3.00"], "outside the characterized"),
     (["--variant", "fancy"], "variant"),
     (["--gate", "1.5"], "gate"),
     (["--initial-position", "1,2"], "--initial-position"),

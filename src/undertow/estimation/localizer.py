@@ -16,9 +16,13 @@ Wave noise (variants ``an``, ``proposed``): a constant condition adds gamma^2 to
 (and DR) row; a condition that changes over time (a :class:`~undertow.wavetrack.WaveTrack`, a
 log whose ``metadata["wave"]`` is a track with ``t`` lists, or ``wave="auto"``: estimated from
 the log by :mod:`undertow.estimation.waves`) adds each row's gamma(t)^2, gamma interpolated in
-time between the track's nodes (:class:`~undertow.estimation.noise.TrackNoise`). Nodes outside
-the characterized conditions: the nearest one for an estimated track (one warning naming how
-many), else the ``extrapolate`` policy.
+time between the track's nodes (:class:`~undertow.estimation.noise.TrackNoise`). A condition
+(or track node) outside the characterized ones gets the ``extrapolate`` policy
+(:mod:`~undertow.estimation.noise`): ``"physics"`` by default (False): the nearest characterized
+condition scaled by the orbital velocity at the DVL's depth in the log
+(:func:`~undertow.estimation.noise_physics.sensor_site`), stated in one warning and recorded in
+``metadata["wave_noise"]``; ``"nearest"`` (True, ``--extrapolate``): the nearest as is;
+``"refuse"``: an error (an estimated track is never refused: physics).
 
 Sensors: the filter needs DVL velocity and an orientation source (the IMU gyro or the DVL's
 dead-reckoning attitude); barometer and DR are optional. A state no sensor of the log informs is
@@ -77,6 +81,7 @@ from .health import (
     warn_unhealthy,
 )
 from .noise import NoiseProfile, TrackNoise, WaveNoise
+from .noise_physics import PHYSICS, REFUSE, extrapolation_note, outside_policy, sensor_site
 from .smoother import smooth as urts_smooth
 
 # a run where more than this fraction of the processed measurements needed a covariance repair
@@ -115,7 +120,7 @@ class Localizer:
         else:
             self.profile = NoiseProfile.from_yaml(profile)
         self.wave = wave
-        self.extrapolate = extrapolate
+        self.extrapolate = outside_policy(extrapolate, default=PHYSICS)
 
     def run(self, log: Log) -> Trajectory:
         """Filter the whole log; (x, P) at every processed measurement time (or output rate).
@@ -163,34 +168,30 @@ class Localizer:
         :class:`TrackNoise` for one that changes) and its metadata entries (module doc)."""
         wave, source = wave_condition(self.wave, log)
         meta = {}
-        nearest = False
+        estimated = False
         if isinstance(wave, str) and wave.strip().lower() == WAVE_AUTO:
             wave, estimate = _estimated_track(log)
-            source, nearest = WAVE_ESTIMATED, True
+            source, estimated = WAVE_ESTIMATED, True
             meta["wave_estimate"] = estimate.to_dict()
         elif isinstance(wave, dict) and "t" in wave:
             wave = WaveTrack.from_dict(wave)
         if isinstance(wave, WaveTrack):
-            nearest = nearest or wave.source == "estimated"
+            estimated = estimated or wave.source == "estimated"
             if wave.is_constant:
                 a, f = float(wave.amplitude_m[0]), float(wave.frequency_hz[0])
                 wave = "calm" if a == 0 else (a, f)
-        extrapolate = self.extrapolate or nearest
+        policy = PHYSICS if estimated and self.extrapolate == REFUSE else self.extrapolate
+        cfg, site = self.config, None
+        if policy == PHYSICS:
+            site = sensor_site(log, *depth_reference(log, cfg), default=self.profile.site())
         if isinstance(wave, WaveTrack):
-            noise = self.profile.noise_track(wave, extrapolate=extrapolate)
+            noise = self.profile.noise_track(wave, extrapolate=policy, site=site)
             meta["wave_track"] = wave.to_dict()
-            outside = sum(n.how == "nearest" for n in noise.nodes)
         else:
-            noise = self.profile.noise(wave, extrapolate=extrapolate)
-            outside = int(noise.how == "nearest")
-        if nearest and outside and not self.extrapolate:
-            warnings.warn(
-                f"Localizer: {outside} of {len(getattr(noise, 'nodes', [noise]))} estimated wave "
-                "condition node(s) lie outside the noise profile's characterized conditions; "
-                "the nearest characterized condition is used for them",
-                RuntimeWarning,
-                stacklevel=3,
-            )
+            noise = self.profile.noise(wave, extrapolate=policy, site=site)
+        note = extrapolation_note(noise)
+        if note and cfg.adds_wave_noise:
+            warnings.warn(f"Localizer: {note}", RuntimeWarning, stacklevel=3)
         meta = {
             "wave_noise": noise.to_dict() if self.config.adds_wave_noise else None,
             "wave_condition": noise.condition,

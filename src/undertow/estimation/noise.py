@@ -12,8 +12,25 @@ of the nodes first so that metres and hertz weigh alike). A ``calm`` condition (
 the other conditions, and any a = 0 query returns it. A condition also answers to its canonical
 name (``wave-a0.10-f1.00``: a and f to 0.01), so a profile characterized at the measured
 a = 0.0999 m serves a query for 0.10 m. When all nodes share one frequency (one characterized
-wave plus calm) the interpolation is linear in amplitude at that frequency. A query outside the
-nodes raises :class:`ConfigError` unless ``extrapolate=True``, which returns the nearest node.
+wave plus calm) the interpolation is linear in amplitude at that frequency.
+
+A query outside the nodes gets what the ``extrapolate`` policy says (:data:`OUTSIDE`):
+
+- ``"refuse"`` (:meth:`NoiseProfile.noise`'s default; also ``False``): a :class:`ConfigError`;
+- ``"nearest"`` (also ``True``, the CLI's ``--extrapolate``): the nearest node (in the scaled
+  (a, f) plane) as it is;
+- ``"physics"`` (the Localizer's default): the nearest wave node n scaled by the physics the
+  noise follows, the orbital velocity amplitude at the DVL's depth
+  (:mod:`~undertow.estimation.noise_physics`):
+
+      gamma(a, f; d, h) = gamma_n U(a, f, d, h) / U(a_n, f_n, d_0, h_0)
+
+  with (d, h) the DVL and water depth of the log (``site``; default the profile's own) and
+  (d_0, h_0) those the profile was characterized at (``sensor_depth_m``, ``water_depth_m`` of
+  the profile; a profile without them is taken at the paper's carriage geometry, and says so).
+  The result's ``how`` is ``"extrapolated"`` and its ``extrapolation`` records the node, the
+  ratio, both sites and a one-line statement. Inside the nodes the depth plays no part: the
+  profile is used as characterized.
 
 A condition that changes over time (a :class:`~undertow.wavetrack.WaveTrack` of nodes
 (t_i, a_i, f_i)) gives :class:`TrackNoise` (:meth:`NoiseProfile.noise_track`): gamma_i =
@@ -40,6 +57,14 @@ from .._util.atomic import atomic_path
 from .._util.validate import read_yaml, validate
 from ..errors import ConfigError
 from ..wavetrack import WaveTrack
+from .noise_physics import (
+    PHYSICS,
+    REFUSE,
+    SensorSite,
+    assumed_site,
+    outside_policy,
+    scale_by_orbital_velocity,
+)
 
 _NAME = re.compile(r"^wave-a(\d+(?:\.\d*)?)-f(\d+(?:\.\d*)?)$")
 
@@ -65,10 +90,11 @@ class WaveNoise:
     frequency_hz: float | None
     dvl_std: np.ndarray
     dr_std: np.ndarray
-    how: str  # "node", "interpolated", "nearest" or "calm"
+    how: str  # "node", "interpolated", "nearest", "extrapolated" or "calm"
+    extrapolation: dict | None = None  # how == "extrapolated": node, ratio, sites, statement
 
     def to_dict(self) -> dict:
-        return {
+        out = {
             "condition": self.condition,
             "amplitude_m": self.amplitude_m,
             "frequency_hz": self.frequency_hz,
@@ -76,6 +102,9 @@ class WaveNoise:
             "dr_std": [float(v) for v in self.dr_std],
             "how": self.how,
         }
+        if self.extrapolation is not None:
+            out["extrapolation"] = self.extrapolation
+        return out
 
     def std_at(self, which: str, t: np.ndarray) -> np.ndarray:
         """The std devs of ``which`` ("dvl" or "dr") at the times t: the same (3,) at all."""
@@ -109,6 +138,7 @@ class TrackNoise:
                 "dvl_std": [float(v) for v in n.dvl_std],
                 "dr_std": [float(v) for v in n.dr_std],
                 "how": n.how,
+                **({} if n.extrapolation is None else {"extrapolation": n.extrapolation}),
             }
             for ti, n in zip(self.track.t, self.nodes, strict=True)
         ]
@@ -181,16 +211,22 @@ class _ProfileFile(BaseModel):
 
     name: str | None = ""
     source: str | None = ""
+    sensor_depth_m: float | None = Field(None, ge=0, allow_inf_nan=False)
+    water_depth_m: float | None = Field(None, gt=0, allow_inf_nan=False)
     conditions: list[_ConditionFile] = Field(min_length=1)
 
 
 @dataclass
 class NoiseProfile:
-    """Characterized wave conditions; :meth:`noise` maps a condition to a :class:`WaveNoise`."""
+    """Characterized wave conditions; :meth:`noise` maps a condition to a :class:`WaveNoise`.
+    ``sensor_depth_m`` and ``water_depth_m``: the DVL and water depth of the characterization
+    (None: not recorded, :meth:`site` assumes the paper's)."""
 
     conditions: list[WaveCondition]
     name: str = ""
     source: str = ""
+    sensor_depth_m: float | None = None
+    water_depth_m: float | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -232,12 +268,19 @@ class NoiseProfile:
             )
             for c in checked.conditions
         ]
-        return cls(conds, name=checked.name or "", source=checked.source or "")
+        d, h = checked.sensor_depth_m, checked.water_depth_m
+        if d is not None and h is not None and d > h:
+            raise ConfigError(f"{origin}: noise profile field sensor_depth_m: {d} m is below the "
+                              f"water depth water_depth_m {h} m")  # fmt: skip
+        return cls(conds, name=checked.name or "", source=checked.source or "",
+                   sensor_depth_m=d, water_depth_m=h)  # fmt: skip
 
     def to_dict(self) -> dict:
+        site = {"sensor_depth_m": self.sensor_depth_m, "water_depth_m": self.water_depth_m}
         return {
             "name": self.name,
             "source": self.source,
+            **{k: v for k, v in site.items() if v is not None},
             "conditions": [
                 {
                     "name": c.name,
@@ -257,8 +300,23 @@ class NoiseProfile:
             tmp.write_text(yaml.safe_dump(self.to_dict(), sort_keys=False))
         return path
 
-    def noise(self, wave, extrapolate: bool = False) -> WaveNoise:
-        """Extra noise for ``wave`` ("calm", "wave-a0.10-f1.00" or (a, f)); see module doc."""
+    def site(self) -> SensorSite:
+        """Where the profile was characterized: its recorded DVL and water depth, else
+        (:func:`~undertow.estimation.noise_physics.assumed_site`) the paper's carriage geometry
+        as the simulator builds it (a recorded DVL depth without a water depth: deep water)."""
+        if self.sensor_depth_m is None:
+            assumed = assumed_site()
+            h = self.water_depth_m or assumed.water_depth_m
+            return SensorSite(assumed.sensor_depth_m, h, assumed.source)
+        h = self.water_depth_m if self.water_depth_m is not None else math.inf
+        return SensorSite(self.sensor_depth_m, h, "recorded in the profile")
+
+    def noise(self, wave, extrapolate: bool | str = False,
+              site: SensorSite | None = None) -> WaveNoise:  # fmt: skip
+        """Extra noise for ``wave`` ("calm", "wave-a0.10-f1.00" or (a, f)); outside the profile's
+        conditions as the ``extrapolate`` policy says, ``"physics"`` at ``site`` (the log's DVL
+        and water depth; default the profile's own); see the module doc."""
+        policy = outside_policy(extrapolate, default=REFUSE)
         name, a, f = parse_wave(wave)
         for c in self.conditions:
             if (a == 0 and c.amplitude_m == 0) or (a > 0 and _same_condition(c, name, a, f)):
@@ -274,26 +332,43 @@ class NoiseProfile:
             v = _along_amplitude(nodes, values, q)
         if v is not None and np.all(np.isfinite(v)):
             return self._result(name, a, f, v[:3], v[3:], "interpolated")
-        if not extrapolate:
+        if policy == REFUSE:
             raise ConfigError(
                 f"wave condition {name} is outside the characterized conditions of profile "
-                f"{self.name or '?'} (extrapolate=True, or --extrapolate, uses the nearest)"
+                f"{self.name or '?'} (extrapolate='physics' scales the nearest by the orbital "
+                "velocity; extrapolate=True, or --extrapolate, uses the nearest as is)"
             )
+        if policy == PHYSICS:
+            if site is None:
+                at = self.site()
+                site = SensorSite(at.sensor_depth_m, at.water_depth_m, "DVL depth not given")
+            return self._extrapolated(name, a, f, nodes, q, site)
         i = int(np.argmin(np.sum((nodes - q) ** 2, axis=1)))
         return self._result(name, a, f, values[i, :3], values[i, 3:], "nearest")
 
-    def noise_track(self, track: WaveTrack, extrapolate: bool = False) -> TrackNoise:
-        """:class:`TrackNoise` of ``track``: :meth:`noise` at each node (with ``extrapolate``:
-        the nearest characterized condition outside them; else a node outside is one
-        ConfigError line naming its time)."""
+    def noise_track(self, track: WaveTrack, extrapolate: bool | str = False,
+                    site: SensorSite | None = None) -> TrackNoise:  # fmt: skip
+        """:class:`TrackNoise` of ``track``: :meth:`noise` at each node with the ``extrapolate``
+        policy and ``site`` (a node outside refused: one ConfigError line naming its time)."""
         nodes = []
         for ti, a, f in zip(track.t, track.amplitude_m, track.frequency_hz, strict=True):
             wave = "calm" if a == 0 else (float(a), float(f))
             try:
-                nodes.append(self.noise(wave, extrapolate=extrapolate))
+                nodes.append(self.noise(wave, extrapolate=extrapolate, site=site))
             except ConfigError as exc:
                 raise ConfigError(f"wave track node at t = {ti:.3f} s: {exc}") from None
         return TrackNoise(track, nodes)
+
+    def _extrapolated(self, name, a, f, nodes, q, site: SensorSite) -> WaveNoise:
+        """The nearest wave node (scaled (a, f) plane) times U(a, f, site) / U(node, profile's
+        site): the module doc's physics policy."""
+        waves = [c for c in self.conditions if c.amplitude_m > 0]  # _nodes lists them first
+        node = waves[int(np.argmin(np.sum((nodes[: len(waves)] - q) ** 2, axis=1)))]
+        ratio, record = scale_by_orbital_velocity(
+            (node.name, node.amplitude_m, node.frequency_hz), self.site(), (a, f), site
+        )
+        return WaveNoise(name, a, f, np.array(node.dvl_std, float) * ratio,
+                         np.array(node.dr_std, float) * ratio, "extrapolated", record)  # fmt: skip
 
     def _nodes(self):
         waves = [c for c in self.conditions if c.amplitude_m > 0]

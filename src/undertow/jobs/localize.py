@@ -24,6 +24,7 @@ from ..estimation.calibration import Calibration, calibrate
 from ..estimation.config import DEFAULT_GATE
 from ..estimation.localizer import check_options, localize
 from ..estimation.noise import NoiseProfile
+from ..estimation.noise_physics import PHYSICS, outside_policy
 from ..evaluation.trajectory import TrajectoryErrors, trajectory_rmse
 from ..io.results import save_trajectory
 from ..io.tum import read_tum
@@ -122,15 +123,17 @@ def _path_or_none(value):
     return value if isinstance(value, (str, Path)) else None
 
 
-def _read_options(profile, wave, calibration, extrapolate: bool):
+def _read_options(profile, wave, calibration, extrapolate: bool | str):
     """The noise profile and calibration read and checked, and a given wave condition looked
-    up in that profile, before any log is read: a wrong option fails at once, not after it."""
+    up in that profile, before any log is read: a wrong option fails at once, not after it
+    (with the Localizer's outside policy: a condition outside the profile is extrapolated by
+    default, at the log's depth once it is read)."""
     if not isinstance(profile, NoiseProfile):
         profile = NoiseProfile.paper() if profile is None else NoiseProfile.from_yaml(profile)
     if wave is not None and not is_auto(wave):
         with warnings.catch_warnings():  # its warnings are raised again where it is used
             warnings.simplefilter("ignore")
-            profile.noise(wave, extrapolate=extrapolate)
+            profile.noise(wave, extrapolate=outside_policy(extrapolate, default=PHYSICS))
     if calibration is not None and not isinstance(calibration, Calibration):
         calibration = Calibration.from_yaml(calibration)
     return profile, calibration
