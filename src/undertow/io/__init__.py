@@ -1,9 +1,12 @@
 """Readers and writers of log formats, all returning or taking a :class:`~undertow.log.Log`.
 
 :func:`read_log` guesses the format from the path: a ``.bag`` file is ROS 1; a directory with
-``metadata.yaml`` or a ``.mcap``/``.db3`` file is ROS 2; ``.txt/.json/.jsonl/.log`` is Water
-Linked TCP JSON; ``.tlog`` (or any other file whose first bytes are a timestamped MAVLink
-record) is a MAVLink telemetry log; named pipes, devices and sockets are refused before opening.
+``metadata.yaml`` or a ``.mcap``/``.db3`` file is ROS 2; ``.txt/.json/.jsonl`` is Water
+Linked TCP JSON, and so is ``.log`` unless it is an ArduPilot dataflash log (binary, or text
+whose lines start ``FMT,``); ``.tlog`` (or any other file whose first bytes are a timestamped
+MAVLink record) is a MAVLink telemetry log; ``.BIN`` (or any other file starting with a binary
+dataflash FMT record, 0xA3 0x95 0x80) is an ArduPilot dataflash log; named pipes, devices and
+sockets are refused before opening.
 :func:`write_log` writes a ROS 2 mcap bag; TUM trajectories and PLY clouds have their own small
 modules.
 """
@@ -16,6 +19,8 @@ from ..errors import ReaderError
 from ..log import Log
 from ._collect import check_regular
 from .a50_json import JSON_SUFFIXES, read_a50_json
+from .dataflash import DATAFLASH_SUFFIXES, read_dataflash
+from .dataflash_records import looks_like_dataflash
 from .info import LogSummary, StreamSummary, summarize
 from .ply import read_ply, write_ply
 from .rosbag import read_rosbag
@@ -28,8 +33,8 @@ ROS2_SUFFIXES = (".mcap", ".db3")
 
 
 def detect_format(path) -> str:
-    """'ros1', 'ros2', 'a50_json' or 'tlog' for ``path``; ReaderError naming the file
-    otherwise."""
+    """'ros1', 'ros2', 'a50_json', 'tlog' or 'dataflash' for ``path``; ReaderError naming the
+    file otherwise."""
     path = Path(path)
     suffix = path.suffix.lower()
     check_regular(path, directory_ok=True)  # a named pipe must not block, a device be read
@@ -45,24 +50,28 @@ def detect_format(path) -> str:
         return "ros1"
     if suffix in ROS2_SUFFIXES:
         return "ros2"
+    if suffix in DATAFLASH_SUFFIXES:
+        return "dataflash"
     if suffix in JSON_SUFFIXES:
-        return "a50_json"
-    if suffix in TLOG_SUFFIXES or _sniff_tlog(path):
+        dataflash = suffix == ".log" and looks_like_dataflash(_head(path, 8192))
+        return "dataflash" if dataflash else "a50_json"
+    if suffix in TLOG_SUFFIXES or looks_like_tlog(_head(path, 300)):
         return "tlog"
+    if looks_like_dataflash(_head(path, 3)) == "binary":
+        return "dataflash"
     raise ReaderError(
         f"{path}: unknown log format '{suffix or path.name}' (expected .bag, a ROS 2 bag "
-        f"directory, .mcap, .db3, .tlog, or {', '.join(JSON_SUFFIXES)})"
+        f"directory, .mcap, .db3, .tlog, .BIN, or {', '.join(JSON_SUFFIXES)})"
     )
 
 
-def _sniff_tlog(path: Path) -> bool:
-    """True when the file's first bytes are a timestamped MAVLink record (a renamed .tlog)."""
+def _head(path: Path, size: int) -> bytes:
+    """The first ``size`` bytes of the file (b'' when it cannot be read), to sniff its format."""
     try:
         with open(path, "rb") as f:
-            head = f.read(300)
+            return f.read(size)
     except OSError:
-        return False
-    return looks_like_tlog(head)
+        return b""
 
 
 def read_log(path, topics: TopicMap | None = None, mavlink=None) -> Log:
@@ -74,6 +83,8 @@ def read_log(path, topics: TopicMap | None = None, mavlink=None) -> Log:
         return read_a50_json(path)
     if fmt == "tlog":
         return read_tlog(path, mavlink)
+    if fmt == "dataflash":
+        return read_dataflash(path)
     return read_rosbag(path, topics)
 
 
@@ -83,6 +94,7 @@ __all__ = [
     "TopicMap",
     "detect_format",
     "read_a50_json",
+    "read_dataflash",
     "read_log",
     "read_ply",
     "read_rosbag",

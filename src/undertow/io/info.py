@@ -63,6 +63,9 @@ def _missing(name: str, stream) -> dict[str, int]:
         "sonar": "range",
         "wave_probe": "elevation",
         "ground_truth": "position",
+        "depth": "depth",
+        "gps": "position",
+        "autopilot": "position",
     }[name]
     values = np.asarray(getattr(stream, main), dtype=np.float64).reshape(len(stream), -1)
     return {main: int(np.sum(~np.isfinite(values).all(axis=1))) if values.size else 0}
