@@ -110,6 +110,13 @@ def localize(
         err.print(f"wave condition: {result.wave} ({_wave_source(result, wave)})",
                   highlight=False, soft_wrap=True)  # fmt: skip
         err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
+        if result.consistency is not None:
+            err.print(
+                f"consistency: {result.consistency.summary()} (`undertow evaluate trajectory "
+                f"{out_dir}` for the report)",
+                highlight=False,
+                soft_wrap=True,
+            )
 
 
 def _wave_option(name: str | None, amplitude: float | None, frequency: float | None):
@@ -182,25 +189,75 @@ def calibrate(
 @user_errors
 def evaluate_trajectory(
     estimate: Annotated[Path, typer.Argument(help="Localization folder or trajectory.npz.")],
-    ground_truth: Annotated[Path, typer.Argument(help="Ground-truth TUM file (e.g. 2000 Hz).")],
-    align: Annotated[str, typer.Option(help="none | origin (first poses made equal).")] = "none",
+    reference_path: Annotated[
+        Path | None,
+        typer.Argument(
+            metavar="[REFERENCE]",
+            help="Ground-truth TUM file (e.g. 2000 Hz), or with --reference the log to take the "
+            "reference from (bag, mcap folder, .BIN, .tlog); none: the consistency report only.",
+        ),
+    ] = None,
+    reference: Annotated[
+        str | None,
+        typer.Option(
+            help="gps | dvl-dr | autopilot: REFERENCE is a log, compared with its GPS fixes, "
+            "the DVL's own dead reckoning or the autopilot's EKF (drift in % of distance)."
+        ),
+    ] = None,
+    align: Annotated[
+        str | None,
+        typer.Option(
+            help="Ground truth: none (default) | origin (first poses made equal). A log's "
+            "reference: start (default: translated to agree at the first common time) | yaw "
+            "(and rotated by the least-squares yaw over the first 10 % of the path) | none."
+        ),
+    ] = None,
+    checkpoints: Annotated[
+        int,
+        typer.Option(help="Checkpoints of a continuous reference, evenly spaced in distance."),
+    ] = 10,
+    config: ConfigOption = None,
+    topics: TopicsOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
 ) -> None:
-    """Per-axis RMSE (x, y, z, roll, pitch, yaw, vx, vy, vz; the paper's Table II) and NEES.
+    """Per-axis RMSE (x, y, z, roll, pitch, yaw, vx, vy, vz; the paper's Table II) and NEES
+    against ground truth, or the drift against a reference from the log (no ground truth); then
+    the filter's consistency report (NIS per sensor, whiteness) recorded by `undertow localize`.
 
-    Example: `undertow evaluate trajectory runs/a10/proposed runs/a10/ground_truth.tum --json`
+    Examples: `undertow evaluate trajectory runs/a10/proposed runs/a10/ground_truth.tum --json`;
+    `undertow evaluate trajectory out/ mylog.mcap --reference dvl-dr`
     """
-    from rich.table import Table
-
+    from ..errors import DataError
     from ..jobs.localize import evaluate_trajectory_file
 
-    evaluation = evaluate_trajectory_file(estimate, ground_truth, align)
+    evaluation = evaluate_trajectory_file(
+        estimate, reference_path, align, reference=reference, settings=config, topics=topics,
+        checkpoints=checkpoints,
+    )  # fmt: skip
     _print_warnings(evaluation.warnings)
-    result = evaluation.errors
+    if reference_path is None and evaluation.consistency is None:
+        raise DataError(
+            f"{estimate}: the trajectory carries no consistency report (written before undertow "
+            "recorded one, or not by `undertow localize`); give a REFERENCE to compare it with"
+        )
     if as_json:
-        _print_json(result.to_dict())
+        _print_json(evaluation.to_dict())
         return
-    table = Table(title=f"RMSE of {estimate} (align {align})")
+    if evaluation.errors is not None:
+        _print_errors(evaluation.errors, estimate)
+    if evaluation.drift is not None:
+        _print_drift(evaluation.drift, estimate)
+    if evaluation.consistency is not None:
+        _print_consistency(evaluation.consistency)
+    elif reference_path is not None:
+        console.print("consistency: none recorded with this trajectory")
+
+
+def _print_errors(result, estimate: Path) -> None:
+    """The RMSE table and the NEES line."""
+    from rich.table import Table
+
+    table = Table(title=f"RMSE of {estimate} (align {result.align})")
     table.add_column("axis")
     table.add_column("RMSE", justify="right")
     for key, value in result.rmse.items():
@@ -222,3 +279,67 @@ def evaluate_trajectory(
             else ""
         )
     )
+
+
+def _number(value, digits: int = 2) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def _print_drift(drift, estimate: Path) -> None:
+    """The drift table, then the alignment, the checkpoint rule and the growth."""
+    from rich.table import Table
+
+    table = Table(title=f"Drift of {estimate} against {drift.reference} ({drift.source})")
+    vertical = drift.reference != "gps"
+    columns = ["t (s)", "distance (m)", "drift (m)", "drift (%)", "along (m)", "cross (m)"]
+    for name in columns + (["vertical (m)"] if vertical else []):
+        table.add_column(name, justify="right")
+    for c in drift.checkpoints:
+        row = [f"{c.t_s:.1f}", f"{c.distance_m:.1f}", f"{c.drift_m:.2f}"]
+        row += [_number(v) for v in (c.drift_percent, c.along_track_m, c.cross_track_m)]
+        table.add_row(*row, *([_number(c.vertical_m)] if vertical else []))
+    console.print(table)
+    console.print(f"alignment: {drift.alignment_text()}", highlight=False, soft_wrap=True)
+    console.print(f"checkpoints: {drift.checkpoint_rule}", highlight=False, soft_wrap=True)
+    final = (
+        f"final drift {drift.final_drift_m:.2f} m"
+        + (f" = {drift.final_drift_percent:.2f} %" if drift.final_drift_percent is not None else "")
+        + f" of {drift.distance_m:.1f} m travelled"
+    )
+    growth = (
+        "growth: none (no distance travelled)"
+        if drift.growth_percent is None
+        else f"growth: {drift.growth_percent:.2f} % of distance (along "
+        f"{_number(drift.along_growth_percent)} %, cross {_number(drift.cross_growth_percent)} %)"
+    )
+    console.print(f"{final}; {growth}", highlight=False, soft_wrap=True)
+
+
+def _print_consistency(report) -> None:
+    """The consistency table: per sensor, the NIS against its band, the share outside, the
+    whiteness, and the verdict."""
+    from rich.table import Table
+
+    from ..estimation.consistency import MEANING
+
+    table = Table(title="Consistency of the filter's innovations (no truth needed)")
+    for name in ("sensor", "dof", "count", "mean NIS", "95 % band", "verdict",
+                 "outside (5 %)", "lag-1 autocorr", "white"):  # fmt: skip
+        table.add_column(name, justify="left" if name in ("sensor", "verdict") else "right")
+    for s in report.sensors:
+        if not s.count:
+            table.add_row(s.sensor, str(s.dof), "0", "-", "-", s.verdict, "-", "-", "-")
+            continue
+        band = f"{s.nis_band_low:.3g} - {s.nis_band_high:.3g}"
+        share = f"{100 * s.share_outside:.1f} %" + ("" if s.share_as_expected else " !")
+        rho = (
+            "-"
+            if s.autocorrelation_lag1 is None
+            else f"{s.autocorrelation_lag1:+.3f} (+-{s.autocorrelation_band:.3f})"
+        )
+        white = "-" if s.white is None else "yes" if s.white else "no"
+        table.add_row(s.sensor, str(s.dof), str(s.count), f"{s.nis_mean:.3g}", band,
+                      s.verdict, share, rho, white)  # fmt: skip
+    console.print(table)
+    for verdict in dict.fromkeys(s.verdict for s in report.evaluated):
+        console.print(f"{verdict}: {MEANING[verdict]}", highlight=False, soft_wrap=True)

@@ -8,6 +8,7 @@ prints out::
                            out_dir="runs/a10/proposed")
     print(result.wave, result.wave_source, result.warnings)
     print(evaluate_trajectory_file(result.out_dir, "runs/a10/ground_truth.tum").errors.rmse)
+    print(evaluate_trajectory_file(result.out_dir, "runs/a10/log", reference="dvl-dr").drift)
 """
 
 from __future__ import annotations
@@ -22,9 +23,18 @@ from .._util.atomic import check_output_file, check_output_folder
 from ..errors import ConfigError
 from ..estimation.calibration import Calibration, calibrate
 from ..estimation.config import DEFAULT_GATE
+from ..estimation.consistency import ConsistencyReport
 from ..estimation.localizer import check_options, localize
 from ..estimation.noise import NoiseProfile
 from ..estimation.noise_physics import PHYSICS, outside_policy
+from ..evaluation.drift import (
+    ALIGNMENTS,
+    CHECKPOINTS,
+    REFERENCES,
+    DriftResult,
+    reference_track,
+    trajectory_drift,
+)
 from ..evaluation.trajectory import TrajectoryErrors, trajectory_rmse
 from ..io.results import save_trajectory
 from ..io.tum import read_tum
@@ -66,6 +76,11 @@ class LocalizationResult:
     @property
     def variant(self) -> str:
         return self.trajectory.variant
+
+    @property
+    def consistency(self) -> ConsistencyReport | None:
+        """The innovations' consistency per sensor (:mod:`undertow.estimation.consistency`)."""
+        return consistency_of(self.trajectory)
 
 
 def localize_file(path: str | Path, settings: Settings | str | Path | None = None, *,
@@ -175,26 +190,99 @@ def calibrate_file(log_path: str | Path, ground_truth: str | Path | None = None,
 
 @dataclass(frozen=True)
 class TrajectoryEvaluation:
-    """Per-axis RMSE and pose NEES of a trajectory (see
-    :class:`~undertow.evaluation.trajectory.TrajectoryErrors`) and the warnings raised."""
+    """A trajectory against a reference: per-axis RMSE and pose NEES against ground truth
+    (``errors``, :class:`~undertow.evaluation.trajectory.TrajectoryErrors`), or its drift
+    against a reference from a log (``drift``, :class:`~undertow.evaluation.drift.DriftResult`),
+    or neither (no reference given); the filter's consistency report as ``undertow localize``
+    recorded it (None for a trajectory without one), and the warnings raised."""
 
-    errors: TrajectoryErrors
+    errors: TrajectoryErrors | None
     warnings: tuple[str, ...]
+    drift: DriftResult | None = None
+    consistency: ConsistencyReport | None = None
 
     def to_dict(self) -> dict:
-        return self.errors.to_dict()
+        """The reference's result (the RMSE and NEES, or the drift) with ``consistency``."""
+        out = self.errors.to_dict() if self.errors is not None else {}
+        if self.drift is not None:
+            out = self.drift.to_dict()
+        out["consistency"] = None if self.consistency is None else self.consistency.to_dict()
+        return out
 
 
-def evaluate_trajectory_file(estimate: str | Path, ground_truth: str | Path,
-                             align: str = "none") -> TrajectoryEvaluation:  # fmt: skip
-    """Evaluate a ``trajectory.npz`` (or its localization folder) against a ground-truth TUM
-    file (:func:`~undertow.evaluation.trajectory.trajectory_rmse`; ``align``: none | origin)."""
+LOG_SUFFIXES = (".bag", ".mcap", ".db3", ".bin", ".log", ".tlog", ".json", ".jsonl")
+
+
+def evaluate_trajectory_file(estimate: str | Path, ground_truth: str | Path | None = None,
+                             align: str | None = None, *, reference: str | None = None,
+                             settings: Settings | str | Path | None = None,
+                             topics: str | Path | None = None,
+                             checkpoints: int = CHECKPOINTS) -> TrajectoryEvaluation:  # fmt: skip
+    """Evaluate a ``trajectory.npz`` (or its localization folder).
+
+    Without ``reference``: against the ground-truth TUM file ``ground_truth``
+    (:func:`~undertow.evaluation.trajectory.trajectory_rmse`; ``align``: none (default) |
+    origin). With ``reference`` (gps | dvl-dr | autopilot): ``ground_truth`` is a log (any
+    format :func:`~undertow.io.read_log` reads, with the ``topics`` / ``settings`` topic map)
+    and the drift against that reference stream is measured
+    (:func:`~undertow.evaluation.drift.trajectory_drift`; ``align``: start (default) | yaw |
+    none; ``checkpoints`` for a continuous reference). With neither, only the consistency
+    report. The options are checked before any file is read."""
+    align = _check_evaluate_options(ground_truth, align, reference, checkpoints)
+    if not isinstance(settings, Settings) and reference is not None:
+        settings = Settings.from_yaml(settings)
+    caught: list[str] = []
+    errors = drift = None
+    with collect_warnings(caught):
+        trajectory = Trajectory.load_npz(estimate)
+        if reference is not None:
+            track = reference_track(load_log(ground_truth, topics, settings), reference)
+            drift = trajectory_drift(trajectory, track, align, checkpoints)
+        elif ground_truth is not None:
+            errors = trajectory_rmse(trajectory, read_tum(ground_truth), align)
+    return TrajectoryEvaluation(errors, tuple(caught), drift, consistency_of(trajectory))
+
+
+def _check_evaluate_options(ground_truth, align, reference, checkpoints) -> str:
+    """The alignment to use (its default for the kind of reference), or a one-line error."""
+    if reference is not None:
+        if ground_truth is None:
+            raise ConfigError(f"--reference {reference}: give the log to take it from")
+        if reference not in REFERENCES:
+            raise ConfigError(
+                f"--reference must be one of {', '.join(REFERENCES)}, not {reference!r}"
+            )
+        align = "start" if align is None else align
+        if align not in ALIGNMENTS:
+            raise ConfigError(
+                f"align against a log's reference must be one of {', '.join(ALIGNMENTS)}, "
+                f"not {align!r}"
+            )
+        if checkpoints < 1:
+            raise ConfigError(f"--checkpoints must be at least 1, not {checkpoints}")
+        return align
+    align = "none" if align is None else align
     if align not in ("none", "origin"):  # checked before the files are read
         raise ConfigError(f"align must be 'none' or 'origin', not {align!r}")
-    caught: list[str] = []
-    with collect_warnings(caught):
-        errors = trajectory_rmse(Trajectory.load_npz(estimate), read_tum(ground_truth), align)
-    return TrajectoryEvaluation(errors, tuple(caught))
+    path = None if ground_truth is None else Path(ground_truth)
+    if path is not None and (path.is_dir() or path.suffix.lower() in LOG_SUFFIXES):
+        raise ConfigError(
+            f"{path} is a log, not a ground-truth TUM file: choose the reference in it with "
+            "--reference gps|dvl-dr|autopilot"
+        )
+    return align
+
+
+def consistency_of(trajectory: Trajectory) -> ConsistencyReport | None:
+    """The consistency report in ``trajectory``'s metadata (None when it has none: written
+    before undertow recorded one, or not by ``undertow localize``)."""
+    data = trajectory.metadata.get("consistency")
+    if not isinstance(data, dict):
+        return None
+    try:
+        return ConsistencyReport.from_dict(data)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
 
 
 def gate_option(text: str | None) -> dict:
