@@ -1,5 +1,5 @@
-"""One settings file for every stage: ``topics``, ``mounting``, ``localizer``, ``mapping``,
-``live``.
+"""One settings file for every stage: ``topics``, ``log``, ``mounting``, ``localizer``,
+``mapping``, ``live``.
 
 Each section is the stage's own pydantic model (:class:`~undertow.io.topics.TopicMap`,
 :class:`~undertow.estimation.config.LocalizerConfig`,
@@ -7,6 +7,7 @@ Each section is the stage's own pydantic model (:class:`~undertow.io.topics.Topi
 no file) runs, and a file sets only what differs::
 
     topics: {imu: [/mavros/imu/data]}
+    log: {time: record, imu_units: deg/s, surface_pressure_pa: 85300, water: fresh}
     mounting: {imu: {rotation: [3.141592653589793, 0, 0]}}   # IMU in ROS FLU, body is FRD
     localizer: {variant: proposed, dvl_velocity_std_m_s: [0.02, 0.02, 0.01]}
     mapping: {method: adaptive, resolution: 0.05}
@@ -24,6 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ._util.validate import read_yaml, validate
 from .errors import ConfigError
 from .estimation.config import LocalizerConfig
+from .io.read_options import LogOptions
 from .io.topics import TopicMap
 from .log import Log
 from .mapping.config import MappingConfig
@@ -82,6 +84,8 @@ class Settings(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     topics: TopicMap = Field(default_factory=TopicMap)
+    #: how logs are read where the data cannot say: time base, gyro unit, surface pressure, water
+    log: LogOptions = Field(default_factory=LogOptions)
     #: sensor mounting overrides applied to every log read (e.g. an IMU logged in ROS's FLU
     #: convention: ``imu: {rotation: [3.141592653589793, 0, 0]}``); see Mounting.updated
     mounting: dict = Field(default_factory=dict)

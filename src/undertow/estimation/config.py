@@ -95,6 +95,10 @@ class LocalizerConfig(BaseModel):
     # initial IMU gyro bias mean b-bar^g (rad/s) when initial_state is None, e.g. from
     # `undertow calibrate`; only the variants that estimate biases (be, proposed) use it
     gyro_bias_rad_s: Vec3 = (0.0, 0.0, 0.0)
+    # initial DR bias mean b^g (rad, roll pitch yaw) when initial_state is None: an offset of the
+    # DVL's attitude reports, e.g. the pitch offset `undertow check` finds from the depth rate;
+    # only the variants that estimate biases use it
+    dr_bias_rad: Vec3 = (0.0, 0.0, 0.0)
     initial_std: list[NonNegative] = Field(
         default_factory=lambda: [0.01] * 3 + [0.05] * 3 + [0.1] * 3 + [0.05] * 3
         + [0.005] * 3 + [0.01] * 3

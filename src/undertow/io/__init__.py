@@ -23,11 +23,13 @@ from .dataflash import DATAFLASH_SUFFIXES, read_dataflash
 from .dataflash_records import looks_like_dataflash
 from .info import LogSummary, StreamSummary, summarize
 from .ply import read_ply, write_ply
+from .read_options import LogOptions
 from .rosbag import read_rosbag
 from .rosbag_write import write_log
 from .tlog import TLOG_SUFFIXES, looks_like_tlog, read_tlog
 from .topics import TopicMap
 from .tum import read_tum, write_tum
+from .units import resolve_units
 
 ROS2_SUFFIXES = (".mcap", ".db3")
 
@@ -74,21 +76,29 @@ def _head(path: Path, size: int) -> bytes:
         return b""
 
 
-def read_log(path, topics: TopicMap | None = None, mavlink=None) -> Log:
+def read_log(path, topics: TopicMap | None = None, mavlink=None,
+             options: LogOptions | None = None) -> Log:  # fmt: skip
     """Read any supported log into a Log (format guessed from the path). ``mavlink``: a
     :class:`~undertow.io.mavlink.MavlinkConfig` for ``.tlog`` files (default: ATTITUDE gyro,
-    SCALED_PRESSURE2 pressure)."""
+    SCALED_PRESSURE2 pressure). ``options``: the time base, units and references where the log
+    cannot say them (:class:`~undertow.io.read_options.LogOptions`, default: detected); the
+    gyro's unit, the surface pressure and the water are resolved and stated
+    (:func:`~undertow.io.units.resolve_units`)."""
+    options = options or LogOptions()
     fmt = detect_format(path)
     if fmt == "a50_json":
-        return read_a50_json(path)
-    if fmt == "tlog":
-        return read_tlog(path, mavlink)
-    if fmt == "dataflash":
-        return read_dataflash(path)
-    return read_rosbag(path, topics)
+        log = read_a50_json(path)
+    elif fmt == "tlog":
+        log = read_tlog(path, mavlink)
+    elif fmt == "dataflash":
+        log = read_dataflash(path)
+    else:
+        log = read_rosbag(path, topics, options)
+    return resolve_units(log, options)
 
 
 __all__ = [
+    "LogOptions",
     "LogSummary",
     "StreamSummary",
     "TopicMap",

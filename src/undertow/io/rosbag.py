@@ -127,6 +127,27 @@ def read_rosbag(path, topics: TopicMap | None = None, options: LogOptions | None
         return _read_rosbag(path, topics or TopicMap(), options or LogOptions())
 
 
+def bag_topics(path) -> dict[str, tuple[str, int]]:
+    """``{topic: (message type, message count)}`` of a ROS 1/2 bag, from its index (no
+    message is read); one ReaderError line for a file that is not a readable bag."""
+    path = Path(path)
+    try:
+        reader = AnyReader(_bag_paths(path), default_typestore=dvl_typestore())
+        reader.open()
+    except ReaderError:
+        raise
+    except Exception as exc:  # rosbags raises many types for corrupt input
+        raise ReaderError(f"{path}: cannot open bag ({_one_line(exc)})") from exc
+    try:
+        topics: dict[str, tuple[str, int]] = {}
+        for c in reader.connections:
+            msgtype, count = topics.get(str(c.topic), (str(c.msgtype), 0))
+            topics[str(c.topic)] = (msgtype, count + int(c.msgcount))
+        return topics
+    finally:
+        reader.close()
+
+
 def _resolve_topics(topics: TopicMap, available: dict, notes: Notes) -> tuple[dict, dict]:
     """(stream -> topic, stream -> guessed topic): the topic map's first candidates found, and
     for the streams whose default candidates are all absent, the topic :func:`propose_topics`
@@ -504,4 +525,4 @@ def _check_numeric(metadata: dict, notes: Notes) -> None:
             del metadata[key]
 
 
-__all__ = ["read_rosbag", "SIDECAR"]
+__all__ = ["bag_topics", "read_rosbag", "SIDECAR"]
