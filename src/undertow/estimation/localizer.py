@@ -70,8 +70,8 @@ from ..trajectory import Trajectory
 from ..wavetrack import WaveTrack
 from . import model
 from .calibration import Calibration
-from .consistency import innovation_consistency
 from .config import LocalizerConfig
+from .consistency import innovation_consistency
 from .health import (
     check_mounting,
     dvl_inside,
@@ -316,6 +316,12 @@ def sensor_coverage(log: Log, cfg: LocalizerConfig) -> tuple[list[str], list[str
             f"Localizer: the log{where} has DVL velocity but no orientation source: needs an "
             "IMU gyro (stream imu) or the DVL's dead reckoning (position_local, stream "
             f"dead_reckoning); it has: {', '.join(log.streams())}"
+        )
+    units = log.metadata.get("imu_units")
+    if has["imu"] and isinstance(units, dict) and units.get("unit") == "ambiguous":
+        raise MissingSensorError(
+            f"Localizer: the gyro's unit in the log{where} is ambiguous ({units.get('evidence')});"
+            " set it in the settings file: log: {imu_units: deg/s} (or rad/s)"
         )
     unobserved, held = [], []
     if not has["imu"]:
@@ -594,7 +600,8 @@ def _initial_state(log: Log, cfg: LocalizerConfig):
             x0[2] = d[ok[0]] - lever[2]
     if cfg.initial_position is not None:
         x0[0:3] = cfg.initial_position
-    x0[15:18] = cfg.gyro_bias_rad_s  # held at 0 by the variants without bias states
+    x0[12:15] = cfg.dr_bias_rad  # held at 0 by the variants without bias states
+    x0[15:18] = cfg.gyro_bias_rad_s
     return x0, P0
 
 
