@@ -20,6 +20,7 @@ from typer.testing import CliRunner
 
 from undertow.cli import app
 from undertow.errors import ConfigError
+from undertow.estimation.characterize import characterize
 from undertow.estimation.localizer import Localizer
 from undertow.estimation.noise import NoiseProfile
 from undertow.estimation.noise_physics import (
@@ -222,6 +223,18 @@ def test_the_dvl_site_comes_from_the_log(simulated):
     default = SensorSite(0.784, 3.0, "profile")
     unknown = sensor_site(bare.replace(ground_truth=None), default=default)
     assert unknown.sensor_depth_m == 0.784 and "DVL depth unknown" in unknown.source
+
+
+def test_characterize_records_the_depth_it_characterized_at():
+    """A profile from `undertow characterize` records its wave runs' DVL and water depth (so
+    extrapolating from it needs no assumption)."""
+    s = _carriage(0.1, 0.75, depth=1.0)
+    logs = [simulate(_carriage(0.0, 1.0, depth=1.0), seed=1).log, simulate(s, seed=2).log]
+    profile = characterize(logs).profile
+    dvl_depth = s.motion.carriage.depth_m + s.mounting.dvl.translation[2]
+    assert profile.sensor_depth_m == pytest.approx(dvl_depth, abs=0.01)
+    assert profile.water_depth_m == s.water.depth_m
+    assert profile.site().source == "recorded in the profile"
 
 
 def test_the_localizer_states_and_records_the_extrapolation(simulated):

@@ -57,7 +57,11 @@ def localize(
     wave_amplitude: Annotated[float | None, typer.Option(help="Wave amplitude, m.")] = None,
     wave_frequency: Annotated[float | None, typer.Option(help="Wave frequency, Hz.")] = None,
     extrapolate: Annotated[
-        bool, typer.Option(help="Allow wave conditions outside the characterized ones.")
+        bool,
+        typer.Option(
+            help="A wave condition outside the profile's takes the nearest characterized one as "
+            "is (default: the nearest scaled by the orbital velocity at the DVL's depth, stated)."
+        ),
     ] = False,
     calibration: Annotated[
         Path | None, typer.Option(help="Calibration YAML from `undertow calibrate`.")

@@ -45,6 +45,7 @@ from scipy.signal import periodogram
 from ..errors import DataError
 from ..log import FRESH_WATER_DENSITY, Log, WaveProbe
 from .noise import NoiseProfile, wave_name
+from .noise_physics import sensor_site
 
 CALM_AMPLITUDE_M = 0.01  # a probe showing less than this is calm water
 PEAK_TO_NOISE_MIN = 100.0  # a wave's spectral peak over the median periodogram level
@@ -425,5 +426,24 @@ def characterize(logs: list[Log], name: str = "characterized") -> Characterizati
         )
     how = "extra noise over the calm run" if calm else "total noise (no calm run given)"
     source = f"undertow characterize: {how}; runs: " + ", ".join(r.source for r in runs)
-    profile = NoiseProfile.from_dict({"name": name, "source": source, "conditions": conditions})
+    site = characterized_site([log for log, run in zip(logs, runs, strict=True) if not run.calm])
+    profile = NoiseProfile.from_dict(
+        {"name": name, "source": source, **site, "conditions": conditions}
+    )
     return Characterization(runs, calm, profile)
+
+
+def characterized_site(wave_logs: list[Log]) -> dict:
+    """The DVL and water depth the wave runs were characterized at (the profile's
+    ``sensor_depth_m``, ``water_depth_m``, used to extrapolate outside its conditions): the
+    median over the runs of each run's :func:`~undertow.estimation.noise_physics.sensor_site`;
+    {} when a run has no depth source (the profile then assumes the paper's), no water depth
+    when one is unknown."""
+    sites = [sensor_site(log) for log in wave_logs]
+    if not sites or any(s is None for s in sites):
+        return {}
+    out = {"sensor_depth_m": float(np.median([s.sensor_depth_m for s in sites]))}
+    h = [s.water_depth_m for s in sites]
+    if all(np.isfinite(h)) and float(np.median(h)) >= out["sensor_depth_m"]:
+        out["water_depth_m"] = float(np.median(h))
+    return out

@@ -82,19 +82,24 @@ def orbital_velocity_amplitude(amplitude_m, frequency_hz, depth_m, water_depth_m
     return a * omega * k_h
 
 
-def sensor_site(log: Log, water_density: float = FRESH_WATER_DENSITY,
-                surface_pressure: float = P_ATM, default: SensorSite | None = None
+def sensor_site(log: Log, water_density: float | None = None,
+                surface_pressure: float | None = None, default: SensorSite | None = None
                 ) -> SensorSite | None:  # fmt: skip
     """The DVL's depth and the water depth of ``log``.
 
     d: the median over the log of the DVL's depth, from the first of: the barometer
-    ((p - p_surface) / (rho g)), the vehicle's own depth stream, the ground truth's z; each
-    moved from its sensor to the DVL by the lever arms taken level (roll and pitch neglected:
+    ((p - p_surface) / (rho g); rho and p_surface as given, else the log's metadata
+    ``water_density_kg_m3`` and ``surface_pressure_pa``, else fresh water and one standard
+    atmosphere), the vehicle's own depth stream, the ground truth's z; each moved from its
+    sensor to the DVL by the lever arms taken level (roll and pitch neglected:
     d_DVL = d_baro + t_DVL,z - t_baro,z). The median: one depth for the run's constant condition,
     robust to the barometer's wave and spike excursions.
     h: the log's recorded still-water depth (``metadata["water_depth_m"]``, a simulated log),
     else d + the median DVL altitude, else deep water.
     Without any depth source: ``default`` (the profile's own site) with that said, or None."""
+    meta = log.metadata if isinstance(log.metadata, dict) else {}
+    water_density = water_density or _positive(meta.get("water_density_kg_m3"))
+    surface_pressure = surface_pressure or _positive(meta.get("surface_pressure_pa"))
     depth, where = _dvl_depths(log, water_density, surface_pressure)
     if depth is None:
         if default is None:
@@ -109,12 +114,20 @@ def sensor_site(log: Log, water_density: float = FRESH_WATER_DENSITY,
     return SensorSite(max(d, 0.0), h, source, (lo, hi))
 
 
-def _dvl_depths(log: Log, water_density: float, surface_pressure: float):
+def _positive(value) -> float | None:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) and value > 0 else None
+
+
+def _dvl_depths(log: Log, water_density: float | None, surface_pressure: float | None):
     """(finite DVL depths, where from) or (None, None)."""
     dvl_z = float(log.mounting.dvl.translation[2])
     candidates = []
     if log.pressure is not None and len(log.pressure):
-        baro = log.pressure.depth(water_density, surface_pressure)
+        baro = log.pressure.depth(water_density or FRESH_WATER_DENSITY, surface_pressure or P_ATM)
         candidates.append((baro + dvl_z - log.mounting.barometer.translation[2],
                            "barometer depth + lever arms"))  # fmt: skip
     depth_stream = getattr(log, "depth", None)
