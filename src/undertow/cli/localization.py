@@ -57,11 +57,7 @@ def localize(
     wave_amplitude: Annotated[float | None, typer.Option(help="Wave amplitude, m.")] = None,
     wave_frequency: Annotated[float | None, typer.Option(help="Wave frequency, Hz.")] = None,
     extrapolate: Annotated[
-        bool,
-        typer.Option(
-            help="A wave condition outside the profile's takes the nearest characterized one as "
-            "is (default: the nearest scaled by the orbital velocity at the DVL's depth, stated)."
-        ),
+        bool, typer.Option(help="Outside the profile: the nearest condition as is, not scaled.")
     ] = False,
     calibration: Annotated[
         Path | None, typer.Option(help="Calibration YAML from `undertow calibrate`.")
