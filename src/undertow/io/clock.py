@@ -141,9 +141,11 @@ def choose_time_base(
         evidence = "messages without a header stamp on " + ", ".join(partial)
     elif spread > tolerance_s:
         far = max(voting, key=lambda s: abs(offsets[s] - common))
+        others = [offsets[s] for s in voting if s != far and math.isfinite(offsets[s])]
+        gap = offsets[far] - float(np.median(others)) if others else spread
         evidence = (
-            f"the stamps of {name(far)} are {_fmt_offset(offsets[far] - common)} off the other "
-            f"streams' (offsets record - stamp spread over {_fmt_offset(spread)})"
+            f"the stamps of {name(far)} are {_fmt_offset(abs(gap))} off the other streams' "
+            f"(offsets record - stamp spread over {_fmt_offset(spread)})"
         )
     else:
         evidence = ""
@@ -155,7 +157,7 @@ def choose_time_base(
                 f"all {n} stream{'s' if n != 1 else ''} stamped, stamps "
                 f"{_fmt_offset(common) if math.isfinite(common) else 'n/a'} before record time"
             )
-        elif stamped and math.isfinite(common) and abs(common) > tolerance_s:
+        elif unstamped and stamped and math.isfinite(common) and abs(common) > tolerance_s:
             evidence += f"; the other streams' stamps are {_fmt_offset(common)} before record time"
     else:
         base = policy

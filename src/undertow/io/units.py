@@ -22,9 +22,10 @@ it falls about 12 Pa per metre of altitude (86 kPa at 1,400 m) and moves with th
 +-3 kPa (+-0.3 m of water). In order: the settings' value; an autopilot's own ground pressure
 recorded in the log (e.g. ArduSub's ``BARO1_GND_PRESS``, put in ``metadata`` by the dataflash
 and telemetry readers); the pressure while the vehicle is at the surface at the start, where
-the log shows that (the log's shallowest pressures are in its first :data:`START_S` s, and it
-dives by more than :data:`DIVE_M` afterwards): the median of the first pressures within
-:data:`SURFACE_BAND_M` of water of the minimum; else the standard atmosphere, or the log's
+the log shows that (the log's shallowest pressures are in its first :data:`START_S` s, held
+there for :data:`SURFACE_HOLD_S` s, and it dives by more than :data:`DIVE_M` afterwards): the
+median of those first pressures within :data:`SURFACE_BAND_M` of water of the minimum (a log
+that starts at rest just below the surface reads the same: depths are then from there); else the standard atmosphere, or the log's
 minimum pressure when that lies below the standard atmosphere's weather range (the surface
 cannot be above the shallowest point). A depth more than 0.5 m above the surface is a warning
 naming the likely cause.
@@ -57,6 +58,8 @@ MAX_TURN = 120 * math.pi / 180.0
 START_S = 30.0
 DIVE_M = 0.3
 SURFACE_BAND_M = 0.05
+#: the vehicle rests at the surface at least this long before it dives (s)
+SURFACE_HOLD_S = 2.0
 #: the standard atmosphere's weather range: p_surface = P_ATM +- 3 kPa at sea level
 WEATHER_PA = 3_000.0
 ABOVE_SURFACE_M = 0.5
@@ -161,9 +164,11 @@ def surface_pressure(log: Log, setting="auto", rho: float = 998.0) -> tuple[floa
     band, dive = SURFACE_BAND_M * rho * G0, DIVE_M * rho * G0
     lo = float(pr.min())
     start = t <= t[0] + START_S
-    if (pr[start] <= lo + band).any() and pr.max() - lo > dive:
-        first = np.flatnonzero(pr <= lo + band)
-        head = first[t[first] <= t[first[0]] + 2.0]
+    near = np.flatnonzero(pr <= lo + band)
+    held = near[t[near] <= t[near[0]] + SURFACE_HOLD_S + 1.0] if near.size else near
+    held_s = float(t[held[-1]] - t[held[0]]) if held.size else 0.0
+    if (pr[start] <= lo + band).any() and pr.max() - lo > dive and held_s >= SURFACE_HOLD_S:
+        head = held
         value = float(np.median(pr[head]))
         return value, (
             f"the log's first pressures at the surface ({head.size} readings from "
