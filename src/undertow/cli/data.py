@@ -175,8 +175,8 @@ def _print_check(result) -> None:
     tb = result.time_base
     out(f"[bold]{result.path}[/] ({result.format})")
     if tb:
-        what = "header stamps" if tb.get("base") == "header" else "record (receive) time"
-        out(f"time base: {what} ({tb.get('reason')})")
+        what = {"header": "header stamps ", "record": "record (receive) time "}
+        out(f"time base: {what.get(tb.get('base'), '')}({tb.get('reason')})")
     for s in result.streams:
         where = f"{s.topic} ({s.msgtype})" if s.topic else ""
         gaps = f"{s.gaps} gaps (longest {s.max_gap_s:.2f} s)" if s.gaps else "no gaps"

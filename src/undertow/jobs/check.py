@@ -166,6 +166,12 @@ def _stream_checks(log: Log, types: dict) -> list[StreamCheck]:
     return out
 
 
+def _time_base(meta: dict) -> dict:
+    """The reader's time base as a dict (a reader with one clock may state it in words)."""
+    tb = meta.get("time_base") or {}
+    return tb if isinstance(tb, dict) else {"base": "log", "reason": str(tb)}
+
+
 def _missing(log: Log) -> list[str]:
     has = set(log.streams())
     missing = []
@@ -205,7 +211,7 @@ def _problems_and_settings(log: Log, fmt: str, settings: Settings, streams) -> t
                 f"topics:\n{lines}",
             ))  # fmt: skip
     section: dict = {}
-    tb = meta.get("time_base") or {}
+    tb = _time_base(meta)
     if tb.get("mixed_clocks"):
         section["time"] = tb["base"]
         comments["log.time"] = tb.get("reason", "")
@@ -316,7 +322,7 @@ def check_file(path: str | Path, settings: Settings | str | Path | None = None, 
         written = Path(write_config)
     return CheckResult(
         path=Path(path), format=fmt, ready=ready, reason=reason,
-        time_base=log.metadata.get("time_base", {}), streams=streams, missing=_missing(log),
+        time_base=_time_base(log.metadata), streams=streams, missing=_missing(log),
         problems=problems, proposed_topics={s: c.to_dict() for s, c in guess.items()},
         settings=proposed, warnings=tuple(dict.fromkeys(caught)), written=written,
     )  # fmt: skip
