@@ -287,12 +287,18 @@ def _number(value, digits: int = 2) -> str:
 
 def _print_drift(drift, estimate: Path) -> None:
     """The drift table, then the alignment, the checkpoint rule and the growth."""
+    from rich import box
     from rich.table import Table
 
-    table = Table(title=f"Drift of {estimate} against {drift.reference} ({drift.source})")
+    table = Table(
+        title=f"Drift of {estimate} against {drift.reference} ({drift.source})",
+        box=box.SIMPLE_HEAD,
+        show_edge=False,
+        pad_edge=False,
+    )
     vertical = drift.reference != "gps"
-    columns = ["t (s)", "distance (m)", "drift (m)", "drift (%)", "along (m)", "cross (m)"]
-    for name in columns + (["vertical (m)"] if vertical else []):
+    columns = ["t s", "distance m", "drift m", "drift %", "along m", "cross m"]
+    for name in columns + (["vertical m"] if vertical else []):
         table.add_column(name, justify="right")
     for c in drift.checkpoints:
         row = [f"{c.t_s:.1f}", f"{c.distance_m:.1f}", f"{c.drift_m:.2f}"]
@@ -316,30 +322,40 @@ def _print_drift(drift, estimate: Path) -> None:
 
 
 def _print_consistency(report) -> None:
-    """The consistency table: per sensor, the NIS against its band, the share outside, the
-    whiteness, and the verdict."""
+    """The consistency table: per sensor, the mean NIS over its expected value against its
+    band, the share outside, the lag-1 autocorrelation against its band, and the verdict; then
+    how to read them."""
+    from rich import box
     from rich.table import Table
 
-    from ..estimation.consistency import MEANING
+    from ..estimation.consistency import LABELS, MEANING
 
-    table = Table(title="Consistency of the filter's innovations (no truth needed)")
-    for name in ("sensor", "dof", "count", "mean NIS", "95 % band", "verdict",
-                 "outside (5 %)", "lag-1 autocorr", "white"):  # fmt: skip
+    table = Table(title="Consistency of the filter's innovations", box=box.SIMPLE_HEAD,
+                  show_edge=False, pad_edge=False, collapse_padding=True)  # fmt: skip
+    for name in ("sensor", "n", "NIS/dof", "95 % band", "outside", "lag-1 (band)", "verdict"):
         table.add_column(name, justify="left" if name in ("sensor", "verdict") else "right")
     for s in report.sensors:
         if not s.count:
-            table.add_row(s.sensor, str(s.dof), "0", "-", "-", s.verdict, "-", "-", "-")
+            table.add_row(s.sensor, "0", "-", "-", "-", "-", s.verdict)
             continue
-        band = f"{s.nis_band_low:.3g} - {s.nis_band_high:.3g}"
-        share = f"{100 * s.share_outside:.1f} %" + ("" if s.share_as_expected else " !")
-        rho = (
-            "-"
-            if s.autocorrelation_lag1 is None
-            else f"{s.autocorrelation_lag1:+.3f} (+-{s.autocorrelation_band:.3f})"
-        )
-        white = "-" if s.white is None else "yes" if s.white else "no"
-        table.add_row(s.sensor, str(s.dof), str(s.count), f"{s.nis_mean:.3g}", band,
-                      s.verdict, share, rho, white)  # fmt: skip
+        rho = "-"
+        if s.autocorrelation_lag1 is not None:
+            rho = f"{s.autocorrelation_lag1:+.2f} ({s.autocorrelation_band:.2f})"
+            rho += "" if s.white else "!"
+        table.add_row(
+            s.sensor, str(s.count), f"{s.nis_mean:.3g}/{s.dof}",
+            f"{s.nis_band_low:.3g}-{s.nis_band_high:.3g}",
+            f"{100 * s.share_outside:.0f} %" + ("" if s.share_as_expected else "!"), rho,
+            LABELS.get(s.verdict, s.verdict),
+        )  # fmt: skip
     console.print(table)
-    for verdict in dict.fromkeys(s.verdict for s in report.evaluated):
-        console.print(f"{verdict}: {MEANING[verdict]}", highlight=False, soft_wrap=True)
+    lines = [
+        "NIS/dof: mean NIS over its expected value; ok inside the 95 % band (or within 10 %); "
+        "outside: share of NIS beyond the per-sample 95 % interval, expected 5 %; lag-1: "
+        "autocorrelation of consecutive innovations, expected within +-(band); ! marks a "
+        "departure"
+    ]
+    verdicts = dict.fromkeys(s.verdict for s in report.evaluated)
+    lines += [f"{LABELS.get(v, v)} ({v}): {MEANING[v]}" for v in verdicts]
+    for line in lines:
+        console.print(line, highlight=False, soft_wrap=True)
