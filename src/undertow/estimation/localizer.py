@@ -64,6 +64,7 @@ import numpy as np
 
 from .._util.validate import validate
 from ..errors import ConfigError, MissingStreamError
+from ..io.units import reading_record
 from ..log import FRESH_WATER_DENSITY, P_ATM, Log
 from ..rotations import matrix_to_rpy, quaternion_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
@@ -158,6 +159,7 @@ class Localizer:
             "held_bias": held,
             "config": cfg.model_dump(),
             "source": log.source,
+            "log": reading_record(log.metadata),
         }
         if cfg.adapts_r:
             metadata["adaptive_r"] = _adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)

@@ -231,3 +231,16 @@ def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
         warnings.warn(line, stacklevel=2)
     meta["warnings"] = lines
     return log.replace(metadata=meta, **changes)
+
+
+#: what every output's config.yaml records of how its log was read
+READING_KEYS = ("format", "topics", "topics_guessed", "time_base", "imu_units",
+                "surface_pressure_pa", "surface_pressure_source", "water", "water_density_kg_m3",
+                "depth_z", "gps_origin", "dvl_frame", "mounting_source")  # fmt: skip
+
+
+def reading_record(metadata: dict) -> dict:
+    """The choices made reading a log (time base, units, references, topics), as recorded in
+    every output's ``config.yaml``."""
+    return {k: metadata[k] for k in READING_KEYS if k in metadata}
+

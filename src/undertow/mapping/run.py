@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import DataError
+from ..io.units import reading_record
 from ..log import Log
 from ..occupancy import OccupancyMap
 from ..trajectory import Trajectory
@@ -68,6 +69,7 @@ def map_metadata(mapper: dict, samples, occupancy: OccupancyMap, config: Mapping
         "occupied_cells": len(occupancy.occupied(config.occupied_threshold)),
         "trajectory_variant": trajectory.variant,
         "source": log.source,
+        "log": reading_record(log.metadata),
     }
 
 
