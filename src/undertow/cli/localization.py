@@ -297,16 +297,21 @@ def _print_drift(drift, estimate: Path) -> None:
         pad_edge=False,
     )
     vertical = drift.reference != "gps"
-    columns = ["t s", "distance m", "drift m", "drift %", "along m", "cross m"]
+    columns = ["time s", "distance m", "drift m", "drift %", "along m", "cross m"]
     for name in columns + (["vertical m"] if vertical else []):
         table.add_column(name, justify="right")
     for c in drift.checkpoints:
-        row = [f"{c.t_s:.1f}", f"{c.distance_m:.1f}", f"{c.drift_m:.2f}"]
+        row = [f"{c.t_s - drift.start_t_s:.1f}", f"{c.distance_m:.1f}", f"{c.drift_m:.2f}"]
         row += [_number(v) for v in (c.drift_percent, c.along_track_m, c.cross_track_m)]
         table.add_row(*row, *([_number(c.vertical_m)] if vertical else []))
     console.print(table)
     console.print(f"alignment: {drift.alignment_text()}", highlight=False, soft_wrap=True)
-    console.print(f"checkpoints: {drift.checkpoint_rule}", highlight=False, soft_wrap=True)
+    console.print(
+        f"checkpoints: {drift.checkpoint_rule}; time from t0 = {drift.start_t_s:.3f} s (the first "
+        "common time)",
+        highlight=False,
+        soft_wrap=True,
+    )
     final = (
         f"final drift {drift.final_drift_m:.2f} m"
         + (f" = {drift.final_drift_percent:.2f} %" if drift.final_drift_percent is not None else "")

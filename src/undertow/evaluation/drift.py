@@ -105,11 +105,13 @@ class Alignment:
 
 @dataclass(frozen=True)
 class DriftResult:
-    """Drift of a trajectory against a reference (module doc), units in the names."""
+    """Drift of a trajectory against a reference (module doc), units in the names;
+    ``start_t_s`` is the first common time (the distances count from there)."""
 
     reference: str
     source: str
     alignment: Alignment
+    start_t_s: float
     checkpoint_rule: str
     checkpoints: tuple[DriftCheckpoint, ...]
     distance_m: float
@@ -204,7 +206,7 @@ def trajectory_drift(
         ref_cp = _interp_rows(t_cp, t_ref, p_ref)
     rows = _checkpoint_rows(t_cp, t_est, p_est, path, s_a, ref_cp, reference.fixes,
                             total >= MIN_DISTANCE_M)  # fmt: skip
-    return _result(reference, alignment, rule, rows, total, int(t_ref.size))
+    return _result(reference, alignment, t_a, rule, rows, total, int(t_ref.size))
 
 
 def _finite_estimate(estimate: Trajectory) -> tuple[np.ndarray, np.ndarray]:
@@ -366,7 +368,7 @@ def _slope_percent(s: np.ndarray, d: list) -> float | None:
     return float(100.0 * np.sum(s[ok] * dv) / np.sum(s[ok] ** 2))
 
 
-def _result(reference, alignment, rule, rows, total, samples) -> DriftResult:
+def _result(reference, alignment, start, rule, rows, total, samples) -> DriftResult:
     s = np.array([r.distance_m for r in rows])
     if total < MIN_DISTANCE_M:
         s = np.zeros_like(s)  # no growth per distance for a run that does not travel
@@ -375,6 +377,7 @@ def _result(reference, alignment, rule, rows, total, samples) -> DriftResult:
         reference=reference.name,
         source=reference.source,
         alignment=alignment,
+        start_t_s=start,
         checkpoint_rule=rule,
         checkpoints=rows,
         distance_m=total,
