@@ -80,9 +80,14 @@ def _imu(t: float, stamp: bool):
     q = T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
     v = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.01)
     return T["sensor_msgs/msg/Imu"](
-        header=header(t if stamp else 0.0), orientation=q, orientation_covariance=np.zeros(9),
-        angular_velocity=v, angular_velocity_covariance=np.zeros(9), linear_acceleration=v,
-        linear_acceleration_covariance=np.zeros(9))
+        header=header(t if stamp else 0.0),
+        orientation=q,
+        orientation_covariance=np.zeros(9),
+        angular_velocity=v,
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=v,
+        linear_acceleration_covariance=np.zeros(9),
+    )
 
 
 def _pressure(t: float):

@@ -57,9 +57,12 @@ def wl_dvl(i: int, t: float, cov=None):
 def uuv_dvl(msgtype: str, i: int, t: float):
     beam_t = msgtype.replace("/DVL", "/DVLBeam")
     pose = T["geometry_msgs/msg/PoseStamped"](
-        header=header(t), pose=T["geometry_msgs/msg/Pose"](
+        header=header(t),
+        pose=T["geometry_msgs/msg/Pose"](
             position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
-            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        ),
+    )
     beams = [T[beam_t](range=-1.0 if k == 1 else 2.0, range_covariance=0.0, velocity=0.2,
                        velocity_covariance=0.0, pose=pose) for k in range(4)]  # fmt: skip
     cov = np.full(9, -1.0) if i == 5 else np.eye(3).ravel() * 4e-4
@@ -70,7 +73,8 @@ def uuv_dvl(msgtype: str, i: int, t: float):
 def ds_dvl(i: int, t: float):
     ds_header = T["ds_core_msgs/msg/DsHeader"](
         io_time=T["builtin_interfaces/msg/Time"](sec=int(t), nanosec=0),
-        source_uuid=np.zeros(2, np.uint64))
+        source_uuid=np.zeros(2, np.uint64),
+    )
     units = [vec(*u) for u in ((0.5, 0.0, 0.866), (-0.5, 0.0, 0.866), (0.0, 0.5, 0.866),
                                (0.0, -0.5, 0.866))]  # fmt: skip
     return T[DS_DVL](header=header(t), ds_header=ds_header, dvl_time=t,
@@ -176,7 +180,8 @@ def test_dvldr_dead_reckoning_in_radians(tmp_path):
 def _pose_cov(t: float, z: float):
     pose = T["geometry_msgs/msg/Pose"](
         position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=float(z)),
-        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0))
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+    )
     pc = T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=np.zeros(36))
     return T["geometry_msgs/msg/PoseWithCovarianceStamped"](header=header(t), pose=pc)
 
@@ -193,8 +198,15 @@ def test_a_pose_depth_sign_detected_from_the_pressure(tmp_path, z_sign):
     depth = 0.5 + 0.5 * np.sin(np.arange(40) / 6)
     msgs = [("/depth_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", int(t * 1e9),
              _pose_cov(t, z_sign * d)) for t, d in zip(times, depth, strict=True)]  # fmt: skip
-    msgs += [("/pressure", "sensor_msgs/msg/FluidPressure", int(t * 1e9),
-              _pressure(t, 90_000 + 9_787 * d)) for t, d in zip(times, depth, strict=True)]
+    msgs += [
+        (
+            "/pressure",
+            "sensor_msgs/msg/FluidPressure",
+            int(t * 1e9),
+            _pressure(t, 90_000 + 9_787 * d),
+        )
+        for t, d in zip(times, depth, strict=True)
+    ]
     write_raw_bag(tmp_path / "bag", msgs)
     log, _ = _read(tmp_path / "bag", depth=["/depth_pose"])
     np.testing.assert_allclose(log.depth.depth, depth, atol=1e-12)
@@ -265,8 +277,12 @@ def test_a_dvl_definition_without_covariance_keeps_the_rest(tmp_path):
     store = get_typestore(Stores.ROS2_HUMBLE)
     old = WL_DVL_MSG.replace("float64[] covariance\n", "")
     types = get_types_from_msg(old, WL_DVL)
-    types.update(get_types_from_msg("int64 id\nfloat64 velocity\nfloat64 distance\n"
-                                    "float64 rssi\nfloat64 nsd\nbool valid\n", WL_BEAM))
+    types.update(
+        get_types_from_msg(
+            "int64 id\nfloat64 velocity\nfloat64 distance\nfloat64 rssi\nfloat64 nsd\nbool valid\n",
+            WL_BEAM,
+        )
+    )
     store.register(types)
     from rosbags.rosbag2 import Writer
 
@@ -277,9 +293,16 @@ def test_a_dvl_definition_without_covariance_keeps_the_rest(tmp_path):
             t = T0 + 0.2 * i
             stamp = Old["builtin_interfaces/msg/Time"](sec=int(t), nanosec=int((t % 1) * 1e9))
             msg = Old[WL_DVL](
-                header=Old["std_msgs/msg/Header"](stamp=stamp, frame_id="dvl"), time=t,
-                velocity=Old["geometry_msgs/msg/Vector3"](x=0.3, y=0.0, z=0.0), fom=0.01,
-                altitude=1.0, beams=[], velocity_valid=True, status=0, form="json_v3")
+                header=Old["std_msgs/msg/Header"](stamp=stamp, frame_id="dvl"),
+                time=t,
+                velocity=Old["geometry_msgs/msg/Vector3"](x=0.3, y=0.0, z=0.0),
+                fom=0.01,
+                altitude=1.0,
+                beams=[],
+                velocity_valid=True,
+                status=0,
+                form="json_v3",
+            )
             writer.write(conn, int(t * 1e9), store.serialize_cdr(msg, WL_DVL))
     log, _ = _read(tmp_path / "bag")
     assert len(log.dvl) == 5 and np.isnan(log.dvl.covariance).all()

@@ -93,8 +93,9 @@ class TimeBase:
             "reason": self.reason,
             "mixed_clocks": self.mixed,
             "missing_stamps": dict(self.missing_stamps),
-            "offsets_s": {k: (None if math.isnan(v) else round(v, 6))
-                          for k, v in self.offsets_s.items()},  # fmt: skip
+            "offsets_s": {
+                k: (None if math.isnan(v) else round(v, 6)) for k, v in self.offsets_s.items()
+            },  # fmt: skip
             "shift_s": {k: round(v, 6) for k, v in self.shift_s.items()},
         }
 

@@ -88,12 +88,15 @@ DVL_TYPES: dict[str, DvlFields] = {
     WL_DVL: DvlFields(**_WL, covariance="covariance"),
     UUV_DVL: DvlFields(**_UUV),
     COLA2_DVL: DvlFields(**_UUV),
-    MARINE_DVL: DvlFields(**_MARINE, ranges_valid="beam_ranges_valid",
-                          beam_velocities="beam_velocity"),  # fmt: skip
-    DS_DVL: DvlFields(**_MARINE, beam_velocities="raw_velocity",
-                      beam_velocity_if=("coordinate_mode", 0)),  # fmt: skip
-    TWIST_COV: DvlFields(velocity="twist.twist.linear", covariance="twist.covariance",
-                         altitude=None),  # fmt: skip
+    MARINE_DVL: DvlFields(
+        **_MARINE, ranges_valid="beam_ranges_valid", beam_velocities="beam_velocity"
+    ),  # fmt: skip
+    DS_DVL: DvlFields(
+        **_MARINE, beam_velocities="raw_velocity", beam_velocity_if=("coordinate_mode", 0)
+    ),  # fmt: skip
+    TWIST_COV: DvlFields(
+        velocity="twist.twist.linear", covariance="twist.covariance", altitude=None
+    ),  # fmt: skip
     TWIST: DvlFields(velocity="twist.linear", altitude=None),
 }
 

@@ -285,8 +285,9 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap
     depth = rows.depth(_depth_sign(rows, options, metadata, notes))
     gps = rows.gps(options.gps_origin)
     if gps is not None:
-        metadata["gps_origin"] = [float(v) for v in gps.origin] if not rows.gps_local else (
-            "first odometry fix")
+        metadata["gps_origin"] = (
+            [float(v) for v in gps.origin] if not rows.gps_local else ("first odometry fix")
+        )
     limits = (source_meta or {}).get("multibeam")
     limits = limits if isinstance(limits, dict) else {}
     log = Log(

@@ -290,6 +290,7 @@ class Rows:
 
     def apply_times(self, times: np.ndarray) -> None:
         """Replace every row's time placeholder (its message index) by ``times[index]``."""
+
         def at(k: float) -> float:
             return float(times[int(k)])
 

@@ -49,11 +49,15 @@ _TYPE_POINTS[("imu", "sensor_msgs/msg/Imu")] = 8
 #: words of the topic name (split at / _ - .) for and against each stream
 _WORDS = {
     "dvl": ({"dvl": 3, "velocity": 1, "data": 1}, {}),
-    "dead_reckoning": ({"dead": 3, "reckoning": 3, "dr": 3, "position": 3, "dvl": 3, "local": 1},
-                       {"global": -2, "depth": -6}),  # fmt: skip
+    "dead_reckoning": (
+        {"dead": 3, "reckoning": 3, "dr": 3, "position": 3, "dvl": 3, "local": 1},
+        {"global": -2, "depth": -6},
+    ),  # fmt: skip
     "imu": ({"imu": 2, "data": 1}, {"raw": -1}),
-    "pressure": ({"pressure": 3, "baro": 3, "barometer": 3, "fluid": 1, "data": 1},
-                 {"leak": -8, "battery": -8, "desired": -8}),  # fmt: skip
+    "pressure": (
+        {"pressure": 3, "baro": 3, "barometer": 3, "fluid": 1, "data": 1},
+        {"leak": -8, "battery": -8, "desired": -8},
+    ),  # fmt: skip
     "depth": ({"depth": 8}, {}),
     "sonar": ({"sonar": 3, "ping": 3, "echo": 2, "altitude": 2, "altimeter": 2, "range": 1}, {}),
     "gps": ({"gps": 6, "fix": 3, "gnss": 6, "navsat": 6}, {"extended": -1}),

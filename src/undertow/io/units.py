@@ -25,10 +25,10 @@ and telemetry readers); the pressure while the vehicle is at the surface at the 
 the log shows that (the log's shallowest pressures are in its first :data:`START_S` s, held
 there for :data:`SURFACE_HOLD_S` s, and it dives by more than :data:`DIVE_M` afterwards): the
 median of those first pressures within :data:`SURFACE_BAND_M` of water of the minimum (a log
-that starts at rest just below the surface reads the same: depths are then from there); else the standard atmosphere, or the log's
-minimum pressure when that lies below the standard atmosphere's weather range (the surface
-cannot be above the shallowest point). A depth more than 0.5 m above the surface is a warning
-naming the likely cause.
+that starts at rest just below the surface reads the same: depths are then from there); else
+the standard atmosphere, or the log's minimum pressure when that lies below the standard
+atmosphere's weather range (the surface cannot be above the shallowest point). A depth more
+than 0.5 m above the surface is a warning naming the likely cause.
 
 **Water density.** Fresh (998 kg/m^3) or salt (1025) by the settings' ``water``; stated.
 """
@@ -227,7 +227,7 @@ def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
                 f"pressure {p0:,.0f} Pa ({how}) is likely too high (a lake at altitude, the "
                 "weather, or a pressure in other units); set log: {surface_pressure_pa: PA}"
             )
-    for line in lines[len(meta.get("warnings", [])):]:
+    for line in lines[len(meta.get("warnings", [])) :]:
         warnings.warn(line, stacklevel=2)
     meta["warnings"] = lines
     return log.replace(metadata=meta, **changes)
@@ -243,4 +243,3 @@ def reading_record(metadata: dict) -> dict:
     """The choices made reading a log (time base, units, references, topics), as recorded in
     every output's ``config.yaml``."""
     return {k: metadata[k] for k in READING_KEYS if k in metadata}
-
