@@ -138,5 +138,28 @@ ConfigOption = Annotated[
 ]
 
 
+TimeOption = Annotated[
+    str | None,
+    typer.Option(
+        "--time",
+        help="Time base of the log: auto (header stamps when every stream has them on one "
+        "clock, else the record time), header or record. Default: the settings' log.time.",
+    ),
+]
+
+
+def settings_with_time(config: Path | None, time: str | None):
+    """The settings to pass a job: the ``--config`` path as given, or, with ``--time``, the
+    settings read with their ``log.time`` replaced (one line for a bad value)."""
+    if time is None:
+        return config
+    from ..io.clock import check_policy
+    from ..settings import Settings
+
+    settings = Settings.from_yaml(config)
+    settings.log = settings.log.model_copy(update={"time": check_policy(time)})
+    return settings
+
+
 def _fmt(value, digits: int = 3) -> str:
     return "-" if value is None else f"{value:.{digits}f}"

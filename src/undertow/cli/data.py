@@ -13,6 +13,7 @@ import typer
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
+    TimeOption,
     TopicsOption,
     _print_json,
     _print_warnings,
@@ -20,6 +21,7 @@ from ._app import (
     app,
     console,
     err,
+    settings_with_time,
     user_errors,
 )
 
@@ -33,6 +35,7 @@ def info(
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")] = False,
     topics: TopicsOption = None,
     config: ConfigOption = None,
+    time: TimeOption = None,
 ) -> None:
     """Streams found, message counts, rates, time span and invalid data, in measurement terms.
 
@@ -41,7 +44,9 @@ def info(
     from ..jobs.data import info_file
     from ..settings import Settings
 
-    settings = Settings.from_yaml(config) if config else None
+    settings = settings_with_time(config, time)
+    if settings is not None and not isinstance(settings, Settings):
+        settings = Settings.from_yaml(settings)
     # every warning once, each time (not left to the process's warning registry, which hides a
     # warning already shown from the same line: a second `info` in one process would miss it)
     with warnings.catch_warnings(record=True) as caught:
@@ -121,16 +126,6 @@ def simulate(
         )
     if not quiet:
         err.print(f"wrote {out_dir}/{', '.join(RUN_FILES)}", soft_wrap=True, highlight=False)
-
-
-TimeOption = Annotated[
-    str | None,
-    typer.Option(
-        "--time",
-        help="Time base: auto (header stamps when every stream has them on one clock, else the "
-        "record time), header or record. Default: the settings' log.time (auto).",
-    ),
-]
 
 
 @app.command()

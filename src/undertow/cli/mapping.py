@@ -11,6 +11,7 @@ from ..errors import UndertowError
 from ._app import (
     ConfigOption,
     OverwriteOption,
+    TimeOption,
     TopicsOption,
     _print_json,
     _progress,
@@ -18,6 +19,7 @@ from ._app import (
     console,
     err,
     evaluate_app,
+    settings_with_time,
     user_errors,
 )
 
@@ -64,6 +66,7 @@ def map_command(
     ] = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
+    time: TimeOption = None,
     overwrite: OverwriteOption = False,
     quiet: Annotated[
         bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
@@ -82,7 +85,8 @@ def map_command(
     given = {k: v for k, v in options.items() if v is not None}  # options win over the file
     with _progress(quiet) as progress:
         progress.add_task(f"mapping ({method})" if method else "mapping", total=None)
-        result = map_file(log_path, trajectory, config, topics=topics, prior=prior,
+        result = map_file(log_path, trajectory, settings_with_time(config, time), topics=topics,
+                          prior=prior,
                           out_dir=out_dir, overwrite=overwrite, tiles=tiles,
                           scheduler=scheduler, **given)  # fmt: skip
     _print_warnings(result.warnings)
