@@ -1,8 +1,8 @@
 """Fuzzing campaign of the log readers through the entry point of ``undertow info``.
 
 Each input is a mutation of a seed in ``fuzz/corpus/`` (small files derived from the real A50
-recordings, a simulated ROS 2 bag and a simulated
-MAVLink telemetry log): byte flips, truncations, block overwrites, line edits,
+recordings, a simulated ROS 2 bag, a simulated MAVLink telemetry log and the head of the real
+ArduSub dataflash log ``ardusub_small.BIN``): byte flips, truncations, block overwrites, line edits,
 field-level JSON mutations (huge integers, infinities, NaN, wrong types, absurd nesting),
 YAML mutations of the files beside a ROS 2 bag (``undertow.yaml``, ``metadata.yaml``) and
 bag-byte mutations; plus a named pipe and an empty file. Every input runs in a forked child
@@ -224,7 +224,7 @@ def mutate_yaml(rng: random.Random, data: bytes) -> bytes:
 
 def _seed_files():
     """(name, kind, path) of every seed: JSON lines, ROS 1 bags, ROS 2 bag folders, MAVLink
-    telemetry logs."""
+    telemetry logs, ArduPilot dataflash logs."""
     seeds = []
     for path in sorted(CORPUS.iterdir()):
         if path.suffix == ".txt":
@@ -233,6 +233,8 @@ def _seed_files():
             seeds.append((path.name, "ros1", path))
         elif path.suffix == ".tlog":
             seeds.append((path.name, "tlog", path))
+        elif path.suffix.lower() == ".bin":
+            seeds.append((path.name, "dataflash", path))
         elif path.is_dir():
             seeds.append((path.name, "ros2", path))
     return seeds
@@ -246,9 +248,9 @@ def make_input(rng: random.Random, seeds, workdir: Path, index: int) -> tuple[Pa
         out = workdir / f"in{index}.txt"
         out.write_bytes(mut(rng, seed.read_bytes()))
         return out, f"{name}:{mut.__name__}"
-    if kind in ("ros1", "tlog"):
+    if kind in _BINARY_SUFFIX:
         mut = rng.choice(BYTE_MUTATORS)
-        out = workdir / f"in{index}.{'bag' if kind == 'ros1' else 'tlog'}"
+        out = workdir / f"in{index}.{_BINARY_SUFFIX[kind]}"
         out.write_bytes(mut(rng, seed.read_bytes()))
         return out, f"{name}:{mut.__name__}"
     out = workdir / f"in{index}"
@@ -260,7 +262,8 @@ def make_input(rng: random.Random, seeds, workdir: Path, index: int) -> tuple[Pa
     return out, f"{name}/{target}:{mut.__name__}"
 
 
-_WEIGHT = {"json": 3.0, "ros1": 1.0, "ros2": 1.5, "tlog": 1.0}
+_WEIGHT = {"json": 3.0, "ros1": 1.0, "ros2": 1.5, "tlog": 1.0, "dataflash": 1.0}
+_BINARY_SUFFIX = {"ros1": "bag", "tlog": "tlog", "dataflash": "BIN"}
 
 
 def special_inputs(workdir: Path) -> list[tuple[Path, str]]:

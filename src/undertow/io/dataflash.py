@@ -104,8 +104,9 @@ _CONVERSIONS = {
 #: fields whose declared multiplier ArduPilot does not apply when writing: VISO.dt is declared
 #: in 1e-6 s but written in s (AP_VisualOdom_Backend: time_delta_usec / 1e6)
 _WRITTEN_UNSCALED = {("VISO", "dt")}
-#: multipliers assumed without FMTU records: TimeUS/SampleUS are microseconds
-_ASSUMED = {"TimeUS": 1e-6, "SampleUS": 1e-6}
+#: times are microseconds since boot by ArduPilot's definition of these columns, whatever a
+#: (possibly damaged) declaration says
+_MICROSECONDS = ("TimeUS", "SampleUS")
 
 
 def read_dataflash(path) -> Log:
@@ -223,9 +224,11 @@ class _Reader:
         """Factor taking ``name.column`` as written to ``expected`` (the log's declaration when
         it has one, else ArduPilot's); None (with a warning) when the declared unit is another
         quantity."""
+        if column in _MICROSECONDS:
+            return 1e-6
         declared = self.scan.unit(name, column)
         if declared is None or expected is None:
-            return _ASSUMED.get(column, 1.0) if expected else 1.0
+            return 1.0
         label, mult = declared
         if (name, column) in _WRITTEN_UNSCALED:
             mult = 1.0

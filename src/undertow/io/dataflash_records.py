@@ -27,7 +27,7 @@ import struct
 from collections import Counter
 from collections.abc import Iterable, Iterator
 
-from pymavlink.DFReader import DFFormat, null_term
+from pymavlink.DFReader import FORMAT_TO_STRUCT, DFFormat, null_term
 
 from ._collect import MALFORMED
 
@@ -41,6 +41,9 @@ _TEXT_FMT = re.compile(rb"(?:^|\n)\s*FMT,")
 _SELF_SCALED = frozenset("cCeEL")
 _STRING_CHARS = frozenset("nNZ")
 _META = ("FMTU", "UNIT", "MULT")
+#: the multipliers ArduPilot's MULT records define (AP_Logger/LogStructure.h: 0 for none,
+#: powers of ten, 3.6 and 3600 for per-hour units); another value is a damaged record
+MULTIPLIERS = frozenset([0.0, 3.6, 3600.0] + [float(f"1e{k}") for k in range(-9, 10)])
 
 
 def looks_like_dataflash(head: bytes) -> str | None:
@@ -91,16 +94,19 @@ class Scan:
         return label, float(mult)
 
 
-def _new_format(elements) -> DFFormat:
-    """A DFFormat from an FMT record's (Type, Length, Name, Format, Columns); ValueError when
-    its characters are unknown or its length is not the body's size plus the 3-byte header."""
-    ftype, length, name, form, columns = elements
-    try:
-        fmt = DFFormat(int(ftype), null_term(name), int(length), null_term(form),
-                       null_term(columns))  # fmt: skip
-    except Exception as exc:  # noqa: BLE001 - DFFormat raises a bare Exception on unknown chars
-        raise ValueError(str(exc)) from None
-    if struct.calcsize(fmt.msg_struct) + 3 != fmt.len or not fmt.name:
+def new_format(ftype, length, name, form, columns) -> DFFormat:
+    """A DFFormat from an FMT record's Type, Length, Name, Format and Columns; ValueError when
+    a format character is unknown (checked first: DFFormat prints before it raises), the
+    columns do not match the format characters one to one, or, in a binary log (``length``
+    not None), the length is not the body's size plus the header's 3."""
+    name, form, columns = null_term(name), null_term(form), null_term(columns)
+    unknown = sorted(set(form) - set(FORMAT_TO_STRUCT))
+    if unknown or not name or not form:
+        raise ValueError(f"FMT {name!r}: format {form!r} empty or with unknown characters")
+    fmt = DFFormat(int(ftype), name, -1 if length is None else int(length), form, columns)
+    if len(fmt.columns) != len(fmt.format):
+        raise ValueError(f"FMT {name!r}: {len(fmt.columns)} columns for format {form!r}")
+    if length is not None and struct.calcsize(fmt.msg_struct) + 3 != fmt.len:
         raise ValueError(f"FMT {fmt.name!r}: length {fmt.len} does not match {fmt.format!r}")
     return fmt
 
@@ -160,7 +166,7 @@ class BinaryScanner:
 
     def _define(self, body) -> None:
         try:
-            fmt = _new_format(body)
+            fmt = new_format(*body)
         except MALFORMED:
             self.scan.bad_formats += 1
             return
@@ -184,7 +190,10 @@ def _store_meta(scan: Scan, fmt: DFFormat, body, types: dict) -> None:
     if fmt.name == "UNIT":
         scan.unit_lookup[_id_char(body[col["Id"]])] = _text(body[col["Label"]])
     elif fmt.name == "MULT":
-        scan.mult_lookup[_id_char(body[col["Id"]])] = float(f"{float(body[col['Mult']]):.7g}")
+        mult = float(f"{float(body[col['Mult']]):.7g}")  # (float32 values, as pymavlink rounds)
+        if mult not in MULTIPLIERS:
+            raise ValueError(f"MULT {mult}: not one of ArduPilot's multipliers")
+        scan.mult_lookup[_id_char(body[col["Id"]])] = mult
     else:
         target = types.get(int(body[col["FmtType"]]))
         if target is not None:
@@ -246,9 +255,8 @@ class TextScanner:
             self.scan.bad_formats += 1
             return
         try:
-            ftype, length, name, form = int(parts[1]), int(parts[2]), parts[3], parts[4]
-            fmt = DFFormat(ftype, name, length, form, ",".join(parts[5:]))
-        except Exception:  # noqa: BLE001 - DFFormat raises a bare Exception on unknown chars
+            fmt = new_format(parts[1], None, parts[3], parts[4], ",".join(parts[5:]))
+        except MALFORMED:
             self.scan.bad_formats += 1
             return
         self.scan.formats[fmt.name] = fmt

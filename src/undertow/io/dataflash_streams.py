@@ -235,8 +235,8 @@ def interpolate_orientation(t_src, q_src, t, max_gap_s: float = ATTITUDE_MAX_GAP
     (at sorted times ``t_src``): q(t) = [sin((1 - u) a) q_k + sin(u a) q_k+1] / sin(a), u =
     (t - t_k) / (t_k+1 - t_k), cos a = |q_k . q_k+1| (Shoemake, "Animating rotation with
     quaternion curves", SIGGRAPH 1985; the shorter arc). Before the first and after the last
-    sample the end sample is held; rows whose bracketing samples are more than ``max_gap_s``
-    apart (or whose end sample is further than that) are NaN. Returned with w >= 0."""
+    sample the end sample is held up to ``max_gap_s`` away; rows between samples more than
+    ``max_gap_s`` apart, or further from the ends, are NaN. Returned with w >= 0."""
     t_src, q_src, t = np.asarray(t_src, float), np.asarray(q_src, float), np.asarray(t, float)
     n = t_src.size
     k = np.clip(np.searchsorted(t_src, t, side="right") - 1, 0, max(n - 2, 0))
@@ -256,8 +256,8 @@ def interpolate_orientation(t_src, q_src, t, max_gap_s: float = ATTITUDE_MAX_GAP
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q = np.where(q[:, 3:4] < 0, -q, q)
     nearest = np.minimum(np.abs(t - t_src[k]), np.abs(t - t_src[k1]))
-    far = (span > max_gap_s) | (nearest > max_gap_s) if n > 1 else nearest > max_gap_s
-    q[far] = np.nan
+    inside = (t >= t_src[0]) & (t <= t_src[-1])
+    q[np.where(inside, span > max_gap_s, nearest > max_gap_s)] = np.nan
     return q
 
 
