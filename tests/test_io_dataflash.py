@@ -323,6 +323,20 @@ def test_gps_local_metres_and_dropped_fixes(synthetic):
     assert any("impossible coordinates dropped: 1" in n for n in notes)
 
 
+def test_gps_about_a_given_origin(tmp_path):
+    from undertow.io.read_options import LogOptions
+
+    path = tmp_path / "dive.BIN"
+    path.write_bytes(dive())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        log = read_log(path, options=LogOptions(gps_origin=list(ORIGIN)))
+    gps = log.gps
+    np.testing.assert_allclose(gps.position[:, 0], 1.0 * (gps.t - T0), atol=0.02)
+    np.testing.assert_allclose(gps.position[:, 2], -0.1 * (gps.t - T0), atol=0.011)
+    assert gps.origin == ORIGIN and log.metadata["gps_origin"] == list(ORIGIN)
+
+
 def test_autopilot_is_ekf_core_zero(synthetic):
     log, _ = synthetic
     ap = log.autopilot

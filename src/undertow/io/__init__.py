@@ -91,7 +91,7 @@ def read_log(path, topics: TopicMap | None = None, mavlink=None,
     elif fmt == "tlog":
         log = read_tlog(path, mavlink)
     elif fmt == "dataflash":
-        log = read_dataflash(path)
+        log = read_dataflash(path, options.gps_origin)
     else:
         log = read_rosbag(path, topics, options)
     return resolve_units(log, options)

@@ -30,7 +30,8 @@ formats) map to streams as ArduPilot logs them (``AP_Logger/LogStructure.h``,
   the standard deviation).
 - ``gps``: ``GPS`` of the lowest instance, fixes with Status >= 3 (3D) only (no-fix and
   non-finite fixes dropped and counted), projected to north-east-down metres about the first
-  good fix (``GpsFix.origin``); ``GPA`` HAcc (m) as the horizontal standard deviation.
+  good fix or a given origin (``GpsFix.origin``, :func:`undertow.io.geo.local_ned`); ``GPA``
+  HAcc (m) as the horizontal standard deviation.
 - ``autopilot``: ``XKF1`` of EKF core 0 (``NKF1``, EKF2, in logs without it): PN/PE/PD m,
   Roll/Pitch/Yaw deg, VN/VE/VD m/s.
 
@@ -109,20 +110,22 @@ _WRITTEN_UNSCALED = {("VISO", "dt")}
 _MICROSECONDS = ("TimeUS", "SampleUS")
 
 
-def read_dataflash(path) -> Log:
-    """Read an ArduPilot dataflash log (binary or text) into a Log (see the module docstring)."""
+def read_dataflash(path, gps_origin=None) -> Log:
+    """Read an ArduPilot dataflash log (binary or text) into a Log (see the module docstring);
+    ``gps_origin`` (lat deg, lon deg, alt m): the origin of the GPS fixes' local frame (default
+    the first 3D fix)."""
     path = Path(path)
     data = read_regular_bytes(path)
     if not data:
         raise ReaderError(f"{path}: empty file (no dataflash records)")
     kind = looks_like_dataflash(data[:8192]) or "binary"
     with np.errstate(all="ignore"):
-        return _Reader(path, data, kind).read()
+        return _Reader(path, data, kind, gps_origin).read()
 
 
 class _Reader:
-    def __init__(self, path: Path, data: bytes, kind: str) -> None:
-        self.path, self.kind = path, kind
+    def __init__(self, path: Path, data: bytes, kind: str, gps_origin=None) -> None:
+        self.path, self.kind, self.gps_origin = path, kind, gps_origin
         wanted = (*FIELDS, *_TEXT_MESSAGES)
         if kind == "binary":
             self.scanner = BinaryScanner(data, wanted)
@@ -247,7 +250,7 @@ class _Reader:
     # -- streams -------------------------------------------------------------------------------
 
     def _streams(self, tables: dict) -> dict:
-        self.builder = StreamBuilder(self.notes, self.params)
+        self.builder = StreamBuilder(self.notes, self.params, self.gps_origin)
         return self.builder.build(tables)
 
     # -- metadata ------------------------------------------------------------------------------
@@ -285,6 +288,8 @@ class _Reader:
             metadata["surface_pressure_pa"] = float(self.builder.surface[0])
             metadata["surface_pressure_source"] = self.builder.surface[1]
         metadata["dataflash"] = info
+        if self.builder.gps_origin_used is not None:
+            metadata["gps_origin"] = list(self.builder.gps_origin_used)
         return metadata
 
     def _mounting(self) -> Mounting:

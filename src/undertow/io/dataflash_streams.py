@@ -10,6 +10,7 @@ import numpy as np
 from ..log import AutopilotPose, DeadReckoning, Dvl, GpsFix, Imu, Pressure, SonarRange
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion, world_to_body, wrap_angle
 from ._collect import Notes, count_nan_rows, time_order
+from .geo import local_ned
 
 #: VISO confidence (%) below which a DVL velocity is flagged invalid (the tlog reader's default)
 MIN_CONFIDENCE = 1.0
@@ -25,9 +26,11 @@ class StreamBuilder:
     goes to :attr:`info` (for ``metadata['dataflash']``), the surface pressure it found to
     :attr:`surface` ((Pa, source) or None), counted problems to ``notes``."""
 
-    def __init__(self, notes: Notes, params: dict[str, float]) -> None:
+    def __init__(self, notes: Notes, params: dict[str, float], gps_origin=None) -> None:
         self.notes = notes
         self.params = params
+        self.gps_origin = gps_origin
+        self.gps_origin_used: tuple | None = None
         self.info: dict = {}
         self.surface: tuple[float, str] | None = None
 
@@ -168,15 +171,18 @@ class StreamBuilder:
         keep = fixed & sane
         if not keep.any():
             return None
-        origin = (float(lat[keep][0]), float(lon[keep][0]), float(alt[keep][0]))
+        first = (float(lat[keep][0]), float(lon[keep][0]), float(alt[keep][0]))
+        origin = first if self.gps_origin is None else tuple(self.gps_origin)
         try:
             position = local_ned(lat[keep], lon[keep], alt[keep], origin)
         except ImportError:
             self.notes.add("gps: fixes not used (projecting them needs pyproj: pip install "
                            "pyproj)", 1)  # fmt: skip
             return None
+        self.gps_origin_used = origin
         hacc = _matched(gpa, k, gps[keep, 0])
-        self.info["gps"] = f"GPS instance {k}, local NED about the first 3D fix"
+        about = "the first 3D fix" if self.gps_origin is None else "the settings' gps_origin"
+        self.info["gps"] = f"GPS instance {k}, local north-east-down about {about}"
         return GpsFix(t[keep], position, lat[keep], lon[keep], alt[keep],
                       np.where(hacc > 0, hacc, np.nan), origin=origin)  # fmt: skip
 
@@ -270,17 +276,3 @@ def _matched(table: np.ndarray | None, k: int, t: np.ndarray) -> np.ndarray:
     rows, _ = _instance(table, 1, k)
     lookup = dict(zip(rows[:, 0].tolist(), rows[:, 2].tolist(), strict=True))
     return np.array([lookup.get(v, math.nan) for v in t.tolist()])
-
-
-def local_ned(latitude, longitude, altitude, origin) -> np.ndarray:
-    """(N, 3) north, east, down metres of fixes about ``origin`` (lat deg, lon deg, alt m):
-    pyproj's azimuthal equidistant projection centred on the origin (``+proj=aeqd``, WGS 84:
-    distances and azimuths from the origin are true), x = northing, y = easting, z = -(h - h0)."""
-    from pyproj import Transformer
-
-    lat0, lon0, alt0 = origin
-    proj = f"+proj=aeqd +lat_0={lat0!r} +lon_0={lon0!r} +x_0=0 +y_0=0 +ellps=WGS84 +units=m"
-    forward = Transformer.from_crs("EPSG:4326", proj, always_xy=True)
-    east, north = forward.transform(np.asarray(longitude, float), np.asarray(latitude, float))
-    down = -(np.asarray(altitude, float) - alt0)
-    return np.column_stack([np.asarray(north, float), np.asarray(east, float), down])
