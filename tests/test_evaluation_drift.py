@@ -230,17 +230,9 @@ def test_evaluate_against_the_dvl_dead_reckoning(localized):
     assert len(data["checkpoints"]) == 10 and data["reference"] == "dvl-dr"
     assert set(data["consistency"]["sensors"]) == {"imu", "dvl", "dead_reckoning", "pressure"}
     # independent: the end of the comparison, from the files themselves
-    traj = Trajectory.load_npz(est)
     dr = read_log(log).dead_reckoning
-    inside = (dr.t >= traj.t[0]) & (dr.t <= traj.t[-1])
-    t0, t1 = dr.t[inside][0], dr.t[inside][-1]
-
-    def at(t, tp, p):
-        return np.array([np.interp(t, tp, p[:, i]) for i in range(2)])
-
-    moved_est = at(t1, traj.t, traj.position) - at(t0, traj.t, traj.position)
-    moved_dr = at(t1, dr.t, dr.position) - at(t0, dr.t, dr.position)
-    assert data["final_drift_m"] == pytest.approx(np.linalg.norm(moved_est - moved_dr), rel=1e-6)
+    traj = Trajectory.load_npz(est)
+    assert data["final_drift_m"] == pytest.approx(_end_drift(traj, dr.t, dr.position), rel=1e-6)
     assert data["distance_m"] == pytest.approx(36.6, rel=0.05)  # the carriage run's length
 
 
@@ -257,3 +249,71 @@ def test_a_reference_kind_the_log_lacks_is_one_line(localized):
     assert "it has: imu, dvl, dead_reckoning, pressure" in line
     line = one_error_line(runner.invoke(app, ["evaluate", "trajectory", str(est), str(log)]))
     assert "is a log, not a ground-truth TUM file" in line and "--reference" in line
+
+
+def _real(name: str):
+    from conftest import REAL_DATA
+
+    path = REAL_DATA / name
+    if not path.exists():
+        pytest.skip(f"real recording {path} not found")
+    return path
+
+
+def _end_drift(traj: Trajectory, t_ref: np.ndarray, p_ref: np.ndarray) -> float:
+    """|displacement of the estimate - displacement of the reference| (horizontal) between the
+    first and last reference samples inside the trajectory's span."""
+    inside = (t_ref >= traj.t[0]) & (t_ref <= traj.t[-1])
+    t0, t1 = t_ref[inside][0], t_ref[inside][-1]
+
+    def at(t, tp, p):
+        return np.array([np.interp(t, tp, p[:, i]) for i in range(2)])
+
+    moved_est = at(t1, traj.t, traj.position) - at(t0, traj.t, traj.position)
+    moved_ref = at(t1, t_ref, p_ref) - at(t0, t_ref, p_ref)
+    return float(np.linalg.norm(moved_est - moved_ref))
+
+
+@pytest.mark.realdata
+def test_the_real_auv_against_its_a50_dead_reckoning(tmp_path):
+    """The shared AUV recording, localized with the default settings: the drift table against
+    the A50's own dead reckoning, its final drift as recomputed here from the files."""
+    from undertow.cli import app
+    from undertow.io import read_log
+
+    bag = _real("coug_a50_imu_ros2")
+    r = runner.invoke(app, ["localize", str(bag), "--out", str(tmp_path / "est"), "-q"])
+    assert r.exit_code == 0, r.output
+    args = ["evaluate", "trajectory", str(tmp_path / "est"), str(bag), "--reference", "dvl-dr"]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0 and "Traceback" not in r.output, r.output
+    assert "Drift of" in r.output and "growth:" in r.output
+    data = json.loads(runner.invoke(app, [*args, "--json"]).stdout)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        dr = read_log(bag).dead_reckoning
+    traj = Trajectory.load_npz(tmp_path / "est")
+    assert data["final_drift_m"] == pytest.approx(_end_drift(traj, dr.t, dr.position), rel=1e-6)
+    assert 5.0 < data["distance_m"] < 50.0  # a small AUV over about 15 s
+
+
+@pytest.mark.realdata
+def test_the_autopilot_of_a_real_dataflash_log_is_a_reference(tmp_path):
+    """ardusub_small.BIN's EKF (XKF1, a vehicle on the bench): a trajectory 3 m north and 4 m
+    east of it drifts 5 m without alignment and 0 with it; it travels too little for a %."""
+    from undertow.cli import app
+    from undertow.io import read_log
+
+    path = _real("ardusub_small.BIN")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ekf = read_log(path).autopilot
+    _trajectory(ekf.t, ekf.position + [3.0, 4.0, 0.0]).save_npz(tmp_path / "t.npz")
+    base = ["evaluate", "trajectory", str(tmp_path / "t.npz"), str(path), "--reference"]
+    r = runner.invoke(app, [*base, "autopilot", "--align", "none", "--json"])
+    assert r.exit_code == 0, r.output
+    data = json.loads(r.stdout)
+    assert [c["drift_m"] for c in data["checkpoints"]] == pytest.approx([5.0] * 10)
+    assert data["final_drift_percent"] is None and "no drift in % of distance" in r.output
+    r = runner.invoke(app, [*base, "autopilot", "--json"])
+    assert max(c["drift_m"] for c in json.loads(r.stdout)["checkpoints"]) < 1e-9
