@@ -156,13 +156,16 @@ def gps_fix(t):
     return lat, lon, ORIGIN[2] + 0.1 * (t - T0)
 
 
-def dive(dvl: str = "viso", text: bool = False, formats=FORMATS, imu_deg: bool = False) -> bytes:
+def dive(dvl: str = "viso", text: bool = False, formats=FORMATS, imu_deg: bool = False,
+         primary: bool = True) -> bytes:  # fmt: skip
     """Three seconds of a vehicle turning at 30 deg/s, descending 0.5 m/s."""
     w = DataflashWriter(text, formats)
     w.record("MSG", TimeUS=int(T0 * 1e6) - 1000, Message="ArduSub V4.5.0 (abcdef12)")
     params = {"BARO_PRIMARY": 1, "BARO2_GND_PRESS": P_SURFACE, "BARO_SPEC_GRAV": 1.0,
               "RNGFND1_MIN_CM": 20, "RNGFND1_MAX_CM": 5000, "VISO_POS_X": 0.1, "VISO_POS_Y": 0.0,
               "VISO_POS_Z": 0.2}  # fmt: skip
+    if not primary:
+        del params["BARO_PRIMARY"]
     for name, value in params.items():
         w.record("PARM", TimeUS=int(T0 * 1e6) - 500, Name=name, Value=value)
     events = []
@@ -266,6 +269,29 @@ def test_pressure_is_the_depth_sensor_with_its_ground_pressure(synthetic):
     assert log.metadata["surface_pressure_pa"] == P_SURFACE
     assert "BARO2_GND_PRESS" in log.metadata["surface_pressure_source"]
     assert "BARO_PRIMARY" in log.metadata["dataflash"]["pressure"]
+
+
+def test_depth_sensor_found_by_its_water_formula(tmp_path):
+    """Without BARO_PRIMARY, the barometer whose Alt follows Press at -1 / 9800 m/Pa (AP_Baro's
+    water-type formula) is the depth sensor."""
+    log, _ = _read(tmp_path / "noprimary.BIN", dive(primary=False))
+    np.testing.assert_allclose(log.pressure.pressure[0], P_SURFACE + 9800.0 * 0.025, rtol=1e-7)
+    assert "water-type" in log.metadata["dataflash"]["pressure"]
+
+
+def test_gyr_only_when_no_imu(tmp_path):
+    """GYR (raw samples, timed by SampleUS) stands in for a log without IMU records."""
+    w = DataflashWriter(formats={"ATT": FORMATS["ATT"]})
+    w._define(150, "GYR", "QBQfff", "TimeUS,I,SampleUS,GyrX,GyrY,GyrZ")
+    w.write("FMTU", 0, 150, "s#sEEE", "F-F000")
+    for i in range(20):
+        us = 10_000_000 + 1000 * i
+        w.record("GYR", TimeUS=us + 500, I=0, SampleUS=us, GyrX=0.1, GyrY=0.0, GyrZ=-0.2)
+        w.record("ATT", TimeUS=us, Roll=1.0, Pitch=2.0, Yaw=3.0)
+    log, _ = _read(tmp_path / "gyr.BIN", w.bytes())
+    np.testing.assert_allclose(log.imu.t, 10.0 + 0.001 * np.arange(20))
+    np.testing.assert_allclose(log.imu.angular_velocity[:, [0, 2]], [[0.1, -0.2]] * 20, rtol=1e-6)
+    assert log.imu.linear_acceleration is None and log.metadata["dataflash"]["imu"][:3] == "GYR"
 
 
 def test_rangefinder_downward_status_and_limits(synthetic):
@@ -394,6 +420,20 @@ def test_truncated_and_garbage_keep_the_good_records(tmp_path, synthetic):
     for name, stream in good.streams().items():
         assert len(getattr(log, name)) >= len(stream) - 1, name  # (a record cut by the junk)
     assert any("damaged regions skipped: 1" in n for n in notes)
+
+
+def test_fmt_redefining_a_type_is_refused(tmp_path, synthetic):
+    """A damaged FMT giving IMU's type another layout mid-log is skipped and counted; the IMU
+    records after it keep their layout."""
+    good, _ = synthetic
+    data = dive()
+    type_id = FORMATS["IMU"][0]
+    body = struct.pack("<BB4s16s64s", type_id, 3 + 12, b"IMU", b"Qf", b"TimeUS,GyrX")
+    middle = data.find(HEAD + bytes([type_id]), len(data) // 2)
+    log, notes = _read(tmp_path / "fmt.BIN", data[:middle] + HEAD + b"\x80" + body + data[middle:])
+    np.testing.assert_array_equal(log.imu.angular_velocity, good.imu.angular_velocity)
+    assert any("FMT records with unknown format characters or lengths skipped: 1" in n
+               for n in notes)  # fmt: skip
 
 
 def test_time_outlier_is_dropped(tmp_path):

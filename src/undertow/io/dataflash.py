@@ -11,7 +11,8 @@ formats) map to streams as ArduPilot logs them (``AP_Logger/LogStructure.h``,
   unfiltered samples at the sensor rate, logged on request) is used only when the log has no
   ``IMU`` (gyro only, timed by its ``SampleUS``). ``orientation``: ``ATT`` (Roll, Pitch, Yaw in
   degrees: the AHRS attitude, NED from body, R = Rz(Yaw) Ry(Pitch) Rx(Roll)) as quaternions
-  interpolated to the IMU times by :func:`interpolate_orientation`.
+  interpolated to the IMU times by
+  :func:`~undertow.io.dataflash_streams.interpolate_orientation`.
 - ``pressure``: ``BARO`` Press (Pa) of ArduSub's depth sensor: the instance ``BARO_PRIMARY``
   names (ArduSub makes its first water-type barometer primary at boot, ``ArduSub/system.cpp``);
   without that parameter the instance whose Alt follows Press as water does
@@ -22,10 +23,11 @@ formats) map to streams as ArduPilot logs them (``AP_Logger/LogStructure.h``,
   status other than Good (4) makes the range NaN; limits from ``RNGFND{n}_MIN_CM/MAX_CM``.
 - ``dvl``: ``VISO`` (VISION_POSITION_DELTA as the EKF received it: dt s, position change m in
   the body frame, the sensor orientation already applied): v = PosD / dt, valid when conf >=
-  :data:`MIN_CONFIDENCE` %. Without VISO, ``VISV`` (a velocity in NED, m/s) rotated into the
-  body by the ATT attitude, v^B = R^T v^NED (valid unless the EKF ignored it); the metadata
-  says which. The DVL mount rotation is zero (the autopilot rotated it) and its lever arm is
-  ``VISO_POS_X/Y/Z`` when the log has them.
+  :data:`~undertow.io.dataflash_streams.MIN_CONFIDENCE` %. Without VISO, ``VISV`` (a velocity
+  in NED, m/s; ``AP_VisualOdom_Logging.cpp``) rotated into the body by the ATT attitude,
+  v^B = R^T v^NED (valid unless the EKF ignored it); the metadata says which. The DVL mount
+  rotation is zero (the autopilot rotated it) and its lever arm is ``VISO_POS_X/Y/Z`` when the
+  log has them.
 - ``dead_reckoning``: ``VISP`` (PX, PY, PZ m north-east-down, Roll/Pitch/Yaw deg, PErr m as
   the standard deviation).
 - ``gps``: ``GPS`` of the lowest instance, fixes with Status >= 3 (3D) only (no-fix and
@@ -100,7 +102,6 @@ _CONVERSIONS = {
     ("degheading", "deg"): 1.0,
     ("deglatitude", "deg"): 1.0,
     ("deglongitude", "deg"): 1.0,
-    ("us", "s"): 1e-6,
 }
 #: fields whose declared multiplier ArduPilot does not apply when writing: VISO.dt is declared
 #: in 1e-6 s but written in s (AP_VisualOdom_Backend: time_delta_usec / 1e6)

@@ -170,8 +170,8 @@ class BinaryScanner:
         except MALFORMED:
             self.scan.bad_formats += 1
             return
-        if fmt.type == FMT_TYPE and fmt.msg_struct != self._types[FMT_TYPE].msg_struct:
-            self.scan.bad_formats += 1  # (FMT may describe itself, never change its layout)
+        if _redefines(self._types.get(fmt.type), fmt):
+            self.scan.bad_formats += 1
             return
         self._types[fmt.type] = fmt
         self._structs[fmt.type] = struct.Struct(fmt.msg_struct)
@@ -182,6 +182,19 @@ class BinaryScanner:
             _store_meta(self.scan, fmt, body, self._types)
         except MALFORMED:
             self.scan.bad_records += 1
+
+
+def _redefines(old: DFFormat | None, new: DFFormat) -> bool:
+    """True when ``new`` gives a defined type (or name) another layout: ArduPilot never does
+    within a log (it may repeat an FMT, and FMT describes itself), so it is a damaged record."""
+    if old is None:
+        return False
+    return (old.type, old.name, old.format, old.columns) != (
+        new.type,
+        new.name,
+        new.format,
+        new.columns,
+    )
 
 
 def _store_meta(scan: Scan, fmt: DFFormat, body, types: dict) -> None:
@@ -230,7 +243,7 @@ class TextScanner:
             if not name:
                 continue
             if name == "FMT":
-                self._define(parts, number)
+                self._define(parts)
                 continue
             fmt = scan.formats.get(name)
             width = len(fmt.format) if fmt is not None else 0
@@ -249,7 +262,7 @@ class TextScanner:
             elif name in self.wanted:
                 yield fmt, tuple(values)
 
-    def _define(self, parts: list[str], number: int) -> None:
+    def _define(self, parts: list[str]) -> None:
         self.scan.counts["FMT"] += 1
         if len(parts) < 6:
             self.scan.bad_formats += 1
@@ -259,13 +272,18 @@ class TextScanner:
         except MALFORMED:
             self.scan.bad_formats += 1
             return
+        if _redefines(self.scan.formats.get(fmt.name), fmt) or _redefines(
+            self._by_type.get(fmt.type), fmt
+        ):
+            self.scan.bad_formats += 1
+            return
         self.scan.formats[fmt.name] = fmt
         self._by_type[fmt.type] = fmt
 
 
 class Columns:
-    """Extracts named columns of one format as floats (format scales applied; text values
-    are already scaled). A column the format lacks gives ``missing`` (NaN by default)."""
+    """Extracts named columns of one format as floats (format scales applied as pymavlink's
+    DFMessage does; text values are already scaled). A column the format lacks gives NaN."""
 
     def __init__(self, fmt: DFFormat, names: tuple[str, ...], text: bool) -> None:
         self.index = [fmt.colhash.get(n) for n in names]

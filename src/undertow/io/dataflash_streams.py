@@ -112,13 +112,18 @@ class StreamBuilder:
         status, quality = down[:, 3], down[:, 5]
         rng = np.where(np.isnan(status) | (status == RANGEFINDER_GOOD), down[:, 2], np.nan)
         conf = np.where((quality > 0) & (quality <= 100), quality / 100.0, np.nan)
-        limits = {}
-        for key, name, scale in (("min_range", "MIN_CM", 0.01), ("max_range", "MAX_CM", 0.01)):
-            value = self.params.get(f"RNGFND{k + 1}_{name}", math.nan) * scale
-            if math.isfinite(value) and value >= 0:
-                limits[key] = value
         self.info["sonar"] = f"RFND instance {k} (downward)"
-        return SonarRange(t, rng, conf, **limits)
+        return SonarRange(t, rng, conf, **self._range_limits(k))
+
+    def _range_limits(self, k: int) -> dict:
+        """min_range/max_range (m) of rangefinder ``k`` from RNGFND{n}_MIN_CM/MAX_CM (cm), or
+        RNGFND{n}_MIN/MAX (m, ArduPilot 4.6 on); the SonarRange defaults unless 0 <= min < max."""
+        for suffix, scale in (("_CM", 0.01), ("", 1.0)):
+            low = self.params.get(f"RNGFND{k + 1}_MIN{suffix}", math.nan) * scale
+            high = self.params.get(f"RNGFND{k + 1}_MAX{suffix}", math.nan) * scale
+            if 0.0 <= low < high < math.inf:
+                return {"min_range": low, "max_range": high}
+        return {}
 
     def dvl(self, tables, attitude) -> Dvl | None:
         viso, visv = tables["VISO"], tables["VISV"]
