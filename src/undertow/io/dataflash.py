@@ -196,7 +196,7 @@ class _Reader:
                 self.params.setdefault(name, value)  # the value in effect when the log began
                 if name.endswith("_GND_PRESS"):
                     t = float(elements[fmt.colhash["TimeUS"]]) * 1e-6
-                    self.param_changes.setdefault(name, []).append((t, value))
+                    self.param_changes.setdefault(name, []).append([t, value])
             elif fmt.name == "MSG":
                 self.texts.append(text_field(fmt, elements, "Message"))
             elif fmt.name == "VER":
