@@ -17,18 +17,18 @@ Without a usable orientation, the physical envelope speaks: a 99th-percentile ra
 ambiguous; the localizer then refuses the log in one line naming the setting
 (``log: {imu_units: deg/s}``).
 
-**Surface pressure.** Depth is d = (p - p_surface) / (rho g), and p_surface is not 101,325 Pa:
-it falls about 12 Pa per metre of altitude (86 kPa at 1,400 m) and moves with the weather by
-+-3 kPa (+-0.3 m of water). In order: the settings' value; an autopilot's own ground pressure
-recorded in the log (e.g. ArduSub's ``BARO1_GND_PRESS``, put in ``metadata`` by the dataflash
-and telemetry readers); the pressure while the vehicle is at the surface at the start, where
-the log shows that (the log's shallowest pressures are in its first :data:`START_S` s, held
-there for :data:`SURFACE_HOLD_S` s, and it dives by more than :data:`DIVE_M` afterwards): the
-median of those first pressures within :data:`SURFACE_BAND_M` of water of the minimum (a log
-that starts at rest just below the surface reads the same: depths are then from there); else
-the standard atmosphere, or the log's minimum pressure when that lies below the standard
-atmosphere's weather range (the surface cannot be above the shallowest point). A depth more
-than 0.5 m above the surface is a warning naming the likely cause.
+**Surface pressure.** Depth is d = (p - p_surface) / (rho g), and p_surface is not 101,325 Pa: it
+falls about 12 Pa per metre of altitude (86 kPa at 1,400 m) and moves with the weather by +-3 kPa
+(+-0.3 m of water). In order: the settings' value; an autopilot's own ground pressure recorded in
+the log (e.g. ArduSub's ``BARO<n>_GND_PRESS`` of its depth sensor, put in ``metadata`` by the
+dataflash reader); the pressure while the vehicle is at the surface at the start, where the log
+shows that (the log's shallowest pressures are in its first :data:`START_S` s, held there for
+:data:`SURFACE_HOLD_S` s, and it dives by more than :data:`DIVE_M` afterwards): the median of those
+first pressures within :data:`SURFACE_BAND_M` of water of the minimum (a log that starts at rest
+just below the surface reads the same: depths are then from there); else the standard atmosphere, or
+the log's minimum pressure when that lies below the standard atmosphere's weather range (the surface
+cannot be above the shallowest point). A depth more than 0.5 m above the surface is a warning naming
+the likely cause.
 
 **Water density.** Fresh (998 kg/m^3) or salt (1025) by the settings' ``water``; stated.
 """
@@ -83,6 +83,8 @@ def gyro_orientation_ratio(t, gyro, rpy, window_s: float = WINDOW_S):
     if t.size < 10 or t[-1] <= t[0]:
         return math.nan, math.nan, 0
     dt = (t[-1] - t[0]) / (t.size - 1)  # the mean interval: receive-time jitter cancels
+    if not (np.isfinite(dt) and dt > 0) or window_s / dt >= t.size:
+        return math.nan, math.nan, 0
     per = max(int(round(window_s / dt)), 1)
     starts = np.arange(0, t.size - per, per)
     R = rpy_to_matrix(rpy)
@@ -106,10 +108,12 @@ def _orientation_at_gyro(log: Log):
         if np.any(np.linalg.norm(q, axis=1) > 0.5):
             return quaternion_to_rpy(q), "the IMU's orientation"
     dr = log.dead_reckoning
-    if dr is not None and len(dr) >= 10:
-        unwrapped = np.unwrap(np.asarray(dr.orientation, float), axis=0)
-        rpy = np.column_stack([np.interp(imu.t, dr.t, unwrapped[:, i]) for i in range(3)])
-        inside = (imu.t >= dr.t[0]) & (imu.t <= dr.t[-1])
+    ok = np.isfinite(np.asarray(dr.orientation, float)).all(axis=1) if dr is not None else None
+    if dr is not None and ok.sum() >= 10:
+        t_dr = np.asarray(dr.t)[ok]
+        unwrapped = np.unwrap(np.asarray(dr.orientation, float)[ok], axis=0)
+        rpy = np.column_stack([np.interp(imu.t, t_dr, unwrapped[:, i]) for i in range(3)])
+        inside = (imu.t >= t_dr[0]) & (imu.t <= t_dr[-1])
         rpy[~inside] = np.nan
         return rpy, "the DVL's dead-reckoning attitude"
     return None, None
@@ -192,7 +196,8 @@ def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
     src = f"{log.source}: " if log.source else ""
     changes = {}
     if log.imu is not None and len(log.imu):
-        verdict = gyro_units(log, options.imu_units)
+        with np.errstate(all="ignore"):  # absurd rates give inf/NaN figures, not warnings
+            verdict = gyro_units(log, options.imu_units)
         meta["imu_units"] = verdict
         if verdict["unit"] == "deg/s":
             imu = log.imu
@@ -210,7 +215,8 @@ def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
         meta["water"] = options.water
     if log.pressure is not None and len(log.pressure):
         rho = float(meta["water_density_kg_m3"])
-        p0, how = surface_pressure(log, options.surface_pressure_pa, rho)
+        with np.errstate(all="ignore"):
+            p0, how = surface_pressure(log, options.surface_pressure_pa, rho)
         meta["surface_pressure_pa"] = p0
         meta["surface_pressure_source"] = how
         if abs(p0 - P_ATM) > 1.0 or options.surface_pressure_pa != "auto":

@@ -248,7 +248,8 @@ def _cross_checks(log: Log, settings: Settings, problems: list, proposed: dict,
                   comments: dict) -> None:  # fmt: skip
     """The sensors against each other (:mod:`undertow.estimation.sensor_checks`): the IMU's
     axes against the DVL's yaw, the DVL's pitch against the pressure's depth rate."""
-    axes = imu_axes(log)
+    with np.errstate(all="ignore"):
+        axes = imu_axes(log)
     flipped = abs(abs(log.mounting.imu.rotation[0]) - math.pi) < 0.1
     if axes is not None and axes["z_up"] != flipped:
         rotation = [0.0, 0.0, 0.0] if flipped else [math.pi, 0.0, 0.0]
@@ -259,7 +260,8 @@ def _cross_checks(log: Log, settings: Settings, problems: list, proposed: dict,
     if log.pressure is None:
         return
     rho, p0 = depth_reference(log, settings.localizer)
-    pitch = dvl_pitch_offset(log, rho, p0)
+    with np.errstate(all="ignore"):
+        pitch = dvl_pitch_offset(log, rho, p0)
     if pitch is None or abs(pitch["offset_rad"]) < PITCH_OFFSET_RAD:
         return
     std = list(settings.localizer.dr_orientation_std_rad)
