@@ -26,10 +26,21 @@ import re
 import struct
 from collections import Counter
 from collections.abc import Iterable, Iterator
-
-from pymavlink.DFReader import FORMAT_TO_STRUCT, DFFormat, null_term
+from typing import TYPE_CHECKING
 
 from ._collect import MALFORMED
+
+if TYPE_CHECKING:
+    from pymavlink.DFReader import DFFormat
+
+
+def _df():
+    """pymavlink's ``DFReader`` module, imported at first use: it loads MAVLink dialects, which
+    a live session must not import mid-dive (``undertow.io.links``' load-ahead test)."""
+    from pymavlink import DFReader
+
+    return DFReader
+
 
 HEAD = b"\xa3\x95"
 FMT_TYPE = 0x80
@@ -99,11 +110,11 @@ def new_format(ftype, length, name, form, columns) -> DFFormat:
     a format character is unknown (checked first: DFFormat prints before it raises), the
     columns do not match the format characters one to one, or, in a binary log (``length``
     not None), the length is not the body's size plus the header's 3."""
-    name, form, columns = null_term(name), null_term(form), null_term(columns)
-    unknown = sorted(set(form) - set(FORMAT_TO_STRUCT))
+    name, form, columns = _df().null_term(name), _df().null_term(form), _df().null_term(columns)
+    unknown = sorted(set(form) - set(_df().FORMAT_TO_STRUCT))
     if unknown or not name or not form:
         raise ValueError(f"FMT {name!r}: format {form!r} empty or with unknown characters")
-    fmt = DFFormat(int(ftype), name, -1 if length is None else int(length), form, columns)
+    fmt = _df().DFFormat(int(ftype), name, -1 if length is None else int(length), form, columns)
     if len(fmt.columns) != len(fmt.format):
         raise ValueError(f"FMT {name!r}: {len(fmt.columns)} columns for format {form!r}")
     if length is not None and struct.calcsize(fmt.msg_struct) + 3 != fmt.len:
@@ -119,7 +130,7 @@ class BinaryScanner:
         self.data = data
         self.wanted = frozenset(wanted)
         self.scan = Scan()
-        fmt = DFFormat(FMT_TYPE, *_FMT[:1], 89, *_FMT[1:])
+        fmt = _df().DFFormat(FMT_TYPE, *_FMT[:1], 89, *_FMT[1:])
         self._types: dict[int, DFFormat] = {FMT_TYPE: fmt}
         self._structs: dict[int, struct.Struct] = {FMT_TYPE: struct.Struct(fmt.msg_struct)}
 
@@ -222,7 +233,7 @@ def _id_char(value) -> str:
 
 
 def _text(value) -> str:
-    return null_term(value) if isinstance(value, bytes | str) else str(value)
+    return _df().null_term(value) if isinstance(value, bytes | str) else str(value)
 
 
 class TextScanner:

@@ -25,7 +25,8 @@ Conventions of the sources (their message files):
   top-left 3x3 the linear velocity's) or ``TwistStamped``: valid when finite.
 
 A covariance that is all zeros or all -1 is unknown (NaN); the UUV convention's -1 also makes the
-report invalid.
+report invalid. A validity flag is kept as reported (as the velocity is, whatever the flag); a type
+without one is valid when its velocity is finite (and, with a mode, the mode is set).
 """
 
 from __future__ import annotations
@@ -136,9 +137,9 @@ def dvl_report(msgtype: str, msg) -> dict:
     velocity = (float(v.x), float(v.y), float(v.z))
     finite = all(math.isfinite(x) for x in velocity)
     cov, marked_invalid = _covariance(_get(msg, f.covariance))
-    valid = finite
-    if f.valid is not None:
-        valid = valid and bool(_get(msg, f.valid, True))
+    # a validity flag is kept as the sensor reported it (the velocity too, whatever the flag);
+    # a message without one is valid when its velocity is finite
+    valid = bool(_get(msg, f.valid, True)) if f.valid is not None else finite
     if f.mode is not None:
         valid = valid and int(_get(msg, f.mode, 0)) != 0
     if f.invalid_covariance and marked_invalid:
@@ -171,7 +172,7 @@ def _beams(f: DvlFields, msg) -> dict:
             bid = int(_get(b, f.beam_id, k)) if f.beam_id else k
             rng = float(_get(b, f.beam_range, math.nan))
             ok = bool(_get(b, f.beam_valid, True)) if f.beam_valid else rng >= 0
-            out.append((bid, float(_get(b, f.beam_velocity, math.nan)), rng, ok and rng >= 0))
+            out.append((bid, float(_get(b, f.beam_velocity, math.nan)), rng, ok))
         return {"beams": out}  # without ids: in order, with the DVL geometry of the log
     if f.beam_units is None:
         return {"beams": []}

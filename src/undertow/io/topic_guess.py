@@ -22,6 +22,8 @@ from .rosbag_streams import ACCEPTED, FLOAT_TYPES, NAVSATFIX, ODOMETRY, POSE, PO
 #: streams a topic is proposed for (tf_static and the raw JSON keep their names)
 GUESSED = ("dvl", "dead_reckoning", "imu", "pressure", "depth", "sonar", "gps", "multibeam",
            "ground_truth", "wave_probe")  # fmt: skip
+#: undertow's own recordings' topics (late records, estimates): never a sensor to propose
+OWN_PREFIX = "/undertow/"
 #: a proposal needs at least this score
 MIN_SCORE = 5
 #: (stream, type or None for any accepted type) -> points of the type alone
@@ -108,6 +110,8 @@ def propose_topics(available: dict[str, str], streams=GUESSED) -> dict[str, Topi
     pairs = []
     for stream in streams:
         for topic, msgtype in available.items():
+            if topic.startswith(OWN_PREFIX):
+                continue
             points, reason = score(stream, topic, msgtype)
             if points >= MIN_SCORE:
                 pairs.append(TopicChoice(stream, topic, msgtype, points, reason))
