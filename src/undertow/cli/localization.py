@@ -11,6 +11,7 @@ from ..errors import UndertowError
 from ._app import (
     ConfigOption,
     OverwriteOption,
+    TimeOption,
     TopicsOption,
     _print_json,
     _print_warnings,
@@ -20,6 +21,7 @@ from ._app import (
     console,
     err,
     evaluate_app,
+    settings_with_time,
     user_errors,
 )
 
@@ -32,7 +34,7 @@ QuietOption = Annotated[
 @user_errors
 def localize(
     log_path: Annotated[
-        Path, typer.Argument(metavar="LOG", help="Bag, A50 JSON log or MAVLink .tlog.")
+        Path, typer.Argument(metavar="LOG", help="Bag, A50 JSON log, MAVLink .tlog or .BIN.")
     ],
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
     variant: Annotated[
@@ -80,6 +82,7 @@ def localize(
     ] = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
+    time: TimeOption = None,
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
 ) -> None:
@@ -99,7 +102,8 @@ def localize(
     with _progress(quiet) as progress:
         progress.add_task(f"localizing{f' ({variant})' if variant else ''}", total=None)
         result = localize_file(
-            log_path, config, topics=topics, out_dir=out_dir, overwrite=overwrite,
+            log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
+            overwrite=overwrite,
             profile=profile, calibration=calibration, extrapolate=extrapolate, smooth=smooth,
             wave=condition,
             **{name: value for name, value in options.items() if value is not None},
@@ -107,16 +111,22 @@ def localize(
         )  # fmt: skip
     _print_warnings(result.warnings)
     if not quiet:
-        err.print(f"wave condition: {result.wave} ({_wave_source(result, wave)})",
-                  highlight=False, soft_wrap=True)  # fmt: skip
-        err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
-        if result.consistency is not None:
-            err.print(
-                f"consistency: {result.consistency.summary()} (`undertow evaluate trajectory "
-                f"{out_dir}` for the report)",
-                highlight=False,
-                soft_wrap=True,
-            )
+        _print_localized(result, out_dir, wave)
+
+
+def _print_localized(result, out_dir: Path, wave: str | None) -> None:
+    """What `localize` says once done: the wave condition and where it came from, the files
+    written, the one-line consistency summary."""
+    err.print(f"wave condition: {result.wave} ({_wave_source(result, wave)})",
+              highlight=False, soft_wrap=True)  # fmt: skip
+    err.print(f"wrote {out_dir}/trajectory.tum, trajectory.npz, config.yaml")
+    if result.consistency is not None:
+        err.print(
+            f"consistency: {result.consistency.summary()} (`undertow evaluate trajectory "
+            f"{out_dir}` for the report)",
+            highlight=False,
+            soft_wrap=True,
+        )
 
 
 def _wave_option(name: str | None, amplitude: float | None, frequency: float | None):
