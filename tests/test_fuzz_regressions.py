@@ -163,7 +163,8 @@ def test_sidecar_water_density_not_a_number(tmp_path, small_bag, density):
     sidecar["metadata"]["water_density_kg_m3"] = density
     (bag / "undertow.yaml").write_text(yaml.safe_dump(sidecar))
     log, lines = _read_quietly(bag)
-    assert "water_density_kg_m3" not in log.metadata  # the estimation's default is used
+    # the malformed value is dropped; the water of the settings (fresh by default) is stated
+    assert log.metadata["water_density_kg_m3"] == 998.0 and log.metadata["water"] == "fresh"
     assert any("water_density_kg_m3 is not a positive number (ignored)" in ln for ln in lines)
     assert log.metadata["mounting_source"] == "undertow.yaml"  # the rest of the sidecar kept
 
