@@ -41,6 +41,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .._util.plain import json_safe
 from ..log import G0, P_ATM, Log
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
 from .read_options import LogOptions
@@ -248,4 +249,4 @@ READING_KEYS = ("format", "topics", "topics_guessed", "time_base", "imu_units",
 def reading_record(metadata: dict) -> dict:
     """The choices made reading a log (time base, units, references, topics), as recorded in
     every output's ``config.yaml``."""
-    return {k: metadata[k] for k in READING_KEYS if k in metadata}
+    return json_safe({k: metadata[k] for k in READING_KEYS if k in metadata})
