@@ -274,3 +274,17 @@ def test_undertow_info_on_a_tlog(tlog_file):
     result = CliRunner().invoke(app, ["info", str(bad)])
     assert result.exit_code == 1 and "not a MAVLink telemetry log" in result.output
     assert "Traceback" not in result.output
+
+
+def test_the_autopilots_ground_pressure_parameter_is_the_surface_pressure(tmp_path, sim_log):
+    """ArduSub's BARO2_GND_PRESS (the Bar30 of SCALED_PRESSURE2, calibrated at boot) in a
+    PARAM_VALUE: the surface pressure, stated; BARO1_GND_PRESS (another barometer) is not."""
+    rows = _attitude_rows(sim_log) + _pressure_rows(sim_log)
+    t0 = rows[0][0]
+    for name, value in ((b"BARO1_GND_PRESS", 99_800.0), (b"BARO2_GND_PRESS", 97_770.0)):
+        rows.append((t0, mavlink2.MAVLink_param_value_message(name, value, 9, 300, 1)))
+    path = tmp_path / "params.tlog"
+    write_tlog(path, sorted(rows, key=lambda r: r[0]))
+    log = read_log(path)
+    assert log.metadata["surface_pressure_pa"] == 97_770.0
+    assert "BARO2_GND_PRESS" in log.metadata["surface_pressure_source"]

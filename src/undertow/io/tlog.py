@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import ReaderError
 from ..log import Log, Mounting
-from ._collect import Notes, read_regular_bytes
+from ._collect import MALFORMED, Notes, read_regular_bytes
 from .links.common import records_to_log
 from .mavlink import MavlinkConfig, MavlinkMapper
 
@@ -206,11 +206,15 @@ def read_tlog(path, config: MavlinkConfig | None = None) -> Log:
 
 def _read_tlog(path: Path, data: bytes, config: MavlinkConfig) -> Log:
     mapper = MavlinkMapper(config, source=str(path))
-    scanner = TlogScanner(data, wanted=mapper.message_types)
+    scanner = TlogScanner(data, wanted={*mapper.message_types, "PARAM_VALUE"})
     types, times, kept = Counter(), [], []
+    ground = ground_pressure_param(config.pressure)
+    params: dict[str, float] = {}
     for t, name, msg in scanner.messages():
         types[name] += 1
-        if msg is not None:
+        if name == "PARAM_VALUE" and msg is not None:
+            _keep_param(msg, ground, params)
+        elif msg is not None:
             kept.append((len(times), t, msg))
         times.append(t)
     outliers = _time_outliers(np.array(times))
@@ -244,12 +248,35 @@ def _read_tlog(path: Path, data: bytes, config: MavlinkConfig) -> Log:
             "clock_offsets_s": _offset_summary(offsets),
         },
     }
+    if ground in params:
+        metadata["surface_pressure_pa"] = params[ground]
+        metadata["surface_pressure_source"] = f"{ground} parameter of the telemetry log"
     log = records_to_log(records, source=str(path), metadata=metadata)
     metadata["warnings"] = notes.finish()
     imu = log.imu
     if imu is not None and imu.orientation is not None and np.isnan(imu.orientation).all():
         log = log.replace(imu=dataclasses.replace(imu, orientation=None))
     return log.replace(mounting=Mounting(dvl=MavlinkMapper.dvl_mount()), metadata=metadata)
+
+
+def ground_pressure_param(pressure_message: str) -> str:
+    """The ArduPilot parameter holding the ground (surface) pressure, Pa, of the barometer a
+    SCALED_PRESSURE message reports: SCALED_PRESSURE -> BARO1_GND_PRESS, SCALED_PRESSURE2 ->
+    BARO2_GND_PRESS (MAVLink's common.xml: SCALED_PRESSURE2 holds the "readings for 2nd
+    barometer"; AP_Baro numbers its parameters from 1 and calibrates ``_GND_PRESS`` at boot)."""
+    suffix = pressure_message.removeprefix("SCALED_PRESSURE") or "1"
+    return f"BARO{suffix}_GND_PRESS"
+
+
+def _keep_param(msg, wanted: str, params: dict) -> None:
+    """The first finite positive value of the parameter ``wanted`` from a PARAM_VALUE."""
+    try:
+        name = str(msg.param_id).split("\x00")[0].strip()
+        value = float(msg.param_value)
+    except (*MALFORMED, UnicodeError):
+        return
+    if name == wanted and wanted not in params and math.isfinite(value) and 0 < value < 1e7:
+        params[wanted] = value
 
 
 def _notes(path, scanner: TlogScanner, mapper: MavlinkMapper, config, times, outliers) -> Notes:
