@@ -307,3 +307,32 @@ def test_a_dvl_definition_without_covariance_keeps_the_rest(tmp_path):
     log, _ = _read(tmp_path / "bag")
     assert len(log.dvl) == 5 and np.isnan(log.dvl.covariance).all()
     assert (log.dvl.velocity[:, 0] == 0.3).all()
+
+
+def _odom(t: float, east: float, north: float, up: float):
+    pose = T["geometry_msgs/msg/Pose"](
+        position=T["geometry_msgs/msg/Point"](x=east, y=north, z=up),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+    )
+    cov = np.zeros(36)
+    cov[0] = 4.0
+    twist = T["geometry_msgs/msg/Twist"](linear=vec(0, 0, 0), angular=vec(0, 0, 0))
+    return T["nav_msgs/msg/Odometry"](
+        header=header(t, "map"),
+        child_frame_id="odom",
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](pose=pose, covariance=cov),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)),
+    )
+
+
+def test_an_odometry_gps_in_east_north_up_is_north_east_down_about_its_first_fix(tmp_path):
+    """REP-103 east-north-up (e.g. UTM metres) to undertow's north-east-down; NaN fixes (a
+    receiver with no fix) dropped and counted."""
+    enu = [(12086.3, -18568.7, 189.3), (12096.3, -18563.7, 189.0), (math.nan, math.nan, 0.0)]
+    msgs = [("/gps_odom", "nav_msgs/msg/Odometry", int((T0 + i) * 1e9), _odom(T0 + i, *p))
+            for i, p in enumerate(enu)]  # fmt: skip
+    write_raw_bag(tmp_path / "bag", msgs)
+    log, lines = _read(tmp_path / "bag", gps=["/gps_odom"])
+    np.testing.assert_allclose(log.gps.position, [[0, 0, 0], [5.0, 10.0, 0.3]], atol=1e-9)
+    np.testing.assert_allclose(log.gps.horizontal_std, 2.0)
+    assert any("non-finite positions" in line and ": 1" in line for line in lines)
