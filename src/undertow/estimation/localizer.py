@@ -64,8 +64,9 @@ import numpy as np
 
 from .._util.validate import validate
 from ..errors import ConfigError, MissingStreamError
+from ..io.units import depth_reference as log_depth_reference
 from ..io.units import reading_record
-from ..log import FRESH_WATER_DENSITY, P_ATM, Log
+from ..log import Log
 from ..rotations import matrix_to_rpy, quaternion_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
 from ..wavetrack import WaveTrack
@@ -548,19 +549,8 @@ def depth_reference(log: Log, cfg: LocalizerConfig) -> tuple[float, float]:
     """(water density rho kg/m^3, surface pressure p_surface Pa) of d = (p - p_surface) / (rho g):
     the config's when set, else the log's (``metadata`` ``water_density_kg_m3`` and
     ``surface_pressure_pa``, as its reader resolved them), else fresh water and one standard
-    atmosphere."""
-    meta = log.metadata
-    rho = cfg.water_density_kg_m3 or _positive(meta.get("water_density_kg_m3"))
-    p0 = cfg.surface_pressure_pa or _positive(meta.get("surface_pressure_pa"))
-    return rho or FRESH_WATER_DENSITY, p0 or P_ATM
-
-
-def _positive(value) -> float | None:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        return None
-    return value if np.isfinite(value) and value > 0 else None
+    atmosphere (:func:`undertow.io.units.depth_reference`)."""
+    return log_depth_reference(log.metadata, cfg.water_density_kg_m3, cfg.surface_pressure_pa)
 
 
 def _finite_rows(a: np.ndarray) -> np.ndarray:

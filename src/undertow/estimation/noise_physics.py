@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigError
-from ..log import FRESH_WATER_DENSITY, G0, P_ATM, Log
+from ..io.units import depth_reference
+from ..log import G0, Log
 from .wave_transfer import depth_factors, wavenumber
 
 # what a condition outside a profile's gets (undertow.estimation.noise): an error, the nearest
@@ -97,9 +98,8 @@ def sensor_site(log: Log, water_density: float | None = None,
     h: the log's recorded still-water depth (``metadata["water_depth_m"]``, a simulated log),
     else d + the median DVL altitude, else deep water.
     Without any depth source: ``default`` (the profile's own site) with that said, or None."""
-    meta = log.metadata if isinstance(log.metadata, dict) else {}
-    water_density = water_density or _positive(meta.get("water_density_kg_m3"))
-    surface_pressure = surface_pressure or _positive(meta.get("surface_pressure_pa"))
+    water_density, surface_pressure = depth_reference(log.metadata, water_density,
+                                                      surface_pressure)  # fmt: skip
     depth, where = _dvl_depths(log, water_density, surface_pressure)
     if depth is None:
         if default is None:
@@ -114,20 +114,12 @@ def sensor_site(log: Log, water_density: float | None = None,
     return SensorSite(max(d, 0.0), h, source, (lo, hi))
 
 
-def _positive(value) -> float | None:
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) and value > 0 else None
-
-
-def _dvl_depths(log: Log, water_density: float | None, surface_pressure: float | None):
+def _dvl_depths(log: Log, water_density: float, surface_pressure: float):
     """(finite DVL depths, where from) or (None, None)."""
     dvl_z = float(log.mounting.dvl.translation[2])
     candidates = []
     if log.pressure is not None and len(log.pressure):
-        baro = log.pressure.depth(water_density or FRESH_WATER_DENSITY, surface_pressure or P_ATM)
+        baro = log.pressure.depth(water_density, surface_pressure)
         candidates.append((baro + dvl_z - log.mounting.barometer.translation[2],
                            "barometer depth + lever arms"))  # fmt: skip
     depth_stream = getattr(log, "depth", None)

@@ -42,7 +42,7 @@ from dataclasses import replace
 import numpy as np
 
 from .._util.plain import json_safe
-from ..log import G0, P_ATM, Log
+from ..log import FRESH_WATER_DENSITY, G0, P_ATM, Log
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
 from .read_options import LogOptions
 
@@ -250,3 +250,21 @@ def reading_record(metadata: dict) -> dict:
     """The choices made reading a log (time base, units, references, topics), as recorded in
     every output's ``config.yaml``."""
     return json_safe({k: metadata[k] for k in READING_KEYS if k in metadata})
+
+
+def depth_reference(metadata: dict, water_density=None, surface_pressure=None):
+    """(rho kg/m^3, p_surface Pa) of d = (p - p_surface) / (rho g): the values given, else the
+    log's ``metadata`` (``water_density_kg_m3``, ``surface_pressure_pa``, as
+    :func:`resolve_units` resolved them), else fresh water and one standard atmosphere."""
+    meta = metadata if isinstance(metadata, dict) else {}
+    rho = water_density or _positive(meta.get("water_density_kg_m3"))
+    p0 = surface_pressure or _positive(meta.get("surface_pressure_pa"))
+    return rho or FRESH_WATER_DENSITY, p0 or P_ATM
+
+
+def _positive(value) -> float | None:
+    try:
+        value = float(value)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return value if math.isfinite(value) and value > 0 else None
