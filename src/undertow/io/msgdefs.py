@@ -87,18 +87,8 @@ COLA2_BEAM = "cola2_msgs/msg/DVLBeam"
 DS_DVL = "ds_sensor_msgs/msg/Dvl"
 DS_HEADER = "ds_core_msgs/msg/DsHeader"
 
-WL_DVL_MSG = """\
-std_msgs/Header header
-float64 time
-geometry_msgs/Vector3 velocity
-float64 fom
-float64[] covariance
-float64 altitude
-DVLBeam[] beams
-bool velocity_valid
-int64 status
-string form
-"""
+#: the ROS 1 driver's fields and a 3x3 covariance (row-major, (m/s)^2; empty: unknown)
+WL_DVL_MSG = A50_DVL_MSG.replace("float64 fom\n", "float64 fom\nfloat64[] covariance\n")
 
 WL_DVLDR_MSG = """\
 std_msgs/Header header
