@@ -90,8 +90,7 @@ def depth_pressure_correlation(rows: Rows) -> float | None:
     times (None without both, or without variation)."""
     if not rows.rows["pressure"]:
         return None
-    d = np.array(rows.rows["depth"], dtype=np.float64).reshape(-1, 2)
-    p = np.array(rows.rows["pressure"], dtype=np.float64).reshape(-1, 2)
+    d, p = rows.array("depth", 2), rows.array("pressure", 2)
     d, p = d[np.isfinite(d).all(axis=1)], p[np.isfinite(p).all(axis=1)]
     if len(d) < 3 or len(p) < 3:
         return None

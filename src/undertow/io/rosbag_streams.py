@@ -131,6 +131,8 @@ class Rows:
     def __init__(self, notes: Notes) -> None:
         self.notes = notes
         self.clock = ClockTable()
+        #: the time of every message, by index (None until :meth:`apply_times`)
+        self.times: np.ndarray | None = None
         self.dvl = DvlRows()
         self.dvl_mode_given: list[bool] = []
         self.json_velocity: list[tuple[float, dict]] = []
@@ -154,12 +156,23 @@ class Rows:
     def stamp(self, stream: str, msg, record_ns: int) -> float:
         """Register the message's two times; the row's time placeholder (its index). A zero stamp
         recorded within a second of time zero is a clock that starts at zero (a simulation), not
-        a stamp never filled."""
-        record_s = ns_to_s(record_ns)
-        header_s = header_stamp(msg)
-        if math.isnan(header_s) and abs(record_s) < 1.0 and hasattr(msg, "header"):
-            header_s = 0.0
-        return self.clock.add(stream, header_s, record_s)
+        a stamp never filled. (:func:`header_stamp` and ``ClockTable.add`` inlined: called for
+        every message.)"""
+        record_s = record_ns // 1_000_000_000 + (record_ns % 1_000_000_000) * 1e-9
+        header = getattr(msg, "header", None)
+        if header is None:
+            header_s = math.nan
+        else:
+            sec, nanosec = header.stamp.sec, header.stamp.nanosec
+            if sec == 0 and nanosec == 0:
+                header_s = 0.0 if abs(record_s) < 1.0 else math.nan
+            else:
+                header_s = sec + nanosec * 1e-9
+        clock = self.clock
+        clock.stream.append(stream)
+        clock.header.append(header_s)
+        clock.record.append(record_s)
+        return float(len(clock.record) - 1)
 
     def add(self, stream: str, msgtype: str, msg, record_ns: int) -> None:
         if stream == "dvl_json":
@@ -289,24 +302,29 @@ class Rows:
             self.notes.add("dvl_json: malformed JSON messages skipped")
 
     def apply_times(self, times: np.ndarray) -> None:
-        """Replace every row's time placeholder (its message index) by ``times[index]``."""
+        """Replace every row's time placeholder (its message index) by ``times[index]``: at
+        once for the DVL, pings and JSON reports, as each table is built for the other streams
+        (:meth:`array`)."""
+        self.times = np.asarray(times, dtype=np.float64)
+        at = self.times.take
+        self.dvl.t = at(np.asarray(self.dvl.t, dtype=np.int64)).tolist()
+        self.pings = [(float(at(int(p[0]))), *p[1:]) for p in self.pings]
+        self.json_velocity = [(float(at(int(t))), obj) for t, obj in self.json_velocity]
+        self.json_position = [(float(at(int(r[0]))), *r[1:]) for r in self.json_position]
 
-        def at(k: float) -> float:
-            return float(times[int(k)])
-
-        self.dvl.t = [at(k) for k in self.dvl.t]
-        for stream, rows in self.rows.items():
-            if stream != "tf_static":
-                self.rows[stream] = [(at(r[0]), *r[1:]) for r in rows]
-        self.pings = [(at(p[0]), *p[1:]) for p in self.pings]
-        self.json_velocity = [(at(t), obj) for t, obj in self.json_velocity]
-        self.json_position = [(at(r[0]), *r[1:]) for r in self.json_position]
+    def array(self, stream: str, width: int) -> np.ndarray:
+        """The rows of ``stream`` as a float array (N, width), column 0 the time (the time base's
+        once :meth:`apply_times` ran)."""
+        arr = np.array(self.rows[stream], dtype=np.float64).reshape(-1, width)
+        if self.times is not None and len(arr):
+            arr[:, 0] = self.times.take(arr[:, 0].astype(np.int64))
+        return arr
 
     # -- builders ---------------------------------------------------------------------------
 
     def _table(self, stream: str, width: int) -> np.ndarray | None:
         """The rows of ``stream`` with a finite time, time-ordered (None, noted, if none)."""
-        arr = np.array(self.rows[stream], dtype=np.float64).reshape(-1, width)
+        arr = self.array(stream, width)
         arr = arr[time_order(arr[:, 0], stream, self.notes)]
         if not len(arr):
             self.notes.add(f"{stream}: no message with a finite time (stream dropped)")
@@ -404,7 +422,7 @@ class Rows:
 
     def dead_reckoning_rows(self) -> np.ndarray:
         """(t, x, y, z, std, roll, pitch, yaw) rows of the dead-reckoning topic."""
-        return np.array(self.rows["dead_reckoning"], dtype=np.float64).reshape(-1, 8)
+        return self.array("dead_reckoning", 8)
 
     def depth(self, sign: float = 1.0) -> Depth | None:
         """The depth topic as depth positive down (``sign`` -1 for a pose z that points up)."""
