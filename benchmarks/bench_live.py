@@ -121,7 +121,7 @@ def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | Non
              served_s: float | None = None,
              pin: tuple[int, int] | None = None) -> dict:  # fmt: skip
     from undertow.io import read_log
-    from undertow.jobs.live.pipeline import LiveSession
+    from undertow.live.pipeline import LiveSession
     from undertow.settings import LiveSettings, Settings
 
     _pin({pin[0]} if pin else None)
@@ -142,7 +142,7 @@ def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | Non
         live = live.model_copy(update={"commit_every_s": commit_every_s})
     view_server = client = None
     if view:  # the Foxglove app's stand-in: another process (on serve's core when pinned)
-        from undertow.jobs.live.view import TOPICS, LiveView
+        from undertow.live.view import TOPICS, LiveView
 
         view_server = LiveView("127.0.0.1", 0)
         client = subprocess.Popen([sys.executable, __file__, "--viewer", str(view_server.port)])

@@ -24,10 +24,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 from test_fuzz_readers import JUNK_LINE, WEIRD, _v1_reports, _v3_reports, mutated_report, outcome
 
 from undertow.io import read_log
-from undertow.io.links.a50_tcp import MAX_LINE_BYTES, A50LineDecoder, LineBuffer
-from undertow.io.links.common import RECORD_FIELDS, ClockPolicy, LinkCounters, records_to_log
-from undertow.io.links.ping1d import decode_ping_frames, distance_data
 from undertow.io.mavlink import MavlinkConfig, MavlinkMapper
+from undertow.io.ping import decode_ping_frames, distance_data
+from undertow.live.links.a50_tcp import MAX_LINE_BYTES, A50LineDecoder, LineBuffer
+from undertow.live.links.base import ClockPolicy, LinkCounters
+from undertow.records import RECORD_FIELDS, records_to_log
 
 set_hypothesis_home_dir(Path(tempfile.gettempdir()) / "undertow-hypothesis")
 #: examples per property: 40 in the suite (a few seconds); UNDERTOW_FUZZ_EXAMPLES=N for a long run
@@ -258,7 +259,7 @@ def test_tlog_of_only_unknown_or_heartbeat_messages_is_one_line(tmp_path, n):
 def test_mavlink_link_on_damaged_bytes(data):
     """Damaged MAVLink bytes through pymavlink's stream parser (as the live link receives them)
     and the link's handler: nothing raises, every record is of a known stream."""
-    from undertow.io.links.mavlink_udp import MavlinkLink
+    from undertow.live.links.mavlink_udp import MavlinkLink
 
     raw, k = bytearray(), 0
     while k < len(TLOG):  # the frames of the tlog, without their timestamps
@@ -298,7 +299,7 @@ def test_single_mavlink_frames_named_or_decoded_without_pymavlinks_parser():
     """Intact frames of messages no stream reads are named; mapped ones of scalar fields are
     decoded to pymavlink's message (fields, header); a message with arrays, a bad CRC, a frame
     after buffered bytes and a signed frame go to pymavlink's parser."""
-    from undertow.io.links.mavlink_udp import _SingleFrames
+    from undertow.live.links.mavlink_udp import _SingleFrames
 
     mav = mavlink2.MAVLink(None)
     mav.robust_parsing = True
@@ -330,7 +331,7 @@ def test_single_mavlink_frames_are_what_pymavlink_decodes(data):
     """Any damage to a frame: the link names (counts without decoding) or decodes a datagram
     itself only when pymavlink's parser decodes exactly one message of that name from it, with
     the same fields and header; a named one is a message no stream uses."""
-    from undertow.io.links.mavlink_udp import _SingleFrames
+    from undertow.live.links.mavlink_udp import _SingleFrames
 
     frame = bytearray(data.draw(st.sampled_from(_tlog_frames())))
     for _ in range(data.draw(st.integers(0, 3))):

@@ -18,8 +18,8 @@ from conftest import REAL_DATA
 
 from undertow.io import read_log
 from undertow.io.a50_json import velocity_report_line
-from undertow.io.links import A50TcpLink, Backoff, ClockPolicy, LinkCounters, records_to_log
-from undertow.io.links.common import RECORD_FIELDS
+from undertow.live.links import A50TcpLink, Backoff, ClockPolicy, LinkCounters
+from undertow.records import RECORD_FIELDS, records_to_log
 
 V1 = REAL_DATA / "a50_tcp_json_v1_straight.txt"
 CORPUS = Path(__file__).resolve().parents[1] / "fuzz" / "corpus"
@@ -396,7 +396,7 @@ class PingServer:
 
 
 def test_ping1d_udp_distance_confidence_and_duplicates():
-    from undertow.io.links.ping1d import Ping1DLink
+    from undertow.live.links.ping1d import Ping1DLink
 
     pings = [(1000 + 10 * k, 50 + k, k) for k in range(30)]
     pings[10] = pings[9]  # the same ping polled twice: a duplicate
@@ -420,7 +420,7 @@ def test_ping1d_udp_distance_confidence_and_duplicates():
 
 
 def test_ping1d_reconnects_after_silence():
-    from undertow.io.links.ping1d import Ping1DLink
+    from undertow.live.links.ping1d import Ping1DLink
 
     server = PingServer([(2000, 90, k) for k in range(1000)], silent=range(11, 14))
     records = []
@@ -445,7 +445,7 @@ def test_ping1d_reconnects_after_silence():
 
 def test_ping_device_strings():
     from undertow.errors import ConfigError
-    from undertow.io.links.ping1d import parse_device
+    from undertow.live.links.ping1d import parse_device
 
     assert parse_device("udp://192.168.2.2:9090") == ("udp", "192.168.2.2", 9090)
     assert parse_device("192.168.2.2:9090") == ("udp", "192.168.2.2", 9090)
@@ -481,7 +481,7 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, mode):
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
     from test_io_tlog import _attitude_rows, _pressure_rows, _sonar_rows, _vision_rows, write_tlog
 
-    from undertow.io.links.mavlink_udp import MavlinkLink
+    from undertow.live.links.mavlink_udp import MavlinkLink
 
     log = simulation("calm")
     log = log.log if hasattr(log, "log") else log
@@ -558,8 +558,8 @@ def test_polled_mavlink_counts_the_kernels_drops_and_stamps_on_its_clock():
     for idle_timeout_s reconnects."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-    from undertow.io.links.common import ScaledClock
-    from undertow.io.links.mavlink_udp import MavlinkLink
+    from undertow._util.clocks import ScaledClock
+    from undertow.live.links.mavlink_udp import MavlinkLink
 
     port = _free_udp_port()
     records = []
@@ -598,7 +598,7 @@ def test_deferred_mavlink_wakes_on_dvl_frames_in_either_protocol_version():
     from pymavlink.dialects.v10 import ardupilotmega as mavlink1
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-    from undertow.io.links.mavlink_udp import _frame_id, _message_id
+    from undertow.live.links.mavlink_udp import _frame_id, _message_id
 
     assert not hasattr(mavlink1, "MAVLINK_MSG_ID_VISION_POSITION_DELTA")
     dvl = mavlink2.MAVLINK_MSG_ID_VISION_POSITION_DELTA
@@ -616,7 +616,7 @@ def test_deferred_mavlink_queue_is_bounded():
     and counted as overflow; pump() then delivers the newest."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-    from undertow.io.links.mavlink_udp import MavlinkLink
+    from undertow.live.links.mavlink_udp import MavlinkLink
 
     port = _free_udp_port()
     records = []
@@ -643,7 +643,7 @@ def test_ping1d_serial_device():
     import select
     import tty
 
-    from undertow.io.links.ping1d import Ping1DLink
+    from undertow.live.links.ping1d import Ping1DLink
 
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -684,7 +684,7 @@ def test_mavlink_serial_device():
 
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-    from undertow.io.links.mavlink_udp import MavlinkLink
+    from undertow.live.links.mavlink_udp import MavlinkLink
 
     master, slave = os.openpty()
     tty.setraw(slave)
@@ -718,8 +718,8 @@ def test_links_and_grid_load_their_code_ahead():
 
     script = """
 import sys
-from undertow.io.links.mavlink_udp import MavlinkLink
-from undertow.io.links.ping1d import Ping1DLink
+from undertow.live.links.mavlink_udp import MavlinkLink
+from undertow.live.links.ping1d import Ping1DLink
 from undertow.mapping import grid, kernels
 mav, ping = MavlinkLink("udpin:127.0.0.1:0"), Ping1DLink("udp://127.0.0.1:9")
 loaded = lambda prefix: any(m.startswith(prefix) for m in sys.modules)

@@ -23,12 +23,12 @@ import pytest
 
 from undertow.estimation import Localizer
 from undertow.io import read_log
-from undertow.io.servers import Faults
-from undertow.jobs.live.pipeline import LiveSession
 from undertow.jobs.serve import serve
+from undertow.live.pipeline import LiveSession
 from undertow.mapping.run import map_log
 from undertow.occupancy import OccupancyMap
 from undertow.settings import LiveSettings, Settings
+from undertow.sim.robot import Faults
 from undertow.trajectory import Trajectory
 
 pytestmark = pytest.mark.slow

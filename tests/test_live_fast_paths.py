@@ -17,8 +17,6 @@ from undertow.errors import DataError
 from undertow.estimation.online import OnlineLocalizer
 from undertow.io import read_log
 from undertow.io.a50_json import velocity_report_line
-from undertow.io.links.common import RECORD_FIELDS, Record, records_to_log
-from undertow.io.recorder import Recorder
 from undertow.io.rosbag_write import (
     MessageBuilder,
     dead_reckoning_message,
@@ -26,7 +24,9 @@ from undertow.io.rosbag_write import (
     imu_message,
     pressure_message,
 )
+from undertow.live.recorder import Recorder
 from undertow.log import Dvl
+from undertow.records import RECORD_FIELDS, Record, records_to_log
 from undertow.sim import load_scenario, simulate
 
 SPECIAL = [math.nan, math.inf, -math.inf, -0.0, 0.0, 1e308, -5e-324, 1.0]
@@ -288,7 +288,7 @@ def test_a_preview_from_a_checkpoint_is_the_fresh_preview(commit_every, taken_at
     late reports invalidate some checkpoints. With commits every 0.5 s (the pipeline's default)
     most rows are taken from previews; every 0.1 s (shorter than the buffer: a late report
     often leaves no preview to commit up to) fewer."""
-    from undertow.jobs.live.preview import PreviewCheckpoints
+    from undertow.live.preview import PreviewCheckpoints
 
     recs, mounting = _sim_records(12.0)
     lag = {"dvl": 0.03, "dead_reckoning": 0.15}
@@ -350,7 +350,7 @@ def test_a_preview_from_a_checkpoint_is_the_fresh_preview(commit_every, taken_at
 
 
 def test_preview_checkpoints_rules():
-    from undertow.jobs.live.preview import PreviewCheckpoints
+    from undertow.live.preview import PreviewCheckpoints
 
     c = PreviewCheckpoints()
     assert c.start() is None and c.boundary(100.0) is None
@@ -380,8 +380,8 @@ def test_latency_counts_from_the_links_receipt():
     arrival (or a clock ahead of the queueing) it starts when it was queued."""
     import time
 
-    from undertow.io.links.common import ScaledClock
-    from undertow.jobs.live.pipeline import received_at
+    from undertow._util.clocks import ScaledClock
+    from undertow.live.pipeline import received_at
 
     for scale in (1.0, 20.0):
         clock = ScaledClock(scale)

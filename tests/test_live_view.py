@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError
-from undertow.jobs.live.view import TOPICS, LiveView
+from undertow.live.view import TOPICS, LiveView
 from undertow.occupancy import OccupancyMap
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # the only one the SDK's server accepts (0.30)
@@ -105,7 +105,7 @@ def test_misuse_is_one_line():
 def test_undertow_imports_without_foxglove_and_the_view_names_the_package():
     code = (
         "import sys; sys.modules['foxglove'] = None\n"
-        "import undertow, undertow.cli, undertow.io.recorder, undertow.jobs.live.view as v\n"
+        "import undertow, undertow.cli, undertow.live.recorder, undertow.live.view as v\n"
         "from undertow.errors import ConfigError\n"
         "try:\n    v.LiveView('127.0.0.1', 0)\n"
         "except ConfigError as e:\n    print(e)\n"
@@ -123,7 +123,7 @@ def test_uncertainty_ellipsoid_gives_back_the_covariance():
     covariances (eigh's left-handed bases included) and a degenerate one."""
     from scipy.spatial.transform import Rotation
 
-    from undertow.jobs.live.view import ellipsoid_axes
+    from undertow.live.view import ellipsoid_axes
 
     rng = np.random.default_rng(3)
     left_handed = 0
@@ -141,7 +141,7 @@ def test_uncertainty_ellipsoid_gives_back_the_covariance():
 
 
 def test_path_is_at_most_max_poses_evenly_spaced_newest_last():
-    from undertow.jobs.live.view import MAX_PATH_POSES, path_points
+    from undertow.live.view import MAX_PATH_POSES, path_points
 
     for n in (1, 5, MAX_PATH_POSES, MAX_PATH_POSES + 1, 3 * MAX_PATH_POSES + 7, 36_000):
         p = np.arange(3.0 * n).reshape(n, 3)
@@ -158,7 +158,7 @@ def test_path_is_at_most_max_poses_evenly_spaced_newest_last():
 
 
 def test_the_views_map_takes_at_most_its_share_of_the_loop():
-    from undertow.jobs.live.pipeline import MAP_VIEW_SHARE, STATUS_PERIOD_S, map_view_due
+    from undertow.live.pipeline import MAP_VIEW_SHARE, STATUS_PERIOD_S, map_view_due
 
     assert map_view_due(100.0, 0.004) == 100.0 + STATUS_PERIOD_S  # cheap: every period
     slow = 4 * STATUS_PERIOD_S * MAP_VIEW_SHARE  # a rebuild 4 times the share of a period

@@ -1,6 +1,6 @@
 """The kernel filter of MAVLink datagrams: what a real socket with the program attached lets
 through, against a Python statement of the rule (module docstring of
-undertow.io.links.mavlink_filter), on real pymavlink frames (MAVLink 1 and 2, signed), their
+undertow.live.links.mavlink_filter), on real pymavlink frames (MAVLink 1 and 2, signed), their
 mutations and random bytes; and a live link with it delivering the same records."""
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v10 import ardupilotmega as mavlink1
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-from undertow.io.links import Backoff
-from undertow.io.links.mavlink_filter import attach, program
-from undertow.io.links.mavlink_udp import MavlinkLink
+from undertow.live.links import Backoff
+from undertow.live.links.mavlink_filter import attach, program
+from undertow.live.links.mavlink_udp import MavlinkLink
 
 pytestmark = pytest.mark.skipif(sys.platform != "linux", reason="a Linux socket filter")
 

@@ -16,12 +16,12 @@ from scipy.spatial import cKDTree
 from undertow.errors import ConfigError
 from undertow.estimation import Localizer
 from undertow.estimation.online import OnlineLocalizer
-from undertow.io.links.common import RECORD_FIELDS, Record, records_to_log
 from undertow.log import G0
 from undertow.mapping.config import MappingConfig
 from undertow.mapping.online import OnlineMapper
 from undertow.mapping.run import map_log
 from undertow.mapping.samples import samples_from_config
+from undertow.records import RECORD_FIELDS, Record, records_to_log
 from undertow.sim import load_scenario, simulate
 from undertow.wavetrack import WaveTrack
 
@@ -359,7 +359,7 @@ def test_pushes_that_take_the_previews_states_are_the_offline_run(session, varia
     bit for bit the offline one."""
     import math
 
-    from undertow.jobs.live.preview import PreviewCheckpoints
+    from undertow.live.preview import PreviewCheckpoints
 
     recs, mounting = session
     online = OnlineLocalizer(variant, wave=WAVE, mounting=mounting, expected=EXPECTED)

@@ -14,24 +14,19 @@ import numpy as np
 import pytest
 from conftest import REAL_DATA, one_error_line
 
+from undertow._util.clocks import ScaledClock
 from undertow.errors import ConfigError
 from undertow.io import read_log
-from undertow.io.links import (
-    A50TcpLink,
-    Backoff,
-    ClockPolicy,
-    LinkCounters,
-    ScaledClock,
-    records_to_log,
-)
-from undertow.io.links.mavlink_udp import MavlinkLink
-from undertow.io.links.ping1d import Ping1DLink
 from undertow.io.mavlink import MavlinkConfig
-from undertow.io.servers import Faults
-from undertow.io.servers.a50 import DEFAULT_CONFIG
 from undertow.jobs.serve import serve
+from undertow.live.links import A50TcpLink, Backoff, ClockPolicy, LinkCounters
+from undertow.live.links.mavlink_udp import MavlinkLink
+from undertow.live.links.ping1d import Ping1DLink
 from undertow.log import G0
+from undertow.records import records_to_log
 from undertow.rotations import rpy_to_quaternion
+from undertow.sim.robot import Faults
+from undertow.sim.robot.a50 import DEFAULT_CONFIG
 
 FAST = Backoff(initial=0.02, factor=2.0, maximum=0.1)
 

@@ -24,6 +24,7 @@ STAGE_OF = {
     "errors": "core",
     "rotations": "core",
     "log": "core",
+    "records": "core",
     "trajectory": "core",
     "occupancy": "core",
     "wavetrack": "core",
@@ -36,6 +37,7 @@ STAGE_OF = {
     "evaluation": "evaluation",
     "report": "report",
     "study": "study",
+    "live": "live",
     "jobs": "jobs",
     "cli": "cli",
 }
@@ -43,7 +45,7 @@ RANK = {
     stage: rank
     for rank, stage in enumerate(
         ("core", "io", "sim", "estimation", "mapping", "settings", "evaluation", "report",
-         "study", "jobs", "cli")
+         "study", "live", "jobs", "cli")
     )
 }  # fmt: skip
 

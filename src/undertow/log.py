@@ -92,7 +92,7 @@ class _Stream:
     def _trusted(cls, **fields):
         """The stream of ``fields`` without the constructor's checks and copies, for a builder
         that made every array itself in this class's dtypes and shapes, with finite times in
-        order (:func:`undertow.io.links.common.records_to_log`, called for every few records
+        order (:func:`undertow.records.records_to_log`, called for every few records
         live); the arrays are made read-only, as the constructor makes its copies."""
         obj = object.__new__(cls)
         for name, default in _field_defaults(cls):

@@ -61,7 +61,7 @@ def live_command(
     Example: `undertow live --dvl tcp://192.168.194.95 --sonar udp://192.168.2.2:9090
     --mavlink udpin:0.0.0.0:14550 --wave auto --out dive1`
     """
-    from ..jobs.live.pipeline import LiveSession, check_live_settings
+    from ..live.pipeline import LiveSession, check_live_settings
     from ..settings import Settings
 
     settings = Settings.from_yaml(config)
@@ -100,7 +100,7 @@ def _with_live(settings, live: dict, variant: str | None):
 
 
 def _open_view(settings):
-    from ..jobs.live.view import LiveView
+    from ..live.view import LiveView
 
     view = LiveView(host=settings.live.view_host, port=settings.live.view_port)
     err.print(f"live view: ws://{settings.live.view_host}:{view.port} (Foxglove: open connection)")

@@ -138,8 +138,8 @@ def serve_command(
 
     Example: `undertow serve calm --rate 10 --drop-dvl 5:2 --corrupt 0.01`
     """
-    from ..io.servers import Faults
     from ..jobs.serve import serve
+    from ..sim.robot import Faults
 
     faults = Faults.from_options(drop_dvl or (), corrupt, duplicate, reorder, clock_jump or ())
     mavlink_to = None if mavlink.lower() in ("off", "none", "") else mavlink

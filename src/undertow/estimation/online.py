@@ -44,6 +44,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..log import STREAM_NAMES, Log, Mounting
+from ..records import concat_logs
 from ..trajectory import Trajectory
 from . import model
 from .health import HALF_WINDOW, check_mounting, depth_jumps, per_sensor
@@ -278,32 +279,6 @@ class OnlineLocalizer:
             kinds = np.array([rows[k] for k in model.KIND_NAMES])
             metadata["adaptive_r"] = _adapted_summary(run.state.Ra, kinds, cfg.adaptive_r_alpha)
         return metadata
-
-
-def concat_logs(logs: list[Log], mounting: Mounting) -> Log:
-    """One Log of consecutive chunks (each stream's rows in chunk order)."""
-    streams = {}
-    for name in STREAM_NAMES:
-        parts = [getattr(log, name) for log in logs]
-        parts = [p for p in parts if p is not None and len(p)]
-        if not parts:
-            continue
-        if len(parts) == 1:
-            streams[name] = parts[0]
-            continue
-        changes = {"t": np.concatenate([p.t for p in parts])}
-        for field in parts[0]._shapes:
-            values = [getattr(p, field) for p in parts]
-            if all(v is None for v in values):
-                continue
-            like = next(v for v in values if v is not None)
-            fill = False if like.dtype == np.bool_ else np.nan
-            changes[field] = np.concatenate([
-                v if v is not None else np.full((len(p), *like.shape[1:]), fill, like.dtype)
-                for v, p in zip(values, parts, strict=True)
-            ])  # fmt: skip
-        streams[name] = dataclasses.replace(parts[0], **changes)
-    return Log(**streams, mounting=mounting)
 
 
 class _Outputs:

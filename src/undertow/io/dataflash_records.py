@@ -36,7 +36,7 @@ if TYPE_CHECKING:
 
 def _df():
     """pymavlink's ``DFReader`` module, imported at first use: it loads MAVLink dialects, which
-    a live session must not import mid-dive (``undertow.io.links``' load-ahead test)."""
+    a live session must not import mid-dive (``undertow.live.links``' load-ahead test)."""
     from pymavlink import DFReader
 
     return DFReader

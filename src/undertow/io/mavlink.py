@@ -39,9 +39,9 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..log import G0, Mounting, SensorMount
+from ..records import Record
 from ..rotations import matrix_to_rpy, rpy_to_quaternion_scalar
 from ._collect import MALFORMED
-from .links.common import Record
 
 IMU_MESSAGES = ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "RAW_IMU")
 PRESSURE_MESSAGES = ("SCALED_PRESSURE", "SCALED_PRESSURE2", "SCALED_PRESSURE3")
@@ -102,7 +102,7 @@ def _rotation_vector_matrix(a: np.ndarray) -> np.ndarray:
 
 
 class MavlinkMapper:
-    """Turns MAVLink messages into :class:`~undertow.io.links.common.Record` objects
+    """Turns MAVLink messages into :class:`~undertow.records.Record` objects
     (stateful: the dead-reckoning integral, the latest attitude, the range sensor chosen).
 
     :meth:`records` takes a decoded pymavlink message and its time ``t`` (s) and returns the

@@ -56,7 +56,7 @@ TF_STATIC_QOS = Qos(
 
 class MessageBuilder:
     """Message constructors bound to the typestore (shared by :func:`write_log` and the live
-    recorder, :mod:`undertow.io.recorder`)."""
+    recorder, :mod:`undertow.live.recorder`)."""
 
     def __init__(self) -> None:
         self.store = dvl_typestore()

@@ -35,8 +35,8 @@ import numpy as np
 
 from ..errors import ReaderError
 from ..log import Log, Mounting
+from ..records import records_to_log
 from ._collect import MALFORMED, Notes, read_regular_bytes
-from .links.common import records_to_log
 from .mavlink import MavlinkConfig, MavlinkMapper
 
 TLOG_SUFFIXES = (".tlog",)

@@ -4,8 +4,8 @@
 name or a scenario YAML file), then :meth:`ServeSession.start` serves it on this machine, in
 real time x ``rate``: the DVL and its dead reckoning as a Water Linked A50 (TCP JSON,
 ``dvl_port``), the sonar as a Ping1D (UDP, ``ping_port``), IMU and pressure as an ArduSub
-autopilot (MAVLink to ``mavlink``), with optional :class:`~undertow.io.servers.player.Faults`.
-Sensor clocks and timing: :mod:`undertow.io.servers.player`. Everything binds 127.0.0.1 unless
+autopilot (MAVLink to ``mavlink``), with optional :class:`~undertow.sim.robot.player.Faults`.
+Sensor clocks and timing: :mod:`undertow.sim.robot.player`. Everything binds 127.0.0.1 unless
 another ``host`` is given. Every message served is in :attr:`ServeSession.manifest`::
 
     from undertow.jobs.serve import serve
@@ -24,16 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .._util.clocks import ScaledClock, replay_anchor
 from ..errors import ConfigError
 from ..io import detect_format
-from ..io.links.common import ScaledClock, replay_anchor
-from ..io.servers import Faults, Manifest, Player
-from ..io.servers.a50 import A50Reports, A50Server
-from ..io.servers.decode import served_log
-from ..io.servers.mavlink import DEFAULT_ADDRESS, MavlinkSender
-from ..io.servers.ping1d import Ping1DServer
 from ..log import Log
 from ..sim import list_scenarios, load_scenario, simulate
+from ..sim.robot import Faults, Manifest, Player
+from ..sim.robot.a50 import A50Reports, A50Server
+from ..sim.robot.decode import served_log
+from ..sim.robot.mavlink import DEFAULT_ADDRESS, MavlinkSender
+from ..sim.robot.ping1d import Ping1DServer
 from .common import load_log
 
 
@@ -178,7 +178,7 @@ class ServeSession:
 
     def served_log(self, mavlink=None, faulty: bool = False) -> Log:
         """What was served, as a Log in playback time
-        (:func:`~undertow.io.servers.decode.served_log`)."""
+        (:func:`~undertow.sim.robot.decode.served_log`)."""
         return served_log(self.manifest.select(), mavlink, faulty)
 
     def summary(self) -> dict:
@@ -232,7 +232,7 @@ def serve(
     ``dvl_port``/``ping_port`` None (or ``mavlink`` None) leaves that sensor out; a sensor whose
     streams the log lacks is left out too. ``seed`` seeds the faults (numpy SeedSequence);
     ``epoch``: the sensor clock's epoch (default: wall start - t0, module
-    :mod:`undertow.io.servers.player`); ``distance_sensor``: also send the sonar as MAVLink
+    :mod:`undertow.sim.robot.player`); ``distance_sensor``: also send the sonar as MAVLink
     DISTANCE_SENSOR; ``wait_for_clients``: wait up to that many seconds for an A50 client and a
     Ping request before playing."""
     if not isinstance(host, str) or not host.strip():

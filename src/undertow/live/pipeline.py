@@ -36,35 +36,34 @@ import collections
 import gc
 import json
 import math
-import tempfile
 import threading
 import time
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from ..._util.atomic import check_output_folder
-from ..._util.plain import to_plain
-from ...errors import ConfigError
-from ...estimation.calibration import Calibration
-from ...estimation.config import LocalizerConfig
-from ...estimation.localizer import calibration_fields
-from ...estimation.online import FILTER_STREAMS, OnlineLocalizer, concat_logs
-from ...estimation.waves_online import OnlineSeaState
-from ...io.links.common import Record, ScaledClock, records_to_log
-from ...io.recorder import Recorder
-from ...io.results import save_map, save_trajectory
-from ...log import Mounting
-from ...mapping.grid import load_kernels as load_grid_kernels
-from ...mapping.online import OnlineMapper
-from ...mapping.samples import rays_from_pose
-from ...settings import LIVE_VARIANCE_BOUNDS, Settings
-from .links import expected_streams, open_links
+from .._util.atomic import check_output_folder
+from .._util.clocks import ScaledClock
+from .._util.plain import to_plain
+from ..errors import ConfigError
+from ..estimation.calibration import Calibration
+from ..estimation.config import LocalizerConfig
+from ..estimation.localizer import calibration_fields
+from ..estimation.online import FILTER_STREAMS, OnlineLocalizer
+from ..estimation.waves_online import OnlineSeaState
+from ..io.results import save_map, save_trajectory
+from ..log import Mounting
+from ..mapping.online import OnlineMapper
+from ..mapping.samples import rays_from_pose
+from ..records import Record, concat_logs, records_to_log
+from ..settings import LIVE_VARIANCE_BOUNDS, Settings
 from .preview import PreviewCheckpoints
+from .recorder import Recorder
 from .reorder import ReorderBuffer
+from .sensors import expected_streams, open_links
+from .warmup import warm_up
 
 #: wall seconds between status updates (status line, /undertow/status, the view's map)
 STATUS_PERIOD_S = 1.0
@@ -180,7 +179,7 @@ class LiveSession:
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self) -> LiveSession:
-        _warm_up(self.localizer.config.variant, self.mapping_config if self.mapper else None)
+        warm_up(self.localizer.config.variant, self.mapping_config if self.mapper else None)
         for link in self.links.values():
             link.load()
         # the objects made so far (modules, compiled code, settings) live as long as the
@@ -569,54 +568,6 @@ def _ranges(chunk):
         unit[:, 2] = 1.0  # the sonar frame's +z axis
         out.append(("sonar", unit, r[ok], chunk.mounting.sonar))
     return out
-
-
-def _warm_up(variant: str, mapping) -> None:
-    """Run the filter (and mapper) once on one second of a still vehicle, so the compiled code
-    is loaded (numba's cache) before the sensors start rather than on their first reports."""
-    t = np.arange(0.0, 1.0, 0.01)
-    records = [Record("imu", float(ti), {"angular_velocity": np.zeros(3)}) for ti in t]
-    beams = {"beam_range": np.full(4, 2.0), "beam_valid": np.ones(4, bool),
-             "beam_velocity": np.zeros(4), "altitude": 2.0}  # fmt: skip
-    records += [Record("dvl", float(ti), {"velocity": np.zeros(3), "valid": True, **beams})
-                for ti in t[::10]]  # fmt: skip
-    records += [Record("pressure", float(ti), {"pressure": 101325.0 + 9810.0}) for ti in t[::10]]
-    records += [Record("sonar", float(ti), {"range": 2.0}) for ti in t[::10]]
-    records.sort(key=lambda r: r.t)
-    with warnings.catch_warnings():  # what the filter says of this made-up log is no news
-        warnings.simplefilter("ignore")
-        localizer = OnlineLocalizer(variant=variant, expected={"imu", "dvl", "pressure"})
-        mapper = OnlineMapper(mapping) if mapping is not None else None
-        for part in (records[: len(records) // 2], records[len(records) // 2 :]):
-            chunk = records_to_log(part)
-            localizer.push(chunk)
-            localizer.peek(chunk)
-            if mapper is not None and localizer.ready:
-                mapper.push(chunk, localizer.trajectory())
-        if mapper is not None and localizer.ready:
-            mapper.finish(localizer.trajectory())
-        if mapper is not None:
-            load_grid_kernels()
-        _warm_up_recorder(records, localizer.trajectory())
-
-
-def _warm_up_recorder(records, trajectory) -> None:
-    """Write one message of every kind to a throwaway recording: rosbags generates each
-    message type's serializer on its first use (about 30 ms in all here), and the generated
-    code is shared by later recorders, so the session's first records do not wait for it."""
-    streams = {r.stream: r for r in records}
-    still = {"position": np.zeros(3), "orientation": np.zeros(3)}
-    streams["dead_reckoning"] = Record("dead_reckoning", records[0].t, still)
-    with tempfile.TemporaryDirectory() as tmp:
-        recorder = Recorder(Path(tmp) / "warm-up")
-        for record in streams.values():
-            recorder.write_record(record)
-        t = float(trajectory.t[-1]) if len(trajectory.t) else records[-1].t
-        if len(trajectory.t):
-            recorder.write_pose(t, trajectory.x[-1], trajectory.P[-1])
-        recorder.write_wave(t, 0.0, math.nan)
-        recorder.write_status(t, {"warm_up": True})
-        recorder.close()
 
 
 def _live_mapping(settings: Settings):

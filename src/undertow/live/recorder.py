@@ -1,6 +1,6 @@
 """The live recording: a ROS 2 bag directory (mcap storage) written as records arrive.
 
-Raw records (:class:`~undertow.io.links.common.Record`) go on the standard topics of
+Raw records (:class:`~undertow.records.Record`) go on the standard topics of
 :class:`~undertow.io.topics.TopicMap` (first names) with the message types of
 :func:`~undertow.io.rosbag_write.write_log` (message builders shared with it), so
 :func:`undertow.io.read_log` and ``undertow localize``/``map`` replay a recording, and ROS 2
@@ -29,10 +29,10 @@ The estimates, on topics of their own (the readers ignore them):
 The messages of fixed layout (``sensor_msgs/Imu``, ``sensor_msgs/FluidPressure``, the pose and
 dead reckoning, the A50 driver's ``DVL``) are not built and serialized one by one: their CDR
 bytes are a template of the first such message rosbags serializes, with the stamp and the fields
-after the header packed in place (kept only when it reproduces rosbags' bytes of that message;
-the same bytes, a fifth of the time); the DVL's JSON line goes into its ``std_msgs/String`` the
-same way. The messages are appended to the MCAP chunk by :mod:`undertow.io.mcap_append` (the file
-rosbags' writer makes, byte for byte).
+after the header packed in place (:mod:`undertow.live.cdr`; kept only when it reproduces
+rosbags' bytes of that message: the same bytes, a fifth of the time); the DVL's JSON line goes
+into its ``std_msgs/String`` the same way. The messages are appended to the MCAP chunk by
+:mod:`undertow.live.mcap_append` (the file rosbags' writer makes, byte for byte).
 
 Header stamps are the record time t (s) as ``sec = floor(t)``, ``nanosec = round((t - sec) 1e9)``;
 the bag's record time is the same instant in ns.
@@ -76,9 +76,7 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 import shutil
-import struct
 import tempfile
 import threading
 from pathlib import Path
@@ -89,15 +87,11 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 from .._util.plain import json_safe, to_plain
 from ..errors import ConfigError, DataError
-from ..log import Mounting, SonarRange
-from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
-from .a50_json import MAX_REPORT_INTERVAL_MS, report_line, report_values
-from .links.common import RECORD_FIELDS, Record
-from .mcap_append import MessageAppender
-from .msgdefs import A50_DVL
-from .rosbag import SIDECAR
-from .rosbag_streams import TF_MESSAGE
-from .rosbag_write import (
+from ..io.a50_json import MAX_REPORT_INTERVAL_MS, report_line, report_values
+from ..io.msgdefs import A50_DVL
+from ..io.rosbag import SIDECAR
+from ..io.rosbag_streams import TF_MESSAGE
+from ..io.rosbag_write import (
     TF_STATIC_QOS,
     MessageBuilder,
     dead_reckoning_message,
@@ -107,7 +101,12 @@ from .rosbag_write import (
     sonar_message,
     tf_static_message,
 )
-from .topics import SENSOR_NAMES, TopicMap
+from ..io.topics import SENSOR_NAMES, TopicMap
+from ..log import Mounting, SonarRange
+from ..records import RECORD_FIELDS, Record
+from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
+from .cdr import DVL_FORM, DVL_TAIL, CdrTemplate, stamp, string_cdr
+from .mcap_append import MessageAppender
 
 #: topics of the estimates (the raw streams use TopicMap's first names)
 POSE_TOPIC = "/undertow/pose"
@@ -155,76 +154,8 @@ def _float(value) -> float:
     return math.nan if value is None else float(value)
 
 
-_STAMP = struct.Struct("<iI")
 _ZEROS9 = (0.0,) * 9
 _NO_ESTIMATE9 = (-1.0,) + (0.0,) * 8  # sensor_msgs/Imu: covariance[0] = -1, no estimate
-
-
-def _stamp(t: float) -> tuple[int, int, int]:
-    """(sec, nanosec, record time ns) of a header stamp, as MessageBuilder.header computes them."""
-    sec = math.floor(t)
-    nanosec = int(round((t - sec) * 1e9))
-    if nanosec >= 1_000_000_000:
-        sec, nanosec = sec + 1, nanosec - 1_000_000_000
-    return sec, nanosec, sec * 1_000_000_000 + nanosec
-
-
-def _aligned(codes: str) -> struct.Struct:
-    """Little-endian struct of the CDR fields ``codes`` (struct codes; ``Ns`` bytes, aligned
-    to 1) laid out from an offset aligned to 8: each primitive aligned to its size (OMG CDR)."""
-    fmt, off = "<", 0
-    for count, code in re.findall(r"(\d*)([a-zA-Z?])", codes):
-        n = int(count or 1)
-        items = [f"{n}s"] if code == "s" else [code] * n
-        for item in items:
-            size = struct.calcsize("<" + item)
-            pad = -off % (1 if code == "s" else size)
-            fmt += "x" * pad + item
-            off += pad + size
-    return struct.Struct(fmt)
-
-
-class _CdrTemplate:
-    """The CDR bytes of a message of fixed layout after its ``std_msgs/Header`` (the ``tail``:
-    by default ``n`` float64, as sensor_msgs/Imu and FluidPressure), written without building the
-    message: the bytes of a first message serialized by rosbags, with the stamp (int32 sec,
-    uint32 nanosec right after the 4-byte encapsulation header) and the tail replaced (OMG CDR:
-    the frame id's length, bytes and padding stay those of the template; the tail starts
-    aligned to 8). :meth:`make` keeps a template only when it reproduces rosbags' bytes of that
-    message."""
-
-    def __init__(self, serialized: bytes, tail: struct.Struct) -> None:
-        self.tail = tail
-        self.encapsulation = serialized[:4]
-        self.middle = serialized[4 + _STAMP.size : len(serialized) - tail.size]
-
-    def pack(self, sec: int, nanosec: int, values) -> bytes:
-        return b"".join((self.encapsulation, _STAMP.pack(sec, nanosec), self.middle,
-                         self.tail.pack(*values)))  # fmt: skip
-
-    @classmethod
-    def make(cls, serialized, t: float, values, tail=None) -> _CdrTemplate | None:
-        serialized = bytes(serialized)
-        try:
-            template = cls(serialized, tail or struct.Struct(f"<{len(values)}d"))
-            sec, nanosec, _ = _stamp(t)
-            same = template.pack(sec, nanosec, values) == serialized
-        except (struct.error, OverflowError):
-            same = False
-        return template if same else None
-
-
-#: waterlinked_a50_ros_driver/msg/DVL after its header: time, velocity, fom, altitude, the
-#: beams (a sequence of 4: id, velocity, distance, rssi, nsd, valid), velocity_valid, status,
-#: form (a string of 7 characters)
-_DVL_TAIL = _aligned("6d I" + " q4d?" * 4 + " ?q I8s")
-_FORM = b"json_v3\x00"
-
-
-def _string_cdr(encapsulation: bytes, text: str) -> bytes:
-    """CDR bytes of a std_msgs/String: uint32 length (with the NUL), the UTF-8 bytes, NUL."""
-    data = text.encode()
-    return b"".join((encapsulation, struct.pack("<I", len(data) + 1), data, b"\x00"))
 
 
 def _f32(value: float) -> float:
@@ -281,7 +212,7 @@ class Recorder:
         self._dvl_last_t: float | None = None
         self._dvl_keys: set[tuple] = set()
         self._last_flush: float | None = None
-        self._templates: dict[tuple, _CdrTemplate | None] = {}
+        self._templates: dict[tuple, CdrTemplate | None] = {}
         self._string_template: bytes | bool | None = None  # std_msgs/String's encapsulation
         self._by_stream = {stream: getattr(self, f"_{stream}") for stream in RECORD_FIELDS}
 
@@ -522,16 +453,16 @@ class Recorder:
 
     def _templated(self, key: tuple, msgtype: str, t: float, values: tuple, build, tail=None):
         """(ns, msgtype, CDR bytes) of a message of fixed layout: packed on the key's template
-        (:class:`_CdrTemplate`), made from the first such message rosbags serializes."""
+        (:class:`CdrTemplate`), made from the first such message rosbags serializes."""
         template = self._templates.get(key)
         if template is not None:
-            sec, nanosec, ns = _stamp(t)
+            sec, nanosec, ns = stamp(t)
             return ns, msgtype, template.pack(sec, nanosec, values)
         ns, msg = build()
         if key in self._templates:  # no template reproduces this type's bytes: rosbags
             return ns, msgtype, msg
         serialized = bytes(self._b.store.serialize_cdr(msg, msgtype))
-        self._templates[key] = _CdrTemplate.make(serialized, t, values, tail)
+        self._templates[key] = CdrTemplate.make(serialized, t, values, tail)
         return ns, msgtype, serialized
 
     def _sonar(self, t: float, record: Record, late: str):
@@ -584,20 +515,20 @@ class Recorder:
         values = (report.time_ms, *v, fom, report.altitude, 4,
                   *(x for bid, bv, dist, b_ok in report.beams
                     for x in (bid, bv, dist, math.nan, math.nan, b_ok)),
-                  valid, 0, len(_FORM), _FORM)  # fmt: skip
+                  valid, 0, len(DVL_FORM), DVL_FORM)  # fmt: skip
 
         def build():
             return driver_message(self._b, t, self._frame["dvl"], report)
 
-        ns, _, msg = self._templated((topic,), A50_DVL, t, values, build, _DVL_TAIL)
+        ns, _, msg = self._templated((topic,), A50_DVL, t, values, build, DVL_TAIL)
         line = report_line(report)
         string = self._string_template
         if string is None:  # the first line: rosbags' bytes, kept as the template if equal
-            ours = _string_cdr(b"\x00\x01\x00\x00", line)
+            ours = string_cdr(b"\x00\x01\x00\x00", line)
             ref = bytes(self._b.store.serialize_cdr(self._b.T[_STRING_TYPE](data=line),
                                                     _STRING_TYPE))  # fmt: skip
             self._string_template = string = ours[:4] if ours == ref else False
-        text = _string_cdr(string, line) if string else self._b.T[_STRING_TYPE](data=line)
+        text = string_cdr(string, line) if string else self._b.T[_STRING_TYPE](data=line)
         messages = [(topic, ns, A50_DVL, msg), (json_topic, ns, _STRING_TYPE, text)]
         return _dvl_read_back(fields), messages
 

@@ -15,7 +15,7 @@ import heapq
 import itertools
 import math
 
-from ...io.links.common import Record
+from ..records import Record
 
 
 class ReorderBuffer:

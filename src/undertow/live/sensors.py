@@ -4,10 +4,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ...errors import ConfigError
-from ...io.links.a50_tcp import DEFAULT_PORT, A50TcpLink
-from ...io.links.common import Link, Record
-from ...settings import LiveSettings
+from ..errors import ConfigError
+from ..records import Record
+from ..settings import LiveSettings
+from .links.a50_tcp import DEFAULT_PORT, A50TcpLink
+from .links.base import Link
 
 #: the streams each link delivers (what the filter waits for before it starts)
 LINK_STREAMS = {
@@ -55,12 +56,12 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
                                   calibrate_gyro=live.calibrate_gyro, deferred=True,
                                   wake=wake)  # fmt: skip
     if live.sonar:
-        from ...io.links.ping1d import Ping1DLink
+        from .links.ping1d import Ping1DLink
 
         rate = min(live.ping_rate_hz * live.time_scale, MAX_PING_RATE_HZ)
         links["sonar"] = Ping1DLink(live.sonar, callback, rate_hz=rate, now=now)
     if live.mavlink:
-        from ...io.links.mavlink_udp import MavlinkLink
+        from .links.mavlink_udp import MavlinkLink
 
         links["mavlink"] = MavlinkLink(live.mavlink, callback, now=now, max_offset_s=max_offset,
                                        deferred=True, wake=wake, kernel_filter=True,

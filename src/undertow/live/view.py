@@ -12,7 +12,7 @@ Topics (:data:`TOPICS`, topic -> schema name):
 - ``/undertow/pose`` (``foxglove.Odometry``): the filter's pose, frame ``world``, body
   ``base_link``: position x[0:3], orientation the quaternion of (phi, theta, psi) = x[3:6],
   ``pose_covariance`` P[0:6, 0:6] row-major (the Euler-angle block as is, see
-  :mod:`undertow.io.recorder`); body velocity x[6:9] and angular rate x[9:12] with
+  :mod:`undertow.live.recorder`); body velocity x[6:9] and angular rate x[9:12] with
   ``velocity_covariance`` P[6:12, 6:12] (the state layout of :mod:`undertow.estimation.model`);
 - ``/undertow/pose/uncertainty`` (``foxglove.SceneUpdate``): the 3-sigma ellipsoid of the
   position, axes 2 * 3 sqrt(lambda_i) along the eigenvectors of P[0:3, 0:3];
@@ -39,9 +39,9 @@ import threading
 
 import numpy as np
 
-from ...errors import ConfigError
-from ...occupancy import OCCUPIED_THRESHOLD, OccupancyMap
-from ...rotations import matrix_to_quaternion_scalar, rpy_to_quaternion_scalar
+from ..errors import ConfigError
+from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
+from ..rotations import matrix_to_quaternion_scalar, rpy_to_quaternion_scalar
 
 POSE = "/undertow/pose"
 UNCERTAINTY = "/undertow/pose/uncertainty"

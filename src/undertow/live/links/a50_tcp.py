@@ -10,7 +10,7 @@ live report and a logged one give the same numbers.
 
 Times: a velocity report's sensor time is ``time_of_validity`` (us -> s), a position report's its
 ``ts``; json_v1 reports have none and are stamped on arrival. The link's
-:class:`~undertow.io.links.common.ClockPolicy` decides (trust the sensor clock when it agrees with
+:class:`~undertow.live.links.base.ClockPolicy` decides (trust the sensor clock when it agrees with
 arrival within ``max_offset_s``, else shift it by a recorded offset). Exact duplicate lines are
 dropped and counted; undecodable lines (broken JSON, absurd values, lines longer than
 ``MAX_LINE_BYTES``) are counted as malformed; neither ever stops the link.
@@ -31,9 +31,10 @@ from typing import Any
 
 import numpy as np
 
-from .._collect import MALFORMED
-from ..a50_json import is_position_report, is_velocity_report, position_fields, velocity_fields
-from .common import Backoff, ClockPolicy, Link, LinkCounters, Record
+from ...io._collect import MALFORMED
+from ...io.a50_json import is_position_report, is_velocity_report, position_fields, velocity_fields
+from ...records import Record
+from .base import Backoff, ClockPolicy, Link, LinkCounters
 
 DEFAULT_PORT = 16171
 #: longest line accepted (a velocity report is about 1 kB); longer ones are dropped as malformed

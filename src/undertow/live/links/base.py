@@ -1,10 +1,10 @@
-"""What every live sensor link shares: measurement records, counters, the arrival-time policy,
-reconnection with exponential backoff and a bounded delivery queue.
+"""What every live sensor link shares: counters, the arrival-time policy, reconnection with
+exponential backoff and a bounded delivery queue.
 
-A link delivers :class:`Record` objects, one per measurement, each naming the
-:mod:`undertow.log` stream it belongs to (``imu``, ``dvl``, ``dead_reckoning``, ``pressure``,
-``sonar``) with that stream's fields in the Log's units and frames, so that
-:func:`records_to_log` turns any sequence of records back into a :class:`~undertow.log.Log`.
+A link delivers :class:`~undertow.records.Record` objects, one per measurement (the stream it
+belongs to and that stream's fields in the Log's units and frames), stamped by its
+:class:`ClockPolicy` on an arrival clock (``time.time``, or a
+:class:`~undertow._util.clocks.ScaledClock` for a replay played faster than real time).
 
 Timestamp policy (:class:`ClockPolicy`), per link:
 
@@ -32,46 +32,12 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
-from ...errors import ConfigError, DataError
-from ...log import DeadReckoning, Dvl, Imu, Log, Pressure, SonarRange
-
-#: streams a record may name, and their fields (beyond ``t``) in :mod:`undertow.log` units
-RECORD_FIELDS: dict[str, tuple[str, ...]] = {
-    "imu": ("angular_velocity", "linear_acceleration", "orientation"),
-    "dvl": (
-        "velocity",
-        "valid",
-        "fom",
-        "covariance",
-        "altitude",
-        "beam_range",
-        "beam_valid",
-        "beam_velocity",
-    ),
-    "dead_reckoning": ("position", "orientation", "std"),
-    "pressure": ("pressure",),
-    "sonar": ("range", "confidence"),
-}
-
-
-@dataclass(frozen=True)
-class Record:
-    """One measurement: ``stream`` (a :data:`RECORD_FIELDS` key), ``t`` (s, the policy's
-    time), ``data`` (that stream's fields), ``arrival`` (Unix s, when it reached this machine),
-    ``sensor_time`` (the sensor's own time in s, NaN if none) and ``source`` (the link)."""
-
-    stream: str
-    t: float
-    data: dict[str, Any]
-    arrival: float = math.nan
-    sensor_time: float = math.nan
-    source: str = ""
+from ...errors import ConfigError
+from ...records import Record
 
 
 @dataclass
@@ -205,40 +171,6 @@ class ClockPolicy:
             self._jump[stream] = t
 
 
-def replay_anchor(now: float | None = None) -> float:
-    """The start of the current UTC hour (Unix s): the point where a scaled clock and the wall
-    clock agree. Two processes (``undertow serve --rate R`` and ``undertow live --time-scale
-    R``) derive the same clock from it without talking to each other, and the scaled times stay
-    within R hours of it (ROS stamps hold seconds in an int32)."""
-    now = time.time() if now is None else float(now)
-    return math.floor(now / 3600.0) * 3600.0
-
-
-class ScaledClock:
-    """An arrival clock running ``scale`` times faster than this machine's: c(w) = A + scale
-    (w - A) for the wall time w, with the anchor A (default :func:`replay_anchor`). It stamps
-    arrivals from a virtual robot that plays a recording ``scale`` times faster than real time
-    (``undertow serve --rate``, whose sensor clocks follow the same formula), so that arrival
-    spacing is in the recording's seconds; ``scale`` 1 is ``time.time``."""
-
-    def __init__(self, scale: float = 1.0, start: float | None = None) -> None:
-        if not (math.isfinite(scale) and scale > 0):
-            raise ConfigError(f"time scale: expected a positive number, got {scale}")
-        self.scale = float(scale)
-        self.start = replay_anchor() if start is None else float(start)
-
-    def __call__(self) -> float:
-        return self.start + self.scale * (time.time() - self.start)
-
-    def at(self, wall: float) -> float:
-        """c(w) of a wall time w (``time.time`` seconds) taken earlier, e.g. by the kernel."""
-        return self.start + self.scale * (wall - self.start)
-
-    def wall_seconds(self, seconds: float) -> float:
-        """The wall time in which ``seconds`` of this clock pass."""
-        return seconds / self.scale
-
-
 @dataclass(frozen=True)
 class Backoff:
     """Reconnection delays: ``initial`` s, times ``factor`` after each failed attempt, at most
@@ -277,7 +209,8 @@ class Link:
         now: Callable[[], float] | None = None,
     ) -> None:
         self.counters = LinkCounters()
-        #: the arrival clock (Unix s): time.time, or a :class:`ScaledClock` for replays
+        #: the arrival clock (Unix s): time.time, or a
+        #: :class:`~undertow._util.clocks.ScaledClock` for replays
         self.now: Callable[[], float] = now or time.time
         self.clock = clock or ClockPolicy(self.counters)
         self.clock.counters = self.counters
@@ -408,105 +341,3 @@ class Link:
     @property
     def stopping(self) -> bool:
         return self._stop.is_set()
-
-
-def _stack(rows: list, shape: tuple, dtype=np.float64) -> np.ndarray:
-    out = np.empty((len(rows), *shape), dtype=dtype)
-    missing = np.nan if dtype == np.float64 else 0
-    for i, value in enumerate(rows):
-        out[i] = missing if value is None else value
-    return out
-
-
-def records_to_log(records: Iterable[Record], source: str = "", metadata=None) -> Log:
-    """A :class:`~undertow.log.Log` of ``records`` (each stream sorted by time, stable)."""
-    by_stream: dict[str, list[Record]] = {}
-    for record in records:
-        if record.stream not in RECORD_FIELDS:
-            raise DataError(f"record stream '{record.stream}' is not one of {list(RECORD_FIELDS)}")
-        by_stream.setdefault(record.stream, []).append(record)
-    streams = {}
-    for name, recs in by_stream.items():
-        recs = sorted(recs, key=_time)
-        t = np.array([r.t for r in recs], dtype=np.float64)
-        if not np.isfinite(t).all():
-            raise DataError(f"{name}.t: non-finite timestamps")
-        # every array below is made here in its stream's dtype and shape, the times are finite
-        # and sorted: the streams are built without the constructors' checks and copies
-        streams[name] = _BUILDERS[name](t, [r.data for r in recs])
-    return Log(**streams, source=source, metadata=dict(metadata or {}))
-
-
-def _time(record: Record) -> float:
-    return record.t
-
-
-def _column(data: list[dict], key: str, shape: tuple, dtype=np.float64):
-    rows = [d.get(key) for d in data]
-    missing = sum(r is None for r in rows)
-    if missing == len(rows):
-        return None
-    if not missing:  # one conversion of the whole column when every row is well formed
-        try:
-            out = np.array(rows, dtype=dtype)
-        except (TypeError, ValueError):
-            out = None
-        if out is not None and out.shape == (len(rows), *shape):
-            return out
-    return _stack(rows, shape, dtype)
-
-
-def _imu(t, data) -> Imu:
-    return Imu._trusted(
-        t=t,
-        angular_velocity=_column(data, "angular_velocity", (3,)),
-        linear_acceleration=_column(data, "linear_acceleration", (3,)),
-        orientation=_column(data, "orientation", (4,)),
-    )
-
-
-def _dvl(t, data) -> Dvl:
-    def col(key, shape=(), dtype=np.float64):
-        return _column(data, key, shape, dtype)
-
-    fields = Dvl._velocity_fields(
-        t,
-        col("velocity", (3,)),
-        valid=col("valid", (), np.bool_),
-        fom=col("fom"),
-        covariance=col("covariance", (3, 3)),
-        altitude=col("altitude"),
-        beam_range=col("beam_range", (4,)),
-        beam_valid=col("beam_valid", (4,), np.bool_),
-        beam_velocity=col("beam_velocity", (4,)),
-    )
-    return Dvl._trusted(**fields)
-
-
-def _dead_reckoning(t, data) -> DeadReckoning:
-    return DeadReckoning._trusted(
-        t=t,
-        position=_column(data, "position", (3,)),
-        orientation=_column(data, "orientation", (3,)),
-        std=_column(data, "std", ()),
-    )
-
-
-def _pressure(t, data) -> Pressure:
-    return Pressure._trusted(t=t, pressure=_column(data, "pressure", ()))
-
-
-def _sonar(t, data) -> SonarRange:
-    extra = {k: data[-1][k] for k in ("field_of_view", "min_range", "max_range") if k in data[-1]}
-    return SonarRange._trusted(
-        t=t, range=_column(data, "range", ()), confidence=_column(data, "confidence", ()), **extra
-    )
-
-
-_BUILDERS = {
-    "imu": _imu,
-    "dvl": _dvl,
-    "dead_reckoning": _dead_reckoning,
-    "pressure": _pressure,
-    "sonar": _sonar,
-}

@@ -10,7 +10,7 @@ pymavlink (``robust_parsing``: bytes that do not form a valid message come back 
 Time (``time_source``): ``arrival`` (default) stamps each record with its arrival time, as a
 ``.tlog`` stamps its receive time, so a recorded session reads back identically; ``sensor``
 uses the message's own time (``time_boot_ms``/``time_usec``) through the link's
-:class:`~undertow.io.links.common.ClockPolicy` (shifted to this machine's clock by a recorded
+:class:`~undertow.live.links.base.ClockPolicy` (shifted to this machine's clock by a recorded
 offset), which removes the network jitter from the autopilot's sample spacing.
 A link silent for ``idle_timeout_s`` re-opens its connection (counted as a disconnect).
 
@@ -44,9 +44,9 @@ import sys
 import time
 
 from ...errors import ConfigError
-from ..mavlink import MavlinkConfig, MavlinkMapper
+from ...io.mavlink import MavlinkConfig, MavlinkMapper
 from . import mavlink_filter, stamped
-from .common import Backoff, ClockPolicy, Link, LinkCounters
+from .base import Backoff, ClockPolicy, Link, LinkCounters
 
 TIME_SOURCES = ("arrival", "sensor")
 

@@ -6,7 +6,8 @@ serial device (``connect_serial``, 115200 baud) or UDP (``connect_udp``; BlueOS 
 of a BlueROV2 on UDP port 9090). The link polls the ``distance`` message (id 1212) at
 ``rate_hz``: ``distance`` (mm) -> range r = 1e-3 distance (m), ``confidence`` (%) -> 0..1
 (NaN when above 100), plus ``ping_number`` (a report repeated with the same ping number, polled
-faster than the sonar pings, is dropped as a duplicate).
+faster than the sonar pings, is dropped as a duplicate), read by
+:func:`undertow.io.ping.distance_data`.
 
 Time: the Ping has no clock in its messages; each range is stamped with its arrival time on this
 machine (``time.time()``), which lags the acoustic measurement by the transmit duration, the
@@ -23,19 +24,11 @@ import socket
 import time
 
 from ...errors import ConfigError
-from .common import Backoff, ClockPolicy, Link, LinkCounters, Record
+from ...io.ping import PING1D_DISTANCE, distance_data, load_brping
+from ...records import Record
+from .base import Backoff, ClockPolicy, Link, LinkCounters
 
 DEFAULT_UDP_PORT = 9090
-PING1D_DISTANCE = 1212
-PING1D_DISTANCE_SIMPLE = 1211
-
-
-def _brping():
-    import brping
-    from brping import definitions, pingmessage
-
-    return brping, definitions, pingmessage
-
 
 _QUIET = None
 
@@ -45,7 +38,7 @@ def _quiet_ping1d():
     messages counted in ``unrecognized`` instead of printed."""
     global _QUIET
     if _QUIET is None:
-        brping, _, _ = _brping()
+        brping, _, _ = load_brping()
 
         class QuietPing1D(brping.Ping1D):
             unrecognized = 0
@@ -87,41 +80,6 @@ def _quiet_ping1d():
 
         _QUIET = QuietPing1D
     return _QUIET
-
-
-def distance_data(distance_mm, confidence_pct) -> dict:
-    """The ``sonar`` record fields of a Ping1D distance: range (m) and confidence (0..1)."""
-    ok = type(distance_mm) is int and type(confidence_pct) is int
-    if not (ok and 0 <= distance_mm < 2**32 and 0 <= confidence_pct < 2**16):
-        raise ValueError("Ping1D distance (uint32 mm) and confidence (uint16 %) out of range")
-    confidence = confidence_pct / 100.0 if 0 <= confidence_pct <= 100 else math.nan
-    return {"range": distance_mm / 1000.0, "confidence": confidence}
-
-
-def decode_ping_frames(data: bytes, parser=None) -> tuple[list[dict], int]:
-    """The distance messages (dicts with distance, confidence, ping_number) in ``data`` decoded
-    with brping's ``PingParser`` (checksum verified), and the number of frames rejected (bad
-    checksum or unknown id). Other valid messages are ignored."""
-    _, definitions, pingmessage = _brping()
-    parser = parser or pingmessage.PingParser()
-    out, errors = [], parser.errors
-    rejected = 0
-    with contextlib.redirect_stdout(io.StringIO()):  # brping prints on unknown messages
-        for byte in data:
-            if parser.parse_byte(byte) != pingmessage.PingParser.NEW_MESSAGE:
-                continue
-            msg = parser.rx_msg
-            if not hasattr(msg, "payload_field_names"):
-                rejected += 1
-                continue
-            if msg.message_id in (PING1D_DISTANCE, PING1D_DISTANCE_SIMPLE):
-                fields = {n: getattr(msg, n, None) for n in msg.payload_field_names}
-                if isinstance(fields.get("distance"), int):
-                    out.append(fields)
-                else:
-                    rejected += 1
-    del definitions
-    return out, rejected + parser.errors - errors
 
 
 def parse_device(device: str) -> tuple[str, str, int]:
@@ -183,7 +141,7 @@ class Ping1DLink(Link):
         self._device = None
 
     def load(self) -> None:
-        _brping()
+        load_brping()
 
     def _connect(self):
         device = _quiet_ping1d()()

@@ -36,7 +36,7 @@ def enable(sock: socket.socket) -> None:
 class Reader:
     """Reads the datagrams waiting on a socket :func:`enable` set up, each with its receive
     time on the link's clock ``now`` (its ``at(wall)`` maps a ``time.time`` instant, as
-    :class:`~undertow.io.links.common.ScaledClock` does; ``time.time`` itself needs none; any
+    :class:`~undertow._util.clocks.ScaledClock` does; ``time.time`` itself needs none; any
     other clock gets the read time). ``dropped`` counts the datagrams the kernel dropped (the
     caller may take and reset it)."""
 

@@ -1,17 +1,21 @@
-"""The virtual robot's sensors: servers speaking the real protocols, fed from a Log.
+"""The virtual robot: servers speaking the real sensors' protocols, fed from a Log (a recorded
+dive or a simulated run), so the live stage can be run without the robot.
 
-- :class:`~undertow.io.servers.a50.A50Server` / :class:`~undertow.io.servers.a50.A50Reports`:
+- :class:`~undertow.sim.robot.a50.A50Server` / :class:`~undertow.sim.robot.a50.A50Reports`:
   a Water Linked DVL A50 on TCP (JSON lines, json_v3), answering its commands;
-- :class:`~undertow.io.servers.ping1d.Ping1DServer`: a Blue Robotics Ping1D on UDP (brping's
+- :class:`~undertow.sim.robot.ping1d.Ping1DServer`: a Blue Robotics Ping1D on UDP (brping's
   message definitions), answering each distance request with the log's newest range;
-- :class:`~undertow.io.servers.mavlink.MavlinkSender`: an ArduSub autopilot's ATTITUDE,
+- :class:`~undertow.sim.robot.mavlink.MavlinkSender`: an ArduSub autopilot's ATTITUDE,
   SCALED_IMU2, SCALED_PRESSURE2 (and DISTANCE_SENSOR) sent with pymavlink;
-- :class:`~undertow.io.servers.player.Player`: plays the log in real time x rate with
-  :class:`~undertow.io.servers.player.Faults`, listing every message in a
-  :class:`~undertow.io.servers.player.Manifest`; :func:`~undertow.io.servers.decode.served_log`
+- :class:`~undertow.sim.robot.player.Player`: plays the log in real time x rate with
+  :class:`~undertow.sim.robot.player.Faults`, listing every message in a
+  :class:`~undertow.sim.robot.player.Manifest`; :func:`~undertow.sim.robot.decode.served_log`
   turns a manifest back into a Log.
 
-``undertow.jobs.serve.serve`` puts them together (``undertow serve``).
+A50 lines and Ping distances are written with the codecs of :mod:`undertow.io` the live links
+read them with (:mod:`~undertow.io.a50_json`, :mod:`~undertow.io.ping`), and ``served_log``
+reads a manifest back with those and the MAVLink mapping (:mod:`~undertow.io.mavlink`). The
+``serve`` command puts the servers together (``undertow serve``).
 """
 
 from __future__ import annotations

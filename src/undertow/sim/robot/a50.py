@@ -24,8 +24,8 @@ import time
 
 import numpy as np
 
+from ...io.a50_json import velocity_report_line
 from ...log import Log
-from ..a50_json import velocity_report_line
 from .player import Faults, Manifest, PlayClock, Served
 
 DEFAULT_PORT = 16171

@@ -1,5 +1,5 @@
 """What a served message says, decoded by the same functions the live links use: the
-:class:`~undertow.io.links.common.Record` a link receiving it intact would deliver (values in the
+:class:`~undertow.records.Record` a link receiving it intact would deliver (values in the
 Log's units), stamped with the message's playback time ``t`` (log time) instead of an arrival
 time, so a manifest turns back into a Log (:func:`served_log`) to compare with the original."""
 
@@ -9,9 +9,10 @@ import json
 import math
 from collections.abc import Iterable
 
-from ..a50_json import is_position_report, position_fields, velocity_fields
-from ..links.common import Record, records_to_log
-from ..mavlink import MavlinkConfig, MavlinkMapper
+from ...io.a50_json import is_position_report, position_fields, velocity_fields
+from ...io.mavlink import MavlinkConfig, MavlinkMapper
+from ...io.ping import decode_ping_frames, distance_data
+from ...records import Record, records_to_log
 from .player import Served
 
 
@@ -25,8 +26,6 @@ def _a50(entry: Served) -> list[Record]:
 
 
 def _ping(entry: Served) -> list[Record]:
-    from ..links.ping1d import decode_ping_frames, distance_data
-
     if entry.index < 0:
         return []
     messages, _ = decode_ping_frames(entry.payload)

@@ -19,7 +19,7 @@ ArduSub autopilot), MAVLink 2, to any pymavlink connection string (default
 - ``HEARTBEAT`` once per second of log time (MAV_TYPE_SUBMARINE, MAV_AUTOPILOT_ARDUPILOTMEGA).
 
 ``time_boot_ms`` = 1000 (tau - t0) (+ a clock-jump fault): the autopilot booted when the log
-starts (:class:`~undertow.io.servers.player.PlayClock`).
+starts (:class:`~undertow.sim.robot.player.PlayClock`).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ ids refused (``nack``, id 2). Frames are packed with brping's own message defini
 (``brping.pingmessage.PingMessage``, ``brping.definitions``).
 
 ``distance`` (id 1212) and ``distance_simple`` (1211) answer the log's newest range at the time
-of the request (playback time, :class:`~undertow.io.servers.player.PlayClock`): distance =
+of the request (playback time, :class:`~undertow.sim.robot.player.PlayClock`): distance =
 round(1000 r) mm, confidence = round(100 c) % (255, out of the 0-100 range, when the log's
 confidence is NaN; a NaN range is distance 0, confidence 0, the Ping's "no target"),
 ``ping_number`` = the row's number since playback began (1, 2, ...: repeated while no new ping
@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from ...io.ping import distance_fields
 from ...log import Log
 from .player import Faults, Manifest, PlayClock, Served, flip_one_byte
 
@@ -71,15 +72,6 @@ def _brping():
     from brping import definitions, pingmessage
 
     return definitions, pingmessage
-
-
-def distance_fields(r: float, c: float) -> tuple[int, int]:
-    """(distance mm, confidence %) of a range r (m) and confidence c (0..1) (module
-    docstring)."""
-    if not math.isfinite(r) or r < 0:
-        return 0, 0
-    pct = int(round(100.0 * c)) if math.isfinite(c) and 0.0 <= c <= 1.0 else 255
-    return int(min(round(1000.0 * r), 2**32 - 1)), pct
 
 
 def corrupt_frame(frame: bytes, rng: np.random.Generator) -> bytes:

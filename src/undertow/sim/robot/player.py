@@ -9,8 +9,8 @@ playback time plus a fixed ``epoch``: s = epoch + tau (A50 ``time_of_validity``,
 milliseconds since the autopilot booted at t0 (MAVLink ``time_boot_ms`` = 1000 (tau - t0)): the
 virtual sensor's clock runs at the log's pace whatever the rate. The default epoch is
 A + rate (w0 - A) - t0 with A the start of the hour
-(:func:`~undertow.io.links.common.replay_anchor`), so that s = A + rate (w - A): the clock of
-:class:`~undertow.io.links.common.ScaledClock` ``(rate)`` that ``undertow live --time-scale
+(:func:`~undertow._util.clocks.replay_anchor`), so that s = A + rate (w - A): the clock of
+:class:`~undertow._util.clocks.ScaledClock` ``(rate)`` that ``undertow live --time-scale
 rate`` stamps arrivals with (in another process), and Unix time when ``rate`` is 1 (a sensor
 synchronized by NTP).
 
@@ -37,9 +37,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ..._util.clocks import replay_anchor
 from ...errors import ConfigError
 from ...log import Log
-from ..links.common import replay_anchor
 
 #: the sensor clocks a clock jump may name, and the streams whose served times they shift
 CLOCK_TARGETS: dict[str, tuple[str, ...]] = {
