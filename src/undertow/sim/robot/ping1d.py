@@ -29,7 +29,7 @@ import time
 
 import numpy as np
 
-from ...io.ping import distance_fields
+from ...io.ping import distance_fields, load_brping
 from ...log import Log
 from .player import Faults, Manifest, PlayClock, Served, flip_one_byte
 
@@ -68,12 +68,6 @@ DEVICE_FIELDS = {
 }
 
 
-def _brping():
-    from brping import definitions, pingmessage
-
-    return definitions, pingmessage
-
-
 def corrupt_frame(frame: bytes, rng: np.random.Generator) -> bytes:
     """``frame`` with one payload or checksum byte changed: the checksum no longer matches
     (a one-byte change alters the byte sum by 1..255, never 0 mod 2^16), the length is kept."""
@@ -94,7 +88,7 @@ class Ping1DServer:
         host: str = "127.0.0.1",
         port: int = DEFAULT_PORT,
     ) -> None:
-        self.defs, self.pm = _brping()
+        _, self.defs, self.pm = load_brping()
         self.log, self.manifest = log, manifest
         self.clock: PlayClock | None = None  # set by the player
         self.faults, self.rng = faults, rng
