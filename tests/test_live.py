@@ -21,11 +21,11 @@ import time
 import numpy as np
 import pytest
 
+from undertow.commands.serve import serve
 from undertow.estimation import Localizer
 from undertow.io import read_log
 from undertow.io.servers import Faults
 from undertow.jobs.live.pipeline import LiveSession
-from undertow.jobs.serve import serve
 from undertow.mapping.run import map_log
 from undertow.occupancy import OccupancyMap
 from undertow.settings import LiveSettings, Settings

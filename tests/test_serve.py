@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from conftest import REAL_DATA, one_error_line
 
+from undertow.commands.serve import serve
 from undertow.errors import ConfigError
 from undertow.io import read_log
 from undertow.io.links import (
@@ -29,7 +30,6 @@ from undertow.io.links.ping1d import Ping1DLink
 from undertow.io.mavlink import MavlinkConfig
 from undertow.io.servers import Faults
 from undertow.io.servers.a50 import DEFAULT_CONFIG
-from undertow.jobs.serve import serve
 from undertow.log import G0
 from undertow.rotations import rpy_to_quaternion
 

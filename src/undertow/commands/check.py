@@ -8,7 +8,7 @@ a bag it scores every topic by message type and name (:mod:`undertow.io.topic_gu
 proposes a topic map. ``write_config`` writes the proposed settings file, so that
 ``undertow localize LOG --config FILE`` runs on what was found::
 
-    from undertow.jobs.check import check_file
+    from undertow.commands.check import check_file
 
     result = check_file("SO_bag", write_config="robot.yaml")
     print(result.ready, result.reason, [p.fix for p in result.problems])
@@ -34,8 +34,7 @@ from ..io.rosbag import bag_topics
 from ..io.topic_guess import propose_topics
 from ..log import Log
 from ..settings import Settings
-from .common import load_log
-from .localize import collect_warnings
+from .common import collect_warnings, load_log
 
 PITCH_OFFSET_RAD = math.radians(3.0)
 #: a gap is an interval longer than this many median intervals (and than GAP_MIN_S)

@@ -1,14 +1,23 @@
-"""What every job shares: reading a log with the user's topic names and mounting."""
+"""What every command shares: reading a log with the user's topic names and mounting, finding
+the ``.npz`` a command reads in a file or folder, and gathering the warnings a command returns.
+
+Kept light (no mapping or estimation import): every command imports it, and the CLI imports a
+command only when it runs."""
 
 from __future__ import annotations
 
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
+from ..errors import ReaderError
 from ..io import read_log
 from ..io.clock import check_policy
 from ..io.read_options import LogOptions
 from ..io.topics import TopicMap
 from ..log import Log
+from ..occupancy import not_an_npz
 from ..settings import Settings
 
 
@@ -24,3 +33,26 @@ def load_log(path: str | Path, topics: str | Path | None = None,
         options = options.model_copy(update={"time": check_policy(time)})
     log = read_log(path, topics=topic_map, options=options)
     return settings.apply_mounting(log) if settings else log
+
+
+@contextmanager
+def collect_warnings(into: list[str]) -> Iterator[None]:
+    """Append the text of every warning raised inside to ``into`` instead of showing it (each
+    distinct warning once per call, as a fresh process would show it)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.filterwarnings("default", category=UserWarning)
+        try:
+            yield
+        finally:
+            into.extend(str(w.message) for w in caught)
+
+
+def npz_file(path: str | Path, name: str, expected: str, prefix: str = "") -> Path:
+    """``path``, or ``path/name`` for a folder; a wrong kind of file (a .tum, .ply, .yaml) is
+    one line saying what it looks like and what was ``expected``."""
+    path = Path(path)
+    path = path / name if path.is_dir() else path
+    problem = not_an_npz(path, expected)
+    if problem:
+        raise ReaderError(prefix + problem)
+    return path

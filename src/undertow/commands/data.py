@@ -4,7 +4,7 @@
 :func:`simulate_to_folder` runs a scenario and writes the run folder. Both return a result
 object instead of printing, so a Python user gets what the command prints::
 
-    from undertow.jobs.data import info_file, simulate_to_folder
+    from undertow.commands.data import info_file, simulate_to_folder
 
     run = simulate_to_folder("calm", "runs/calm", seed=0)
     print(info_file(run.out_dir / "log").to_dict())

@@ -2,7 +2,7 @@
 functions: file paths and settings in, a result object with the warnings and facts the command
 prints out::
 
-    from undertow.jobs.localize import evaluate_trajectory_file, localize_file
+    from undertow.commands.localization import evaluate_trajectory_file, localize_file
 
     result = localize_file("runs/a10/log", variant="proposed", calibration="calm_cal.yaml",
                            out_dir="runs/a10/proposed")
@@ -14,8 +14,6 @@ prints out::
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,21 +38,7 @@ from ..io.results import save_trajectory
 from ..io.tum import read_tum
 from ..settings import Settings
 from ..trajectory import Trajectory
-from .common import load_log
-
-
-@contextmanager
-def collect_warnings(into: list[str]) -> Iterator[None]:
-    """Append the text of every warning raised inside to ``into`` instead of showing it (each
-    distinct warning once per call, as a fresh process would show it)."""
-    # the same as jobs.map.collect_warnings (not imported from there: importing the mapping job
-    # costs a third of a second); both belong in jobs.common
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.filterwarnings("default", category=UserWarning)
-        try:
-            yield
-        finally:
-            into.extend(str(w.message) for w in caught)
+from .common import collect_warnings, load_log
 
 
 @dataclass(frozen=True, eq=False)

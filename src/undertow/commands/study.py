@@ -21,8 +21,7 @@ from ..estimation.characterize import Characterization, characterize
 from ..settings import Settings
 from ..study.pipeline import StudySettings
 from ..study.runner import StudyResult, run_study
-from .common import load_log
-from .map import collect_warnings
+from .common import collect_warnings, load_log
 
 
 @dataclass
