@@ -35,6 +35,11 @@ def load_log(path: str | Path, topics: str | Path | None = None,
     return settings.apply_mounting(log) if settings else log
 
 
+def as_settings(settings: Settings | str | Path | None) -> Settings:
+    """``settings`` as is, or the settings file at that path (None: the defaults)."""
+    return settings if isinstance(settings, Settings) else Settings.from_yaml(settings)
+
+
 @contextmanager
 def collect_warnings(into: list[str]) -> Iterator[None]:
     """Append the text of every warning raised inside to ``into`` instead of showing it (each

@@ -17,6 +17,7 @@ from pathlib import Path
 from ..errors import UndertowError
 from ..jobs.live.pipeline import check_live_settings
 from ..settings import Settings
+from .common import as_settings
 
 
 def live_settings(settings: Settings | str | Path | None = None, *, variant: str | None = None,
@@ -26,8 +27,7 @@ def live_settings(settings: Settings | str | Path | None = None, *, variant: str
     None: not given) on top of its ``live`` section and ``variant`` on its localizer's. A value
     out of range is one line naming the field; no sensor link given is an error
     (:func:`~undertow.jobs.live.pipeline.check_live_settings`)."""
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings)
+    settings = as_settings(settings)
     data = settings.model_dump(exclude_unset=True)
     data["live"] = {**data.get("live", {}), **{k: v for k, v in live.items() if v is not None}}
     if variant is not None:

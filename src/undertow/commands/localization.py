@@ -38,7 +38,7 @@ from ..io.results import save_trajectory
 from ..io.tum import read_tum
 from ..settings import Settings
 from ..trajectory import Trajectory
-from .common import collect_warnings, load_log
+from .common import as_settings, collect_warnings, load_log
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,8 +86,7 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     The options are checked before the log is read; with ``out_dir`` the folder is checked too
     and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``)."""
     settings_path = None if isinstance(settings, Settings) else settings
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings_path)
+    settings = as_settings(settings)
     params = {**settings.localizer_params(), **overrides}
     check_options(smooth, params)
     if out_dir is not None:
@@ -156,8 +155,7 @@ def calibrate_file(log_path: str | Path, ground_truth: str | Path | None = None,
     against its ground truth: the TUM file ``ground_truth`` when given, else the log's
     ground_truth stream (:func:`~undertow.estimation.calibration.calibrate`). With ``out``, the
     calibration YAML is written there (for ``localize_file(calibration=...)``)."""
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings)
+    settings = as_settings(settings)
     if out is not None:
         check_output_file(out)
     caught: list[str] = []

@@ -28,7 +28,7 @@ from ..mapping.tiled import check_tiling, map_tiled
 from ..occupancy import MAP_FILE, OccupancyMap
 from ..settings import Settings
 from ..trajectory import Trajectory
-from .common import collect_warnings, load_log, npz_file
+from .common import as_settings, collect_warnings, load_log, npz_file
 
 #: options that only one mapping method uses: giving one for another method is an error
 METHOD_OPTIONS = {"length_scale": "bki", "variance_bounds": "adaptive"}
@@ -65,8 +65,7 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     tiles also written to ``out_dir/tiles``; a tile that fails twice is left out with a
     warning naming it."""
     settings_path = None if isinstance(settings, Settings) else settings
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings_path)
+    settings = as_settings(settings)
     config = mapping_config(settings, overrides)  # the options first, then the files
     check_tiling(tiles, scheduler, prior, config)
     if out_dir is not None:

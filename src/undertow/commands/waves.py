@@ -22,7 +22,7 @@ from ..estimation.characterize import estimate_waves
 from ..log import Log
 from ..settings import Settings
 from ..wavetrack import WaveTrack
-from .common import collect_warnings, load_log
+from .common import as_settings, collect_warnings, load_log
 
 PLATFORMS = ("auto", "rigid", "free")
 
@@ -59,8 +59,7 @@ def waves_file(path: str | Path, settings: Settings | str | Path | None = None, 
         if Path(plot).suffix.lower() != ".png":
             raise ConfigError(f"--plot {plot}: the figure is a PNG file (name it *.png)")
         check_output_file(plot)
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings)
+    settings = as_settings(settings)
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(path, topics, settings)
