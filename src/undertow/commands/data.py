@@ -1,4 +1,4 @@
-"""Jobs on logs and the simulator: what ``undertow info`` and ``undertow simulate`` do.
+"""`undertow info` and `undertow simulate` as library functions: what those commands do.
 
 :func:`info_file` reads a log (ROS 1/2 bag or A50 JSON) and summarizes its streams;
 :func:`simulate_to_folder` runs a scenario and writes the run folder. Both return a result
