@@ -207,7 +207,7 @@ def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | Non
 
 def main(rate: float = RATE, scenario: str = SCENARIO, commit_every_s: float | None = None) -> dict:
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one core (before numba is imported)
-    from undertow.jobs.serve import load_source
+    from undertow.commands.serve import load_source
 
     t0, t1 = load_source(scenario).time_span  # what serve plays (simulated the same way)
     served = t1 - t0

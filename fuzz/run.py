@@ -6,7 +6,7 @@ ArduSub dataflash log ``ardusub_small.BIN``): byte flips, truncations, block ove
 field-level JSON mutations (huge integers, infinities, NaN, wrong types, absurd nesting),
 YAML mutations of the files beside a ROS 2 bag (``undertow.yaml``, ``metadata.yaml``) and
 bag-byte mutations; plus a named pipe and an empty file. Every input runs in a forked child
-through :func:`undertow.jobs.data.info_file` with a per-input timeout, and a sample also runs as
+through :func:`undertow.commands.data.info_file` with a per-input timeout, and a sample also runs as
 the ``undertow info`` command in a subprocess. The outcome of each input is one of:
 
 - ``ok``: read without a warning; ``ok-with-warnings``: read, with reader warnings (bad data
@@ -41,8 +41,8 @@ from pathlib import Path
 
 import yaml
 
+from undertow.commands.data import info_file  # imported once, before the children are forked
 from undertow.errors import UndertowError
-from undertow.jobs.data import info_file  # imported once, before the children are forked
 
 HERE = Path(__file__).resolve().parent
 CORPUS = HERE / "corpus"

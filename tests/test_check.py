@@ -14,9 +14,9 @@ from conftest import REAL_DATA, one_error_line
 from typer.testing import CliRunner
 
 from undertow.cli import app
+from undertow.commands.check import check_file, depth_agreement
+from undertow.commands.common import load_log
 from undertow.io.topic_guess import propose_topics
-from undertow.jobs.check import check_file, depth_agreement
-from undertow.jobs.common import load_log
 from undertow.settings import Settings
 from undertow.trajectory import Trajectory
 

@@ -101,13 +101,13 @@ def test_info_warns_about_a_topic_of_the_users_file_that_the_bag_lacks(tmp_path)
 
 
 @pytest.mark.slow
-def test_the_python_jobs_give_what_the_commands_print(tmp_path, simulated_run):
+def test_the_library_functions_give_what_the_commands_print(tmp_path, simulated_run):
     """`undertow simulate calm --seed 0` writes the same files as the library (the session's
     shared run is written by it), and `undertow info --json` prints `info_file(...).to_dict()`,
     warnings included (a topic of the user's map that the bag lacks)."""
     import json
 
-    from undertow.jobs.data import RUN_FILES, info_file, simulate_to_folder
+    from undertow.commands.data import RUN_FILES, info_file, simulate_to_folder
 
     cli = tmp_path / "cli"
     result = runner.invoke(app, ["simulate", "calm", "--seed", "0", "--out", str(cli)])
@@ -145,7 +145,7 @@ def test_info_settings_file_topics_and_the_table(tmp_path):
     from conftest import REAL_DATA
 
     from undertow.cli.data import summary_table
-    from undertow.jobs.data import info_file
+    from undertow.commands.data import info_file
     from undertow.settings import Settings
 
     settings = tmp_path / "settings.yaml"

@@ -241,7 +241,11 @@ def test_conflicting_wave_options_and_smooth_with_output_rate_are_refused_up_fro
 def test_a_python_user_gets_what_the_commands_print(run, tmp_path):
     """calibrate_file, localize_file and evaluate_trajectory_file (what the commands call)
     from Python: the same calibration, trajectory, wave condition and warnings as the CLI."""
-    from undertow.jobs.localize import calibrate_file, evaluate_trajectory_file, localize_file
+    from undertow.commands.localization import (
+        calibrate_file,
+        evaluate_trajectory_file,
+        localize_file,
+    )
 
     topics = tmp_path / "topics.yaml"
     topics.write_text("imu: [/nothing]\n")  # calibrate warns: no gyro bias; localize warns too

@@ -253,7 +253,7 @@ def test_both_range_streams_disabled_says_so(run, tmp_path):
 def test_a_python_user_gets_the_map_and_warnings_of_the_cli(run, tmp_path):
     """`map_file` / `evaluate_map_file` (what the commands call) from Python: the same map,
     result facts and warnings as `undertow map`, the same numbers as `undertow evaluate map`."""
-    from undertow.jobs.map import evaluate_map_file, map_file
+    from undertow.commands.mapping import evaluate_map_file, map_file
     from undertow.occupancy import OccupancyMap
 
     r = _map(run, tmp_path / "cli", "--trajectory", str(run / "third"), "--method", "bki")

@@ -134,7 +134,7 @@ def test_characterize_from_python_gives_what_the_command_prints(runs, tmp_path):
     """`characterize_files` is the command without the printing: the same rows and profile,
     the same warnings (the command prints each as one `warning:` line), the same file."""
     from undertow._util.plain import json_safe
-    from undertow.jobs.study import characterize_files
+    from undertow.commands.study import characterize_files
 
     logs = [str(runs / n / "log") for n in ("calm", "wave-a0.10-f0.75")]
     topics = str(runs / "no_gt.yaml")
@@ -153,8 +153,8 @@ def test_characterize_from_python_gives_what_the_command_prints(runs, tmp_path):
 
 
 def test_reproduce_from_python_checks_its_arguments_as_the_command_does(tmp_path):
+    from undertow.commands import study
     from undertow.errors import UndertowError
-    from undertow.jobs import study
 
     with pytest.raises(UndertowError, match="--seeds must be at least 1"):
         study.reproduce(tmp_path / "r", seeds=0)

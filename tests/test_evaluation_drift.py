@@ -211,8 +211,8 @@ def test_evaluate_against_the_dvl_dead_reckoning(localized):
     drift computed here from the files (the estimate's and the DR's displacement from the first
     common time)."""
     from undertow.cli import app
+    from undertow.commands.localization import evaluate_trajectory_file
     from undertow.io import read_log
-    from undertow.jobs.localize import evaluate_trajectory_file
 
     log, est = localized
     r = runner.invoke(app, ["evaluate", "trajectory", str(est), str(log), "--reference", "dvl-dr"])

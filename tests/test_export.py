@@ -12,8 +12,8 @@ import pytest
 from conftest import one_error_line
 from typer.testing import CliRunner
 
+from undertow.commands.export import export_map
 from undertow.errors import ConfigError, DataError
-from undertow.jobs.export import export_map
 from undertow.mapping.surface import map_surface
 from undertow.occupancy import OccupancyMap
 

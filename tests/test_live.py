@@ -21,9 +21,9 @@ import time
 import numpy as np
 import pytest
 
+from undertow.commands.serve import serve
 from undertow.estimation import Localizer
 from undertow.io import read_log
-from undertow.jobs.serve import serve
 from undertow.live.pipeline import LiveSession
 from undertow.mapping.run import map_log
 from undertow.occupancy import OccupancyMap

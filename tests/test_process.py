@@ -35,11 +35,11 @@ def _raise_bug(*args, **kwargs):
 
 
 def test_a_bug_is_one_line_naming_a_crash_report_and_exit_70(tmp_path, monkeypatch):
-    import undertow.jobs.data
+    import undertow.commands.data
 
     monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
     monkeypatch.delenv("UNDERTOW_DEBUG", raising=False)
-    monkeypatch.setattr(undertow.jobs.data, "info_file", _raise_bug)
+    monkeypatch.setattr(undertow.commands.data, "info_file", _raise_bug)
     result = runner.invoke(app, ["info", "some.bag"])
     assert result.exit_code == 70  # EX_SOFTWARE, distinct from user (1) and usage (2) errors
     line = _one_error_line(result)
@@ -55,13 +55,13 @@ def test_a_bug_is_one_line_naming_a_crash_report_and_exit_70(tmp_path, monkeypat
 def test_the_crash_report_falls_back_to_the_temporary_folder(tmp_path, monkeypatch):
     import tempfile
 
-    import undertow.jobs.data
+    import undertow.commands.data
 
     blocker = tmp_path / "not-a-folder"
     blocker.write_text("x")  # XDG_STATE_HOME under a file: cannot be created
     monkeypatch.setenv("XDG_STATE_HOME", str(blocker / "state"))
     monkeypatch.setattr(tempfile, "gettempdir", lambda: str(tmp_path))
-    monkeypatch.setattr(undertow.jobs.data, "info_file", _raise_bug)
+    monkeypatch.setattr(undertow.commands.data, "info_file", _raise_bug)
     result = runner.invoke(app, ["info", "some.bag"])
     assert result.exit_code == 70
     assert len(list(tmp_path.glob("undertow-crash-*.txt"))) == 1
@@ -70,7 +70,7 @@ def test_the_crash_report_falls_back_to_the_temporary_folder(tmp_path, monkeypat
 def test_user_and_usage_errors_keep_their_exit_codes(tmp_path, monkeypatch):
     import typer
 
-    import undertow.jobs.data
+    import undertow.commands.data
 
     assert runner.invoke(app, ["info", str(tmp_path / "missing.bag")]).exit_code == 1
     assert runner.invoke(app, ["info", "--no-such-option", "x"]).exit_code == 2
@@ -78,7 +78,7 @@ def test_user_and_usage_errors_keep_their_exit_codes(tmp_path, monkeypatch):
     def leave(*args, **kwargs):
         raise typer.Exit(5)  # typer's own exits are not bugs
 
-    monkeypatch.setattr(undertow.jobs.data, "info_file", leave)
+    monkeypatch.setattr(undertow.commands.data, "info_file", leave)
     assert runner.invoke(app, ["info", "x.bag"]).exit_code == 5
 
 

@@ -15,10 +15,10 @@ import pytest
 from conftest import REAL_DATA, one_error_line
 
 from undertow._util.clocks import ScaledClock
+from undertow.commands.serve import serve
 from undertow.errors import ConfigError
 from undertow.io import read_log
 from undertow.io.mavlink import MavlinkConfig
-from undertow.jobs.serve import serve
 from undertow.live.links import A50TcpLink, Backoff, ClockPolicy, LinkCounters
 from undertow.live.links.mavlink_udp import MavlinkLink
 from undertow.live.links.ping1d import Ping1DLink

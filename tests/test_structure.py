@@ -38,14 +38,14 @@ STAGE_OF = {
     "report": "report",
     "study": "study",
     "live": "live",
-    "jobs": "jobs",
+    "commands": "commands",
     "cli": "cli",
 }
 RANK = {
     stage: rank
     for rank, stage in enumerate(
         ("core", "io", "sim", "estimation", "mapping", "settings", "evaluation", "report",
-         "study", "live", "jobs", "cli")
+         "study", "live", "commands", "cli")
     )
 }  # fmt: skip
 
@@ -215,8 +215,8 @@ def test_test_only_packages_are_not_imported_by_the_package():
 @pytest.mark.parametrize(
     ("source", "module", "expected"),
     [
-        ("from ..io import read_log", "undertow/jobs/common.py", {"undertow.io"}),
-        ("from .. import settings", "undertow/jobs/common.py", {"undertow.settings"}),
+        ("from ..io import read_log", "undertow/commands/common.py", {"undertow.io"}),
+        ("from .. import settings", "undertow/commands/common.py", {"undertow.settings"}),
         ("from . import data", "undertow/cli/__init__.py", {"undertow.cli.data"}),
         ("from .tum import write_tum", "undertow/io/results.py", {"undertow.io.tum"}),
         ("import undertow.sim.waves as w", "undertow/log.py", {"undertow.sim.waves"}),

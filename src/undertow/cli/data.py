@@ -1,9 +1,8 @@
-"""Commands on logs and the simulator: info, simulate (parse, call :mod:`undertow.jobs.data`,
-print)."""
+"""Commands on logs and the simulator: info, simulate (parse, call
+:mod:`undertow.commands.data`, print)."""
 
 from __future__ import annotations
 
-import functools
 import warnings
 from pathlib import Path
 from typing import Annotated
@@ -41,7 +40,7 @@ def info(
 
     Example: `undertow info runs/calm/log --json`
     """
-    from ..jobs.data import info_file
+    from ..commands.data import info_file
     from ..settings import Settings
 
     settings = settings_with_time(config, time)
@@ -106,7 +105,7 @@ def simulate(
 
     Re-run it exactly: `undertow simulate runs/a10f075/scenario.yaml --out runs/again`
     """
-    from ..jobs.data import RUN_FILES, builtin_scenarios, simulate_to_folder
+    from ..commands.data import RUN_FILES, builtin_scenarios, simulate_to_folder
 
     if list_:
         for name, description in builtin_scenarios():
@@ -126,67 +125,3 @@ def simulate(
         )
     if not quiet:
         err.print(f"wrote {out_dir}/{', '.join(RUN_FILES)}", soft_wrap=True, highlight=False)
-
-
-@app.command()
-@user_errors
-def check(
-    path: Annotated[
-        Path, typer.Argument(help="ROS 1 bag, ROS 2 bag directory, A50 JSON, .tlog or .BIN log.")
-    ],
-    write_config: Annotated[
-        Path | None,
-        typer.Option("--write-config", help="Write the proposed settings file here."),
-    ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON instead of tables.")] = False,
-    topics: TopicsOption = None,
-    config: ConfigOption = None,
-    time: TimeOption = None,
-) -> None:
-    """Is this log ready to localize and map, and what should I set? Per stream: topic, type,
-    rate, time base, gaps, units evidence, invalid share and its use; what is missing; the
-    settings lines that fix each problem. Exit 0 when the log can be localized, else 1.
-
-    Example: `undertow check SO_bag --write-config robot.yaml` then
-    `undertow localize SO_bag --config robot.yaml --out run1`
-    """
-    from ..jobs.check import check_file
-
-    result = check_file(path, config, topics=topics, time=time, write_config=write_config)
-    _print_warnings(result.warnings)
-    if as_json:
-        _print_json(result.to_dict())
-    else:
-        _print_check(result)
-    if not result.ready:
-        err.print(f"[bold red]not ready:[/] {result.reason}", highlight=False, soft_wrap=True)
-        raise typer.Exit(1)
-
-
-def _print_check(result) -> None:
-    """One block per stream (topic and type, rate, span, gaps, invalid share; its use and the
-    evidence behind its units), then what is missing and each problem with its fix."""
-    out = functools.partial(console.print, highlight=False, soft_wrap=True)
-    tb = result.time_base
-    out(f"[bold]{result.path}[/] ({result.format})")
-    if tb:
-        what = {"header": "header stamps ", "record": "record (receive) time "}
-        out(f"time base: {what.get(tb.get('base'), '')}({tb.get('reason')})")
-    for s in result.streams:
-        where = f"{s.topic} ({s.msgtype})" if s.topic else ""
-        gaps = f"{s.gaps} gaps (longest {s.max_gap_s:.2f} s)" if s.gaps else "no gaps"
-        out(f"[bold]{s.stream}[/] {where}: {s.messages} messages, {s.rate_hz:.2f} Hz over "
-            f"{s.span_s:.1f} s, {gaps}, {100 * s.invalid_share:.1f} % invalid")  # fmt: skip
-        out(f"    use: {s.use}")
-        if s.evidence:
-            out(f"    {s.evidence}")
-    for line in result.missing:
-        out(f"[yellow]missing:[/] {line}")
-    for p in result.problems:
-        out(f"[yellow]problem:[/] {p.what}")
-        if p.fix:
-            out("    fix:  " + p.fix.replace("\n", "\n          "))
-    if result.written:
-        out(f"wrote {result.written}")
-    if result.ready:
-        out(f"[green]{result.reason}[/]")

@@ -55,7 +55,7 @@ def export_command(
     Example: `undertow export runs/a10/map --out bathy.tif --resolution 0.5 --origin
     59.9081,10.7528`
     """
-    from ..jobs.export import export_map
+    from ..commands.export import export_map
 
     result = export_map(map_path, out, format_, resolution=resolution, origin=origin, utm=utm,
                         threshold=threshold)  # fmt: skip

@@ -8,7 +8,6 @@ from typing import Annotated
 
 import typer
 
-from ..errors import UndertowError
 from ._app import ConfigOption, OverwriteOption, app, err, user_errors
 
 
@@ -61,20 +60,14 @@ def live_command(
     Example: `undertow live --dvl tcp://192.168.194.95 --sonar udp://192.168.2.2:9090
     --mavlink udpin:0.0.0.0:14550 --wave auto --out dive1`
     """
-    from ..live.pipeline import LiveSession, check_live_settings
-    from ..settings import Settings
+    from ..commands.live import live_settings
+    from ..live.pipeline import LiveSession
 
-    settings = Settings.from_yaml(config)
-    given = {"dvl": dvl, "sonar": sonar, "mavlink": mavlink, "wave": wave,
-             "time_scale": time_scale, "view_port": view_port, "duration_s": duration,
-             "idle_stop_s": idle_stop, "reorder_s": reorder}  # fmt: skip
-    live = {k: v for k, v in given.items() if v is not None}
-    if view:
-        live["view"] = True
-    if no_map:
-        live["map"] = False
-    settings = _with_live(settings, live, variant)
-    check_live_settings(settings)
+    settings = live_settings(
+        config, variant=variant, dvl=dvl, sonar=sonar, mavlink=mavlink, wave=wave,
+        time_scale=time_scale, view_port=view_port, duration_s=duration, idle_stop_s=idle_stop,
+        reorder_s=reorder, view=True if view else None, map=False if no_map else None,
+    )  # fmt: skip
     live_view = _open_view(settings) if settings.live.view else None
     session = LiveSession(settings, out_dir, calibration=calibration, overwrite=overwrite,
                           view=live_view)  # fmt: skip
@@ -83,20 +76,6 @@ def live_command(
     if not quiet:
         session.on_notice = lambda line: err.print(f"\n[yellow]note:[/] {line}", highlight=False)
     _run(session, quiet)
-
-
-def _with_live(settings, live: dict, variant: str | None):
-    from ..settings import Settings
-
-    data = settings.model_dump(exclude_unset=True)
-    data["live"] = {**data.get("live", {}), **live}
-    if variant is not None:
-        data["localizer"] = {**data.get("localizer", {}), "variant": variant}
-    try:
-        return Settings.model_validate(data)
-    except ValueError as exc:  # pydantic: one line naming the field
-        first = str(exc).splitlines()
-        raise UndertowError(f"live options: {' '.join(first[1:3]).strip()}") from None
 
 
 def _open_view(settings):

@@ -91,7 +91,7 @@ def localize(
     Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
     --calibration calm_cal.yaml --out runs/a10/proposed`
     """
-    from ..jobs.localize import gate_option, localize_file
+    from ..commands.localization import gate_option, localize_file
 
     condition = _wave_option(wave, wave_amplitude, wave_frequency)
     options = {
@@ -180,7 +180,7 @@ def calibrate(
 
     Example: `undertow calibrate runs/calm/log runs/calm/ground_truth.tum --out calm_cal.yaml`
     """
-    from ..jobs.localize import calibrate_file
+    from ..commands.localization import calibrate_file
 
     with _progress(quiet) as progress:
         progress.add_task("calibrating", total=None)
@@ -237,8 +237,8 @@ def evaluate_trajectory(
     Examples: `undertow evaluate trajectory runs/a10/proposed runs/a10/ground_truth.tum --json`;
     `undertow evaluate trajectory out/ mylog.mcap --reference dvl-dr`
     """
+    from ..commands.localization import evaluate_trajectory_file
     from ..errors import DataError
-    from ..jobs.localize import evaluate_trajectory_file
 
     evaluation = evaluate_trajectory_file(
         estimate, reference_path, align, reference=reference, settings=config, topics=topics,

@@ -78,7 +78,7 @@ def map_command(
     Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --method adaptive
     --out runs/a10/map`
     """
-    from ..jobs.map import map_file
+    from ..commands.mapping import map_file
 
     options = {"method": method, "resolution": resolution, "length_scale": length_scale,
                "variance_bounds": _variance_bounds(variance_bounds)}  # fmt: skip
@@ -141,7 +141,7 @@ def evaluate_map_command(
 
     Example: `undertow evaluate map runs/a10/map runs/a10/ground_truth.ply --json`
     """
-    from ..jobs.map import evaluate_map_file
+    from ..commands.mapping import evaluate_map_file
 
     result = evaluate_map_file(map_path, ground_truth, threshold)
     _print_warnings(result.warnings)

@@ -1,4 +1,5 @@
-"""The virtual robot command: serve (parse, call :func:`undertow.jobs.serve.serve`, print)."""
+"""The virtual robot command: serve (parse, call :func:`undertow.commands.serve.serve`,
+print)."""
 
 from __future__ import annotations
 
@@ -138,7 +139,7 @@ def serve_command(
 
     Example: `undertow serve calm --rate 10 --drop-dvl 5:2 --corrupt 0.01`
     """
-    from ..jobs.serve import serve
+    from ..commands.serve import serve
     from ..sim.robot import Faults
 
     faults = Faults.from_options(drop_dvl or (), corrupt, duplicate, reorder, clock_jump or ())

@@ -42,7 +42,7 @@ def characterize_command(
 
     Example: `undertow characterize runs/calm/log runs/a10/log runs/a05/log --out profile.yaml`
     """
-    from ..jobs.study import characterize_files
+    from ..commands.study import characterize_files
 
     with _progress(quiet) as progress:
         progress.add_task("characterizing", total=None)
@@ -108,7 +108,7 @@ def reproduce(
 
     Example: `undertow reproduce --seeds 10 --out results_mc`
     """
-    from ..jobs import study
+    from ..commands import study
 
     _run_study(study.reproduce, out_dir, quiet, seeds=seeds, first_seed=first_seed,
                scheduler=scheduler, rock_survey=rock_survey,
@@ -121,7 +121,7 @@ def demo(
     out_dir: Annotated[Path, typer.Option("--out", help="Results folder.")] = Path("results"),
 ) -> None:
     """The main job with its defaults: `undertow reproduce --seeds 1 --out results`."""
-    from ..jobs import study
+    from ..commands import study
 
     _run_study(study.demo, out_dir, quiet=False)
 

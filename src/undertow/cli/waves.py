@@ -52,7 +52,7 @@ def waves(
 
     Example: `undertow waves runs/a10/log --plot waves.png`
     """
-    from ..jobs.waves import waves_file
+    from ..commands.waves import waves_file
 
     result = waves_file(
         log_path, config, topics=topics, platform=platform, window_periods=window_periods,

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import ConfigError, DataError
 from ..io.units import reading_record
 from ..log import Log
 from ..occupancy import OccupancyMap
@@ -21,7 +21,7 @@ from .samples import samples_from_config
 class MappingResult:
     """The map, and what went into it (sample counts, dropped ranges, mapper settings);
     ``warnings``: what reading and mapping warned of (filled by
-    :func:`undertow.jobs.map.map_file`)."""
+    :func:`undertow.commands.mapping.map_file`)."""
 
     map: OccupancyMap
     config: MappingConfig
@@ -71,6 +71,29 @@ def map_metadata(mapper: dict, samples, occupancy: OccupancyMap, config: Mapping
         "source": log.source,
         "log": reading_record(log.metadata),
     }
+
+
+def tiled_map_metadata(tiled, samples, log: Log, trajectory: Trajectory,
+                       config: MappingConfig) -> dict:  # fmt: skip
+    """What a tiled map (a :class:`~undertow.mapping.tiled.TiledMap` of ``samples``) records:
+    the mapper's settings, the tiling (without its per-tile facts), then the rest of
+    :func:`map_metadata`."""
+    meta = map_metadata({k: v for k, v in tiled.metadata.items() if k != "tiling"}, samples,
+                        tiled.map, config, trajectory, log)  # fmt: skip
+    tiling = {k: v for k, v in tiled.metadata["tiling"].items() if k != "per_tile"}
+    return {"mapper": meta.pop("mapper"), "tiling": tiling, **meta}
+
+
+def check_prior(prior, config: MappingConfig) -> None:
+    """Read a prior map given as a file and check it fits ``config`` before the log is read (the
+    mapper reads it again and records where it came from)."""
+    if prior is None:
+        return
+    prior_map = prior if isinstance(prior, OccupancyMap) else OccupancyMap.load(prior)
+    if not np.isclose(prior_map.resolution, config.resolution):
+        raise ConfigError(
+            f"prior map resolution {prior_map.resolution} m differs from {config.resolution} m"
+        )
 
 
 # no underwater vehicle this package maps with moves faster than this (m/s)

@@ -408,6 +408,21 @@ def map_tiled(samples: Samples, config: MappingConfig, tile_size: float, *,
     return TiledMap(merged, failed, meta)
 
 
+def check_tiling(tile_size: float | None, scheduler: str | None, prior,
+                 config: MappingConfig) -> None:  # fmt: skip
+    """The options of a tiled map (``tile_size`` m, or None for an untiled one; the
+    ``scheduler``; a ``prior`` map, which tiling cannot take), checked one line each before any
+    file is read; a scheduler address is reached once."""
+    if tile_size is None:
+        if scheduler is not None:
+            raise ConfigError("--scheduler applies to tiled mapping: give --tiles SIZE_M too")
+        return
+    Tiling.for_config(config, tile_size)
+    if prior is not None:
+        raise ConfigError("--prior cannot be combined with --tiles (map the prior's area untiled)")
+    check_scheduler(scheduler, reach=True)
+
+
 def tiled_metadata(config, tiling: Tiling, bounds, run: TileRun, collector: TileCollector,
                    n_samples: int, n_tiles: int) -> dict:  # fmt: skip
     """What the merged map records: the mapper's settings, the tiling and how it ran."""

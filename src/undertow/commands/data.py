@@ -1,10 +1,10 @@
-"""Jobs on logs and the simulator: what ``undertow info`` and ``undertow simulate`` do.
+"""`undertow info` and `undertow simulate` as library functions: what those commands do.
 
 :func:`info_file` reads a log (ROS 1/2 bag or A50 JSON) and summarizes its streams;
 :func:`simulate_to_folder` runs a scenario and writes the run folder. Both return a result
 object instead of printing, so a Python user gets what the command prints::
 
-    from undertow.jobs.data import info_file, simulate_to_folder
+    from undertow.commands.data import info_file, simulate_to_folder
 
     run = simulate_to_folder("calm", "runs/calm", seed=0)
     print(info_file(run.out_dir / "log").to_dict())

@@ -25,7 +25,7 @@ from ..io.export.raster import resample_surface
 from ..io.ply import write_map_ply
 from ..mapping.surface import map_surface
 from ..occupancy import MAP_FILE, OccupancyMap
-from .map import _npz_file
+from .common import npz_file
 
 #: format -> the file suffixes it is written as
 FORMATS = {"geotiff": (".tif", ".tiff"), "octomap": (".bt", ".ot"), "las": (".las",),
@@ -126,7 +126,7 @@ def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
     if georef is not None and frame != "enu":
         raise ConfigError("a georeferenced export is east-north-up; frame must be enu")
     check_output_file(out)
-    source = _npz_file(map_path, "map.npz", MAP_FILE)
+    source = npz_file(map_path, "map.npz", MAP_FILE)
     if out.resolve() == source.resolve():
         raise ConfigError(f"--out {out} is the input map; write elsewhere")
     occupancy = OccupancyMap.load(source)

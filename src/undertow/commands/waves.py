@@ -2,7 +2,7 @@
 own sensors (:func:`undertow.estimation.waves.estimate_sea_state`), with the truth the log
 carries when it has one (a simulated run's scenario, a wave probe) for comparison::
 
-    from undertow.jobs.waves import waves_file
+    from undertow.commands.waves import waves_file
 
     result = waves_file("runs/a10/log", plot="waves.png")
     for row in result.estimate.to_table_rows():
@@ -22,8 +22,7 @@ from ..estimation.characterize import estimate_waves
 from ..log import Log
 from ..settings import Settings
 from ..wavetrack import WaveTrack
-from .common import load_log
-from .localize import collect_warnings
+from .common import as_settings, collect_warnings, load_log
 
 PLATFORMS = ("auto", "rigid", "free")
 
@@ -60,8 +59,7 @@ def waves_file(path: str | Path, settings: Settings | str | Path | None = None, 
         if Path(plot).suffix.lower() != ".png":
             raise ConfigError(f"--plot {plot}: the figure is a PNG file (name it *.png)")
         check_output_file(plot)
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings)
+    settings = as_settings(settings)
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(path, topics, settings)

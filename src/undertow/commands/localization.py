@@ -2,7 +2,7 @@
 functions: file paths and settings in, a result object with the warnings and facts the command
 prints out::
 
-    from undertow.jobs.localize import evaluate_trajectory_file, localize_file
+    from undertow.commands.localization import evaluate_trajectory_file, localize_file
 
     result = localize_file("runs/a10/log", variant="proposed", calibration="calm_cal.yaml",
                            out_dir="runs/a10/proposed")
@@ -14,8 +14,6 @@ prints out::
 from __future__ import annotations
 
 import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,21 +38,7 @@ from ..io.results import save_trajectory
 from ..io.tum import read_tum
 from ..settings import Settings
 from ..trajectory import Trajectory
-from .common import load_log
-
-
-@contextmanager
-def collect_warnings(into: list[str]) -> Iterator[None]:
-    """Append the text of every warning raised inside to ``into`` instead of showing it (each
-    distinct warning once per call, as a fresh process would show it)."""
-    # the same as jobs.map.collect_warnings (not imported from there: importing the mapping job
-    # costs a third of a second); both belong in jobs.common
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.filterwarnings("default", category=UserWarning)
-        try:
-            yield
-        finally:
-            into.extend(str(w.message) for w in caught)
+from .common import as_settings, collect_warnings, load_log
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,8 +86,7 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     The options are checked before the log is read; with ``out_dir`` the folder is checked too
     and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``)."""
     settings_path = None if isinstance(settings, Settings) else settings
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings_path)
+    settings = as_settings(settings)
     params = {**settings.localizer_params(), **overrides}
     check_options(smooth, params)
     if out_dir is not None:
@@ -172,8 +155,7 @@ def calibrate_file(log_path: str | Path, ground_truth: str | Path | None = None,
     against its ground truth: the TUM file ``ground_truth`` when given, else the log's
     ground_truth stream (:func:`~undertow.estimation.calibration.calibrate`). With ``out``, the
     calibration YAML is written there (for ``localize_file(calibration=...)``)."""
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings)
+    settings = as_settings(settings)
     if out is not None:
         check_output_file(out)
     caught: list[str] = []

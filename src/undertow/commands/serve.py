@@ -8,7 +8,7 @@ autopilot (MAVLink to ``mavlink``), with optional :class:`~undertow.sim.robot.pl
 Sensor clocks and timing: :mod:`undertow.sim.robot.player`. Everything binds 127.0.0.1 unless
 another ``host`` is given. Every message served is in :attr:`ServeSession.manifest`::
 
-    from undertow.jobs.serve import serve
+    from undertow.commands.serve import serve
 
     with serve("calm", rate=10, dvl_port=0, ping_port=0) as session:   # 0: free ports
         print(session.endpoints.live_options())

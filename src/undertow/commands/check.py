@@ -8,7 +8,7 @@ a bag it scores every topic by message type and name (:mod:`undertow.io.topic_gu
 proposes a topic map. ``write_config`` writes the proposed settings file, so that
 ``undertow localize LOG --config FILE`` runs on what was found::
 
-    from undertow.jobs.check import check_file
+    from undertow.commands.check import check_file
 
     result = check_file("SO_bag", write_config="robot.yaml")
     print(result.ready, result.reason, [p.fix for p in result.problems])
@@ -34,8 +34,7 @@ from ..io.rosbag import bag_topics
 from ..io.topic_guess import propose_topics
 from ..log import Log
 from ..settings import Settings
-from .common import load_log
-from .localize import collect_warnings
+from .common import as_settings, collect_warnings, load_log
 
 PITCH_OFFSET_RAD = math.radians(3.0)
 #: a gap is an interval longer than this many median intervals (and than GAP_MIN_S)
@@ -296,8 +295,7 @@ def check_file(path: str | Path, settings: Settings | str | Path | None = None, 
                write_config: str | Path | None = None) -> CheckResult:  # fmt: skip
     """Check the log at ``path`` (see the module docstring); with ``write_config``, write the
     proposed settings file there (a new file, written whole or not at all)."""
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings)
+    settings = as_settings(settings)
     if write_config is not None:
         check_output_file(write_config)
     fmt = detect_format(path)

@@ -21,8 +21,7 @@ from ..estimation.characterize import Characterization, characterize
 from ..settings import Settings
 from ..study.pipeline import StudySettings
 from ..study.runner import StudyResult, run_study
-from .common import load_log
-from .map import collect_warnings
+from .common import as_settings, collect_warnings, load_log
 
 
 @dataclass
@@ -60,8 +59,7 @@ def characterize_files(
     ``settings``: a :class:`~undertow.settings.Settings`, a settings YAML path or None
     (defaults); ``topics``: a topic map YAML overriding the settings' topics. With ``out``, the
     noise profile is written there (YAML for `undertow localize --profile`)."""
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings)
+    settings = as_settings(settings)
     if out is not None:
         check_output_file(out)
     caught: list[str] = []

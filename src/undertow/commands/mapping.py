@@ -9,56 +9,30 @@ a result object with the warnings and facts the command prints out.
 from __future__ import annotations
 
 import dataclasses
-import warnings
-from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import yaml
 
 from .._util.atomic import check_output_folder, output_folder
 from .._util.plain import to_plain
-from ..errors import ConfigError, DataError, ReaderError
+from ..errors import ConfigError, DataError
 from ..evaluation.cloud import MapEvaluation, evaluate_map, map_threshold
 from ..io.ply import read_ply, write_map_ply
 from ..io.results import save_map
 from ..mapping.config import MappingConfig
-from ..mapping.run import MappingResult, map_log, map_metadata
+from ..mapping.run import MappingResult, check_prior, map_log, tiled_map_metadata
 from ..mapping.samples import samples_from_config
-from ..mapping.tiled import Tiling, map_tiled
-from ..occupancy import MAP_FILE, OccupancyMap, not_an_npz
+from ..mapping.tiled import check_tiling, map_tiled
+from ..occupancy import MAP_FILE, OccupancyMap
 from ..settings import Settings
 from ..trajectory import Trajectory
-from .common import load_log
+from .common import as_settings, collect_warnings, load_log, npz_file
 
 #: options that only one mapping method uses: giving one for another method is an error
 METHOD_OPTIONS = {"length_scale": "bki", "variance_bounds": "adaptive"}
 _TRAJECTORY_NPZ = "a trajectory.npz written by `undertow localize` (or its folder)"
-
-
-@contextmanager
-def collect_warnings(into: list[str]) -> Iterator[None]:
-    """Append the text of every warning raised inside to ``into`` instead of showing it (each
-    distinct warning once per call, as a fresh process would show it)."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.filterwarnings("default", category=UserWarning)
-        try:
-            yield
-        finally:
-            into.extend(str(w.message) for w in caught)
-
-
-def _npz_file(path: str | Path, name: str, expected: str, prefix: str = "") -> Path:
-    """``path``, or ``path/name`` for a folder; a wrong kind of file (a .tum, .ply, .yaml) is
-    one line saying what it looks like and what was ``expected``."""
-    path = Path(path)
-    path = path / name if path.is_dir() else path
-    problem = not_an_npz(path, expected)
-    if problem:
-        raise ReaderError(prefix + problem)
-    return path
 
 
 def mapping_config(settings: Settings, overrides: dict) -> MappingConfig:
@@ -91,18 +65,17 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     tiles also written to ``out_dir/tiles``; a tile that fails twice is left out with a
     warning naming it."""
     settings_path = None if isinstance(settings, Settings) else settings
-    if not isinstance(settings, Settings):
-        settings = Settings.from_yaml(settings_path)
+    settings = as_settings(settings)
     config = mapping_config(settings, overrides)  # the options first, then the files
-    _check_tiles(tiles, scheduler, prior, config)
+    check_tiling(tiles, scheduler, prior, config)
     if out_dir is not None:
         given_prior = None if isinstance(prior, OccupancyMap) else prior
         inputs = [log_path, trajectory_path, given_prior, settings_path, topics]
         check_output_folder(out_dir, overwrite, inputs=inputs)
-    trajectory_file = _npz_file(trajectory_path, "trajectory.npz", _TRAJECTORY_NPZ)
+    trajectory_file = npz_file(trajectory_path, "trajectory.npz", _TRAJECTORY_NPZ)
     if prior is not None and not isinstance(prior, OccupancyMap):
-        prior = _npz_file(prior, "map.npz", MAP_FILE, "prior ")
-    _check_prior(prior, config)
+        prior = npz_file(prior, "map.npz", MAP_FILE, "prior ")
+    check_prior(prior, config)
     trajectory = Trajectory.load_npz(trajectory_file)  # read before the (longer) log
     caught: list[str] = []
     with collect_warnings(caught):
@@ -118,51 +91,25 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     return result
 
 
-def _check_tiles(tiles, scheduler, prior, config: MappingConfig) -> None:
-    """The tiling options, checked (one line each) before any file is read."""
-    if tiles is None:
-        if scheduler is not None:
-            raise ConfigError("--scheduler applies to tiled mapping: give --tiles SIZE_M too")
-        return
-    from .._util.dask import check_scheduler
-
-    Tiling.for_config(config, tiles)
-    if prior is not None:
-        raise ConfigError("--prior cannot be combined with --tiles (map the prior's area untiled)")
-    check_scheduler(scheduler, reach=True)
-
-
 def _map_tiled_file(log, trajectory, config: MappingConfig, tiles: float, scheduler,
                     out_dir, overwrite: bool, caught: list[str]) -> MappingResult:  # fmt: skip
     """:func:`map_file` with ``tiles``: samples, tiles on Dask, merged map; with ``out_dir``
     the tiles are written to ``out_dir/tiles`` as they finish, then the merged map."""
     with collect_warnings(caught):
         samples = samples_from_config(log, trajectory, config)
-        if out_dir is None:
-            tiled = map_tiled(samples, config, tiles, scheduler=scheduler)
-        else:
-            with output_folder(out_dir, overwrite) as out:
-                tiled = map_tiled(samples, config, tiles, scheduler=scheduler,
-                                  tile_dir=out / "tiles")  # fmt: skip
-                _write_map(
-                    out, tiled.map, config, _tiled_metadata(tiled, samples, log, trajectory, config)
-                )
+        with output_folder(out_dir, overwrite) if out_dir is not None else nullcontext() as out:
+            tile_dir = None if out is None else out / "tiles"
+            tiled = map_tiled(samples, config, tiles, scheduler=scheduler, tile_dir=tile_dir)
+            metadata = tiled_map_metadata(tiled, samples, log, trajectory, config)
+            if out is not None:
+                _write_map(out, tiled.map, config, metadata)
     occupancy = dataclasses.replace(
         tiled.map,
         metadata={**tiled.map.metadata, "occupied_threshold": config.occupied_threshold},
     )
-    result = MappingResult(
-        occupancy, config, _tiled_metadata(tiled, samples, log, trajectory, config)
-    )
+    result = MappingResult(occupancy, config, metadata)
     result.warnings = caught
     return result
-
-
-def _tiled_metadata(tiled, samples, log, trajectory, config) -> dict:
-    meta = map_metadata({k: v for k, v in tiled.metadata.items() if k != "tiling"}, samples,
-                        tiled.map, config, trajectory, log)  # fmt: skip
-    tiling = {k: v for k, v in tiled.metadata["tiling"].items() if k != "per_tile"}
-    return {"mapper": meta.pop("mapper"), "tiling": tiling, **meta}
 
 
 def _write_map(out: Path, occupancy: OccupancyMap, config: MappingConfig, metadata: dict) -> None:
@@ -171,18 +118,6 @@ def _write_map(out: Path, occupancy: OccupancyMap, config: MappingConfig, metada
     write_map_ply(out / "map.ply", occupancy, threshold=config.occupied_threshold)
     doc = {"mapping": config.model_dump(mode="json"), "result": to_plain(metadata)}
     (out / "config.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
-
-
-def _check_prior(prior, config: MappingConfig) -> None:
-    """Read a prior map given as a file and check it fits ``config`` before the log is read (the
-    mapper reads it again and records where it came from)."""
-    if prior is None:
-        return
-    prior_map = prior if isinstance(prior, OccupancyMap) else OccupancyMap.load(prior)
-    if not np.isclose(prior_map.resolution, config.resolution):
-        raise ConfigError(
-            f"prior map resolution {prior_map.resolution} m differs from {config.resolution} m"
-        )
 
 
 @dataclass(frozen=True)
