@@ -11,7 +11,7 @@ from undertow.estimation import Localizer, localize
 from undertow.estimation.config import VARIANTS, LocalizerConfig
 from undertow.estimation.model import N_STATE, STATE_ANGLES, Z_LINEAR, _adapt_r
 from undertow.estimation.ukf import _update_linear
-from undertow.log import Mounting
+from undertow.robot import Mounting
 
 
 def test_the_variant_is_listed_and_defined():

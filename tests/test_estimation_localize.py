@@ -7,7 +7,8 @@ import pytest
 
 from undertow.errors import ConfigError, MissingStreamError
 from undertow.estimation import Localizer
-from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
+from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
+from undertow.robot import Mounting
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
 RHO = 997.0

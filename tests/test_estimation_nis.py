@@ -8,7 +8,8 @@ import pytest
 from scipy.stats import chi2
 
 from undertow.estimation import Localizer, LocalizerConfig, model
-from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
+from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
+from undertow.robot import Mounting
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
 RHO = 997.0

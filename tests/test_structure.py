@@ -24,6 +24,7 @@ STAGE_OF = {
     "errors": "core",
     "rotations": "core",
     "log": "core",
+    "robot": "core",
     "trajectory": "core",
     "occupancy": "core",
     "wavetrack": "core",

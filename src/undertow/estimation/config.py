@@ -13,7 +13,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PlainValidator, field_validator
 from pydantic_core import PydanticCustomError
 
-from ..log import Mounting
+from ..robot import Mounting
 from . import model
 from .ukf import _weights
 

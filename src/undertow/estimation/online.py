@@ -43,7 +43,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import ConfigError
-from ..log import STREAM_NAMES, Log, Mounting
+from ..log import STREAM_NAMES, Log
+from ..robot import Mounting
 from ..trajectory import Trajectory
 from . import model
 from .health import HALF_WINDOW, check_mounting, depth_jumps, per_sensor

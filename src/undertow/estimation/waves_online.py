@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from ..errors import DataError
 from ..io.links.common import Record, records_to_log
-from ..log import Mounting
+from ..robot import Mounting
 from .waves import WaveWindow, estimate_sea_state
 
 #: the streams the estimator reads

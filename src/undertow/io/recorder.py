@@ -89,7 +89,8 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 from .._util.plain import json_safe, to_plain
 from ..errors import ConfigError, DataError
-from ..log import Mounting, SonarRange
+from ..log import SonarRange
+from ..robot import Mounting
 from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
 from .a50_json import MAX_REPORT_INTERVAL_MS, report_line, report_values
 from .links.common import RECORD_FIELDS, Record

@@ -11,7 +11,7 @@ to its sensor frames, body forward-right-down; see :mod:`undertow.io.topics`), e
 defaults; ``metadata['mounting_source']`` says which. A user-given topic that is not in the bag
 gives one warning line. A directory without ``metadata.yaml`` holding a single ``.mcap``/``.db3``
 is read as that file. DVL messages without beam vectors (the A50 driver's) get the A50 geometry,
-or the one recorded in the sidecar's ``metadata.dvl_geometry`` (``log.DvlGeometry.to_dict``:
+or the one recorded in the sidecar's ``metadata.dvl_geometry`` (``robot.DvlGeometry.to_dict``:
 a Nortek or Teledyne head, say). The multibeam (``sensor_msgs/PointCloud2`` detections) takes
 its range limits from the sidecar's ``multibeam`` entry when there is one. rosbags errors
 become one-line :class:`~undertow.errors.ReaderError`.
@@ -35,7 +35,8 @@ import yaml
 from rosbags.highlevel import AnyReader
 
 from ..errors import ReaderError, UndertowError
-from ..log import Dvl, DvlGeometry, Log, Mounting
+from ..log import Dvl, Log
+from ..robot import DvlGeometry, Mounting
 from ..rotations import quaternion_to_rpy
 from ._collect import MALFORMED, DvlRows, Notes, check_regular
 from .a50_json import _covariance, add_velocity_report, dead_reckoning_from_rows

@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ReaderError
-from ..log import Log, Mounting
+from ..log import Log
+from ..robot import Mounting
 from ._collect import MALFORMED, Notes, read_regular_bytes
 from .links.common import records_to_log
 from .mavlink import MavlinkConfig, MavlinkMapper

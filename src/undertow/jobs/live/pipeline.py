@@ -57,10 +57,10 @@ from ...estimation.waves_online import OnlineSeaState
 from ...io.links.common import Record, ScaledClock, records_to_log
 from ...io.recorder import Recorder
 from ...io.results import save_map, save_trajectory
-from ...log import Mounting
 from ...mapping.grid import load_kernels as load_grid_kernels
 from ...mapping.online import OnlineMapper
 from ...mapping.samples import rays_from_pose
+from ...robot import Mounting
 from ...settings import LIVE_VARIANCE_BOUNDS, Settings
 from .links import expected_streams, open_links
 from .preview import PreviewCheckpoints
