@@ -6,7 +6,7 @@ Variants (the paper's ablation, tab:ablation): ``baseline`` (no bias states, no 
 bias estimation the six bias states are held at 0 with a tiny variance and no correlation.
 ``adaptive-r``, a peer baseline outside the paper: bias estimation as ``be``, no wave noise, and
 the DVL and DR noise R adapted from the residuals after each update (Akhlaghi, Zhou and Huang
-2017; :func:`~undertow.estimation.model._adapt_r`):
+2017; :func:`~undertow.estimation.model.adapt_r`):
 
     R_k = alpha R_{k-1} + (1 - alpha) (eps_k eps_k^T + H P_k^+ H^T),   eps_k = z_k - h(x_k^+)
 
@@ -70,7 +70,7 @@ from ..log import Log
 from ..rotations import matrix_to_rpy, quaternion_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
 from ..wavetrack import WaveTrack
-from . import model
+from . import filter_loop, model
 from .calibration import Calibration
 from .config import LocalizerConfig
 from .consistency import innovation_consistency
@@ -139,12 +139,12 @@ class Localizer:
         x0, P0 = _initial_state(log, cfg)
         r_adapted = np.zeros((len(model.KIND_NAMES), 3, 3))
         whitened = np.full((meas.size, 3), np.nan)  # each row's innovation, for the report
-        out_t, out_x, out_P, counts, nis = model._run_filter(
+        out_t, out_x, out_P, counts, nis = filter_loop.run_filter(
             meas, float(meas["t"][0]), x0, P0, cfg.process_model(held=held),
             cfg.sensor_model(log.mounting), _output_times(meas["t"], cfg.output_rate_hz),
             r_adapted, whitened,
         )  # fmt: skip
-        counts = {**rejected, **dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))}
+        counts = {**rejected, **dict(zip(filter_loop.COUNT_NAMES, counts.tolist(), strict=True))}
         _warn_if_frozen(counts, int(meas.size))
         rows = np.bincount(meas["kind"], minlength=len(model.KIND_NAMES))
         sensors = per_sensor(counts, dict(zip(model.KIND_NAMES, rows.tolist(), strict=True)))
@@ -417,7 +417,7 @@ def _nis_summary(stats: np.ndarray) -> dict:
 
 
 def _measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise):
-    """The merged, time-sorted :data:`~undertow.estimation.model.MEASUREMENT` array (at equal
+    """The merged, time-sorted :data:`~undertow.estimation.filter_loop.MEASUREMENT` array (at equal
     times IMU, DVL, DR, baro) and the rows rejected up front, by stream."""
     parts, rejected = [], {}
     for stream in (_imu_rows, _dvl_rows, _dr_rows, _pressure_rows):
@@ -430,12 +430,12 @@ def _measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise)
 
 
 def merged_rows(parts, floor2: float) -> tuple[np.ndarray, np.ndarray]:
-    """One :data:`~undertow.estimation.model.MEASUREMENT` array of the streams' rows ``parts``
+    """One :data:`~undertow.estimation.filter_loop.MEASUREMENT` array of the streams' rows ``parts``
     [(t (n,), kind, z (n, d), R (n, d, d))]: z and R zero-padded to three dimensions, the
     diagonal of R floored at ``floor2``, merged by time, then kind. Also the merge order (the
     index into the parts' rows concatenated), to carry values kept beside the rows."""
     n = sum(part[0].size for part in parts)
-    rows = np.zeros(n, model.MEASUREMENT)
+    rows = np.zeros(n, filter_loop.MEASUREMENT)
     rt, rk, rz, rR = rows["t"], rows["kind"], rows["z"], rows["R"]
     a = 0
     for t, kind, z, R in parts:

@@ -3,7 +3,7 @@ records released since the last one, in time order) and the filter advances with
 
 :class:`OnlineLocalizer` builds the same rows as :class:`~undertow.estimation.Localizer` (same
 envelopes, noise, floors, the same merged order: time, then IMU, DVL, DR, barometer) and runs
-the same numba loop (:func:`~undertow.estimation.model.resume_filter`) from the state the last
+the same numba loop (:func:`~undertow.estimation.filter_loop.resume_filter`) from the state the last
 chunk left. For a fixed wave condition, a log pushed in any pieces gives bit for bit the t, x,
 P and counts of ``Localizer(...).run(log)``. Two things the offline run decides with the whole
 log in hand are made exact by rewinding to a saved filter state (a checkpoint):
@@ -46,7 +46,7 @@ from ..errors import ConfigError
 from ..log import STREAM_NAMES, Log
 from ..robot import Mounting
 from ..trajectory import Trajectory
-from . import model
+from . import filter_loop, model
 from .health import HALF_WINDOW, check_mounting, depth_jumps, per_sensor
 from .localizer import (
     WAVE_AUTO,
@@ -169,7 +169,7 @@ class OnlineLocalizer:
     def at_preview(self) -> bool:
         """Whether the committed state is one a peek reached (the last push ended by taking
         that peek's states): the peeks continued from it since continue the committed filter."""
-        return self._run is not None and isinstance(self._run.key, model.FilterState)
+        return self._run is not None and isinstance(self._run.key, filter_loop.FilterState)
 
     @property
     def preview_state(self):
@@ -413,7 +413,7 @@ class _Preview(NamedTuple):
     t: np.ndarray
     x: np.ndarray
     P: np.ndarray
-    end: model.FilterState
+    end: filter_loop.FilterState
 
 
 class _Run:
@@ -430,17 +430,17 @@ class _Run:
 
     def __init__(self, cfg, noise, x0, P0, process, sensors) -> None:
         self.cfg, self.noise, self.process, self.sensors = cfg, noise, process, sensors
-        self.state = model.start_state(np.nan, x0, P0, process, np.zeros((4, 3, 3)))
+        self.state = filter_loop.start_state(np.nan, x0, P0, process, np.zeros((4, 3, 3)))
         self.out = _Outputs()
         self.depth = _DepthRate(cfg)
         self.rejected: dict[str, int] = {}
         self.candidates = np.zeros(len(model.KIND_NAMES), np.int64)
         self.late = 0
         self.t_seen = -np.inf  # latest record time fed
-        self.tail = np.zeros(0, model.MEASUREMENT)  # candidate rows from position pos0 on
+        self.tail = np.zeros(0, filter_loop.MEASUREMENT)  # candidate rows from position pos0 on
         self.tail_p = np.zeros(0, np.int64)  # their depth index (-1: not a pressure row)
         self.pos0 = 0
-        self.checkpoints: dict[int, tuple[model.FilterState, int]] = {}
+        self.checkpoints: dict[int, tuple[filter_loop.FilterState, int]] = {}
         self.group = None  # position of the first row at the latest time
         # the committed state's key: a new object whenever the state changes, except when a
         # push takes a preview (the key is then the state that preview reached)
@@ -540,7 +540,7 @@ class _Run:
             rows = rows[accepted]
         if np.isnan(state.clock[0]) and rows.size:
             state.clock[0] = rows["t"][0]
-        t, x, P = model.resume_filter(rows, state, self.process, self.sensors, True)
+        t, x, P = filter_loop.resume_filter(rows, state, self.process, self.sensors, True)
         if rows.size:  # for a push to take (_adopt)
             self.previews.pop(id(key), None)
             self.previews[id(key)] = _Preview(key, rows, t, x, P, state)
@@ -608,8 +608,9 @@ class _Run:
         if np.isnan(self.state.clock[0]):
             self.state.clock[0] = rows["t"][0]  # t0: the first measurement's time
         self.key = object()
-        out_t, out_x, out_P = model.resume_filter(rows, self.state, self.process, self.sensors,
-                                                  flush)  # fmt: skip
+        out_t, out_x, out_P = filter_loop.resume_filter(
+            rows, self.state, self.process, self.sensors, flush
+        )
         self.out.append(out_t, out_x, out_P)
 
     def _trim(self) -> None:
@@ -637,7 +638,7 @@ class _Run:
         rejected = dict(self.rejected)
         if "rejected_pressure" in rejected:
             rejected["rejected_pressure_rate"] = self.depth.rejected()
-        filt = dict(zip(model.COUNT_NAMES, self.state.counts.tolist(), strict=True))
+        filt = dict(zip(filter_loop.COUNT_NAMES, self.state.counts.tolist(), strict=True))
         return {**rejected, **filt}
 
     def rows_per_kind(self) -> dict:
