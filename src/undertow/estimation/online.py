@@ -32,7 +32,7 @@ no later chunk can change (what the online mapper uses).
 The filter starts once the data released so far has DVL velocity and an orientation source
 (IMU gyro or DR attitude) and every stream in ``expected`` has a row, or ``start_timeout_s``
 of log time after the first record; it then filters everything released so far, from the
-initial state :func:`~undertow.estimation.localizer._initial_state` takes from that data.
+initial state :func:`~undertow.estimation.rows.initial_state` takes from that data.
 """
 
 from __future__ import annotations
@@ -52,16 +52,11 @@ from .localizer import (
     WAVE_AUTO,
     WAVE_GIVEN,
     Localizer,
-    _adapted_summary,
-    _dr_rows,
-    _dvl_rows,
-    _imu_rows,
-    _initial_state,
-    _nis_summary,
-    _pressure_rows,
-    merged_rows,
+    adapted_summary,
+    nis_summary,
     sensor_coverage,
 )
+from .rows import dr_rows, dvl_rows, imu_rows, initial_state, merged_rows, pressure_rows
 
 FILTER_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure")
 
@@ -235,7 +230,7 @@ class OnlineLocalizer:
             self._noise, self._wave_meta = self._offline._wave_noise(log)
         else:
             self._wave_meta = {"wave_condition_source": "set_wave"}
-        x0, P0 = _initial_state(log, cfg)
+        x0, P0 = initial_state(log, cfg)
         self._start_meta = {
             "unobserved": unobserved,
             "held_bias": held,
@@ -264,7 +259,7 @@ class OnlineLocalizer:
             "variant": cfg.variant,
             "counts": counts,
             "sensors": per_sensor(counts, rows),
-            "nis": _nis_summary(run.state.nis),
+            "nis": nis_summary(run.state.nis),
             **self._wave_meta,
             "wave_noise": noise.to_dict() if cfg.adds_wave_noise else None,
             "wave_condition": noise.condition,
@@ -277,7 +272,7 @@ class OnlineLocalizer:
         metadata.setdefault("wave_condition_source", WAVE_GIVEN)
         if cfg.adapts_r:
             kinds = np.array([rows[k] for k in model.KIND_NAMES])
-            metadata["adaptive_r"] = _adapted_summary(run.state.Ra, kinds, cfg.adaptive_r_alpha)
+            metadata["adaptive_r"] = adapted_summary(run.state.Ra, kinds, cfg.adaptive_r_alpha)
         return metadata
 
 
@@ -502,8 +497,8 @@ class _Run:
         new in-envelope depths); ``commit``: count them."""
         cfg, rejected = self.cfg, {}
         parts, depth_idx = [], []  # each stream's accepted rows; their depth index (-1: none)
-        for name, build in (("imu", _imu_rows), ("dvl", _dvl_rows),
-                            ("dead_reckoning", _dr_rows)):  # fmt: skip
+        for name, build in (("imu", imu_rows), ("dvl", dvl_rows),
+                            ("dead_reckoning", dr_rows)):  # fmt: skip
             stream = getattr(chunk, name)
             if stream is not None and len(stream):
                 t, kind, z, R, ok = build(chunk, cfg, self.noise, rejected, warn=False)
@@ -511,7 +506,7 @@ class _Run:
                 depth_idx.append(np.full(parts[-1][0].size, -1))
         depths = (np.zeros(0), np.zeros(0))
         if chunk.pressure is not None and len(chunk.pressure):
-            t, kind, z, R, ok = _pressure_rows(chunk, cfg, self.noise, rejected, warn=False,
+            t, kind, z, R, ok = pressure_rows(chunk, cfg, self.noise, rejected, warn=False,
                                                jumps=False)  # fmt: skip
             parts.append((t[ok], kind, z[ok], R[ok]))
             depth_idx.append(self.depth.count + np.arange(int(ok.sum())))
