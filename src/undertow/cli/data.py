@@ -15,12 +15,12 @@ from ._app import (
     ConfigOption,
     TimeOption,
     TopicsOption,
-    _print_json,
-    _print_warnings,
-    _progress,
     app,
     console,
     err,
+    print_json,
+    print_warnings,
+    progress_bar,
     settings_with_time,
     user_errors,
 )
@@ -54,9 +54,9 @@ def info(
         result = info_file(path, topics=topics, settings=settings)
     lines = list(result.warnings)
     lines += [str(w.message) for w in caught if str(w.message) not in lines]
-    _print_warnings(dict.fromkeys(lines))
+    print_warnings(dict.fromkeys(lines))
     if as_json:
-        _print_json(result.to_dict())
+        print_json(result.to_dict())
     else:
         console.print(summary_table(result.summary))
 
@@ -116,7 +116,7 @@ def simulate(
         raise UndertowError("simulate needs a SCENARIO and --out DIR (or --list)")
     if seed is not None and seed < 0:
         raise UndertowError(f"--seed {seed}: must be a non-negative integer")
-    with _progress(quiet) as progress:
+    with progress_bar(quiet) as progress:
         simulate_to_folder(
             scenario,
             out_dir,
@@ -153,9 +153,9 @@ def check(
     from ..jobs.check import check_file
 
     result = check_file(path, config, topics=topics, time=time, write_config=write_config)
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     if as_json:
-        _print_json(result.to_dict())
+        print_json(result.to_dict())
     else:
         _print_check(result)
     if not result.ready:

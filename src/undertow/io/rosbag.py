@@ -39,7 +39,7 @@ from ..log import Dvl, Log
 from ..robot import DvlGeometry, Mounting
 from ..rotations import quaternion_to_rpy
 from ._collect import MALFORMED, DvlRows, Notes, check_regular
-from .a50_json import _covariance, add_velocity_report, dead_reckoning_from_rows
+from .a50_json import add_velocity_report, dead_reckoning_from_rows, report_covariance
 from .msgdefs import dvl_typestore
 from .read_options import LogOptions
 from .rosbag_choices import apply_time_base, depth_sign, dvl_frame, resolve_topics
@@ -328,7 +328,7 @@ def _merge_json(dvl: Dvl, order: np.ndarray, rows: Rows, metadata: dict) -> Dvl:
         obj = by_key.get(key)
         if obj is None:
             continue
-        obj_cov = _covariance(obj)
+        obj_cov = report_covariance(obj)
         if obj_cov is not None and np.isnan(cov[i]).all():
             cov[i] = obj_cov
         if obj.get("time_of_validity") is not None:
