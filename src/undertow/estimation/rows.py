@@ -29,6 +29,9 @@ from .config import LocalizerConfig
 from .health import dvl_inside, imu_inside, pressure_inside
 from .noise import TrackNoise, WaveNoise
 
+#: the streams the filter reads, one row builder each
+FILTER_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure")
+
 
 def measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise):
     """The merged, time-sorted :data:`~undertow.estimation.filter_loop.MEASUREMENT` array (at equal

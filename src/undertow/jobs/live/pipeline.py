@@ -52,7 +52,8 @@ from ...errors import ConfigError
 from ...estimation.calibration import Calibration
 from ...estimation.config import LocalizerConfig
 from ...estimation.localizer import calibration_fields
-from ...estimation.online import FILTER_STREAMS, OnlineLocalizer, concat_logs
+from ...estimation.online import OnlineLocalizer, concat_logs
+from ...estimation.rows import FILTER_STREAMS
 from ...estimation.waves_online import OnlineSeaState
 from ...io.links.common import Record, ScaledClock, records_to_log
 from ...io.recorder import Recorder
