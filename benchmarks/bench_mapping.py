@@ -48,11 +48,12 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # OctoMap on one core, like our k
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
-from undertow.log import Dvl, Log, Mounting, SonarRange  # noqa: E402
+from undertow.log import Dvl, Log, SonarRange  # noqa: E402
 from undertow.mapping.config import MappingConfig  # noqa: E402
 from undertow.mapping.mappers import make_mapper  # noqa: E402
 from undertow.mapping.samples import Samples, build_samples  # noqa: E402
 from undertow.mapping.tiled import Tiling  # noqa: E402
+from undertow.robot import Mounting  # noqa: E402
 from undertow.rotations import rpy_to_matrix  # noqa: E402
 from undertow.trajectory import Trajectory  # noqa: E402
 

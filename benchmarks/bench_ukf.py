@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from undertow.estimation import Localizer, model
-from undertow.estimation.ukf import _weights
+from undertow.estimation import Localizer, filter_loop, model
+from undertow.estimation.ukf import weights
 from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
 from undertow.rotations import rpy_to_matrix
 from undertow.wavetrack import WaveTrack
@@ -63,17 +63,17 @@ def _per_step_us(n_steps: int = 20000, R_rows=None, adapt: bool = False) -> floa
     t = np.arange(1, n_steps + 1) * DT
     kind = np.full(n_steps, model.DVL)
     R = np.tile(R_DVL, (n_steps, 1, 1)) if R_rows is None else R_rows
-    meas = model.pack_measurements(t, kind, np.tile(Z_DVL, (n_steps, 1)), R)
-    wm, wc, lam = _weights(18, ALPHA, BETA, KAPPA)
+    meas = filter_loop.pack_measurements(t, kind, np.tile(Z_DVL, (n_steps, 1)), R)
+    wm, wc, lam = weights(18, ALPHA, BETA, KAPPA)
     process = model.ProcessModel(wm, wc, lam, Q_ACC, Q_BIAS, MU, 1.0, False)
     sensors = model.SensorModel(np.eye(3), np.ascontiguousarray(DVL_R.T), DVL_ARM, BARO_ARM,
                                 np.full(4, np.inf), adapt, 0.98)  # fmt: skip
     args = (meas, 0.0, X0, P0, process, sensors, None)
-    model._run_filter(*args)  # compile / load cache
+    filter_loop.run_filter(*args)  # compile / load cache
     best = np.inf
     for _ in range(5):
         t0 = time.perf_counter()
-        out_t, out_x, out_P, _, _ = model._run_filter(*args)
+        out_t, out_x, out_P, _, _ = filter_loop.run_filter(*args)
         best = min(best, time.perf_counter() - t0)
     assert out_t.size == n_steps and np.all(np.isfinite(out_P))
     return best / n_steps * 1e6

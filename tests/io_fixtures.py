@@ -6,19 +6,8 @@ import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from undertow.io.msgdefs import dvl_typestore
-from undertow.log import (
-    DeadReckoning,
-    Dvl,
-    GroundTruth,
-    Imu,
-    Log,
-    Mounting,
-    Pressure,
-    SensorMount,
-    SonarRange,
-    WaveProbe,
-    a50_beam_units,
-)
+from undertow.log import DeadReckoning, Dvl, GroundTruth, Imu, Log, Pressure, SonarRange, WaveProbe
+from undertow.robot import Mounting, SensorMount, a50_beam_units
 
 T0 = 1_700_000_000.0
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from undertow.estimation.characterize import characterize_run, estimate_waves, wave_noise
-from undertow.log import Dvl, GroundTruth, Log, Mounting, WaveProbe
+from undertow.log import Dvl, GroundTruth, Log, WaveProbe
+from undertow.robot import Mounting
 
 
 def test_sinusoid_amplitude_and_frequency():

@@ -51,7 +51,7 @@ def test_cli_reports_a_bad_settings_file_in_one_line(tmp_path):
 
 
 def test_mounting_override_keeps_fields_it_does_not_name(tmp_path):
-    from undertow.log import Mounting
+    from undertow.robot import Mounting
 
     m = Mounting().updated({"dvl": {"rotation": [0, 0, 0.1]}})
     assert m.dvl.rotation == (0.0, 0.0, 0.1)

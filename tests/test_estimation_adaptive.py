@@ -9,9 +9,9 @@ from test_estimation_localize import make_log
 
 from undertow.estimation import Localizer, localize
 from undertow.estimation.config import VARIANTS, LocalizerConfig
-from undertow.estimation.model import N_STATE, STATE_ANGLES, Z_LINEAR, _adapt_r
-from undertow.estimation.ukf import _update_linear
-from undertow.log import Mounting
+from undertow.estimation.model import N_STATE, STATE_ANGLES, Z_LINEAR, adapt_r
+from undertow.estimation.ukf import update_linear
+from undertow.robot import Mounting
 
 
 def test_the_variant_is_listed_and_defined():
@@ -24,7 +24,7 @@ def test_the_variant_is_listed_and_defined():
 
 
 def test_the_update_is_unbiased_when_r_is_right():
-    """E[eps eps^T + H P+ H^T] = R for eps = z - H x+ (closed form, model._adapt_r's doc): with
+    """E[eps eps^T + H P+ H^T] = R for eps = z - H x+ (closed form, model.adapt_r's doc): with
     alpha = 0 the adapted R is that sum, averaged here over innovations drawn from N(0, S)."""
     rng = np.random.default_rng(0)
     H = np.zeros((3, N_STATE))
@@ -39,10 +39,10 @@ def test_the_update_is_unbiased_when_r_is_right():
     for _ in range(n):
         x, P = np.zeros(N_STATE), P0.copy()
         z = Ls @ rng.normal(size=3)  # innovation nu = z - H x with x = 0
-        status, _ = _update_linear(x, P, H, z, R, STATE_ANGLES, Z_LINEAR, np.inf)
+        status, _ = update_linear(x, P, H, z, R, STATE_ANGLES, Z_LINEAR, np.inf)
         assert status == 0
         Ra = np.zeros((3, 3))
-        _adapt_r(Ra, 0.0, z, x, P, H, False)
+        adapt_r(Ra, 0.0, z, x, P, H, False)
         total += Ra
     np.testing.assert_allclose(total / n, R, atol=4 * np.sqrt(2.0 / n) * R.max())
 

@@ -5,7 +5,8 @@ import pytest
 
 from undertow.errors import DataError, MissingStreamError
 from undertow.estimation.calibration import Calibration, calibrate
-from undertow.log import DeadReckoning, Dvl, GroundTruth, Imu, Log, Mounting
+from undertow.log import DeadReckoning, Dvl, GroundTruth, Imu, Log
+from undertow.robot import Mounting
 from undertow.rotations import rpy_to_matrix
 
 

@@ -26,7 +26,7 @@ from undertow.estimation.consistency import (
     sensor_consistency,
 )
 from undertow.estimation.localizer import localize
-from undertow.estimation.ukf import _update_linear
+from undertow.estimation.ukf import update_linear
 
 runner = CliRunner()
 
@@ -105,7 +105,7 @@ def test_the_update_leaves_the_whitened_innovation():
     expected = np.linalg.solve(np.linalg.cholesky(S), z - H @ x)
     w = np.full(3, np.nan)
     no_angles = np.zeros(18, dtype=np.bool_)
-    status, nis = _update_linear(x.copy(), P.copy(), H, z, R, no_angles, no_angles[:3], np.inf, w)
+    status, nis = update_linear(x.copy(), P.copy(), H, z, R, no_angles, no_angles[:3], np.inf, w)
     assert status == 0
     np.testing.assert_allclose(w, expected, rtol=1e-10)
     assert nis == pytest.approx(float(w @ w), rel=1e-12)

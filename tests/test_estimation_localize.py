@@ -7,7 +7,8 @@ import pytest
 
 from undertow.errors import ConfigError, MissingStreamError
 from undertow.estimation import Localizer
-from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
+from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
+from undertow.robot import Mounting
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
 RHO = 997.0
@@ -289,8 +290,8 @@ def test_measurement_rows_noise_in_closed_form():
     wave noise gamma_DVL^2 (proposed); every row's diagonal at least std_floor^2 after the merge,
     the off-diagonal entries untouched."""
     from undertow.estimation.config import LocalizerConfig
-    from undertow.estimation.localizer import _dvl_rows, merged_rows
     from undertow.estimation.noise import WaveNoise
+    from undertow.estimation.rows import dvl_rows, merged_rows
 
     cfg = LocalizerConfig(variant="proposed", dvl_scale_factor=2.0, dvl_std_floor_m_s=0.01,
                           std_floor=0.05)  # fmt: skip
@@ -300,7 +301,7 @@ def test_measurement_rows_noise_in_closed_form():
     dvl = Dvl.from_velocity(t, np.zeros((3, 3)), covariance=cov)
     gamma = np.array([0.02, 0.03, 0.04])
     noise = WaveNoise("test", 0.1, 1.0, dvl_std=gamma, dr_std=np.zeros(3), how="node")
-    _, kind, z, R, ok = _dvl_rows(Log(dvl=dvl), cfg, noise, {}, warn=False)
+    _, kind, z, R, ok = dvl_rows(Log(dvl=dvl), cfg, noise, {}, warn=False)
     scaled = cov[0] / 4.0
     expect = 0.5 * (scaled + scaled.T)
     np.fill_diagonal(expect, np.maximum(np.diag(expect), 0.01**2) + gamma**2)

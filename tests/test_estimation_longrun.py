@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from undertow.estimation import Localizer
-from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
+from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
+from undertow.robot import Mounting
 from undertow.rotations import wrap_angle
 
 DURATION = 1500.0

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from undertow.estimation import Localizer, LocalizerConfig, model
-from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Mounting, Pressure
+from undertow.estimation import Localizer, LocalizerConfig, filter_loop, model
+from undertow.log import G0, P_ATM, DeadReckoning, Dvl, Imu, Log, Pressure
+from undertow.robot import Mounting
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
 RHO = 997.0
@@ -105,7 +106,7 @@ def test_nis_large_when_noise_is_underestimated():
 
 
 def test_chi2_bounds_and_no_nis_without_stream():
-    np.testing.assert_allclose(model.CHI2_95, chi2.ppf(0.95, model.KIND_DIM), rtol=1e-12)
+    np.testing.assert_allclose(filter_loop.CHI2_95, chi2.ppf(0.95, model.KIND_DIM), rtol=1e-12)
     cfg = LocalizerConfig(variant="be", **PARAMS)
     log, _, _ = simulate(cfg, duration=3.0)
     nis = Localizer(**cfg.model_dump()).run(log.replace(pressure=None)).metadata["nis"]

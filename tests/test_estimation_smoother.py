@@ -45,15 +45,15 @@ def test_linear_gaussian_equals_closed_form_rts():
         xs_ref.insert(0, xf[k] + G @ (xs_ref[0] - F @ xf[k]))
         Ps_ref.insert(0, Pf[k] + G @ (Ps_ref[0] - Pp) @ G.T)
     assert np.max(np.abs(np.array(xs_ref)[:, 1])) < 1.0  # the angle never wraps
-    wm, wc, lam = ukf._weights(n, 0.8, 2.0, 0.0)
+    wm, wc, lam = ukf.weights(n, 0.8, 2.0, 0.0)
     L, chi, D = np.zeros((n, n)), np.empty((2 * n + 1, n)), np.empty((n, 2 * n + 1))
     ws = _rts_workspace(n)
     xs, Ps = xf[-1].copy(), Pf[-1].copy()
     for k in range(N - 2, -1, -1):
         x, P = xf[k].copy(), Pf[k].copy()
-        ukf._sigma_points(x, P, lam, angles, L, chi)
+        ukf.sigma_points(x, P, lam, angles, L, chi)
         m, Pm = np.empty(n), np.empty((n, n))
-        ukf._predict_moments(np.ascontiguousarray(chi @ F.T), wm, wc, Q, angles, m, Pm, D)
+        ukf.predict_moments(np.ascontiguousarray(chi @ F.T), wm, wc, Q, angles, m, Pm, D)
         assert _rts_step(x, P, chi, D, m, Pm, xs, Ps, wc, angles, ws) == 0
         np.testing.assert_allclose(x, xs_ref[k], rtol=0, atol=1e-10)
         np.testing.assert_allclose(P, Ps_ref[k], rtol=0, atol=1e-12)

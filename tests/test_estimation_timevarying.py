@@ -16,9 +16,10 @@ import pytest
 from undertow.errors import ConfigError
 from undertow.estimation import localize
 from undertow.estimation.config import LocalizerConfig
-from undertow.estimation.localizer import WAVE_ESTIMATED, _measurements
+from undertow.estimation.localizer import WAVE_ESTIMATED
 from undertow.estimation.model import DR, DVL
 from undertow.estimation.noise import NoiseProfile
+from undertow.estimation.rows import measurements
 from undertow.wavetrack import WaveTrack
 
 TABLE_I_A10_F100 = np.array([0.025, 0.010, 0.003])  # the paper's Table I, wave-a0.10-f1.00
@@ -63,8 +64,8 @@ def test_each_rows_gamma_is_interpolated_in_time_and_held_outside(wave_log):
     track = WaveTrack(np.array([10.0, 30.0]), np.array([0.0, 0.1]), np.array([np.nan, 1.0]))
     noise = NoiseProfile.paper().noise_track(track)
     calm = NoiseProfile.paper().noise("calm")
-    with_waves, _ = _measurements(wave_log, cfg, noise)
-    without, _ = _measurements(wave_log, cfg, calm)
+    with_waves, _ = measurements(wave_log, cfg, noise)
+    without, _ = measurements(wave_log, cfg, calm)
     dvl = with_waves["kind"] == DVL
     t = with_waves["t"][dvl]
     extra = np.diagonal(with_waves["R"][dvl] - without["R"][dvl], axis1=1, axis2=2)

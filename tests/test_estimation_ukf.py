@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 from filterpy_reference import FilterPyModel
 
-from undertow.estimation import model, ukf
+from undertow.estimation import filter_loop, model, ukf
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
 NO_ANGLES = np.zeros(4, dtype=np.bool_)
 
 
 def test_weights_well_conditioned_for_18_states():
-    wm, wc, lam = ukf._weights(18, 1.0, 2.0, 0.0)
+    wm, wc, lam = ukf.weights(18, 1.0, 2.0, 0.0)
     assert lam == 0.0 and wm[0] == 0.0 and abs(wm.sum() - 1.0) < 1e-12 and np.all(wc >= 0)
 
 
@@ -25,7 +25,7 @@ def test_linear_gaussian_equals_kalman_filter():
     R = np.diag([0.1, 0.2, 0.05])
     x_kf, P_kf = np.array([1.0, -1, 0.5, 0.2]), np.diag([1.0, 2.0, 0.5, 0.5])
     x, P = x_kf.copy(), P_kf.copy()
-    wm, wc, lam = ukf._weights(4, 0.7, 2.0, 0.0)
+    wm, wc, lam = ukf.weights(4, 0.7, 2.0, 0.0)
     L, chi = np.zeros((4, 4)), np.empty((9, 4))
     D = np.empty((4, 9))
     for _ in range(20):
@@ -34,11 +34,11 @@ def test_linear_gaussian_equals_kalman_filter():
         S = H @ P_kf @ H.T + R
         K = P_kf @ H.T @ np.linalg.inv(S)
         x_kf, P_kf = x_kf + K @ (z - H @ x_kf), P_kf - K @ S @ K.T
-        ukf._sigma_points(x, P, lam, NO_ANGLES, L, chi)
-        ukf._predict_moments(np.ascontiguousarray(chi @ F.T), wm, wc, Q, NO_ANGLES, x, P, D)
-        ukf._sigma_points(x, P, lam, NO_ANGLES, L, chi)
+        ukf.sigma_points(x, P, lam, NO_ANGLES, L, chi)
+        ukf.predict_moments(np.ascontiguousarray(chi @ F.T), wm, wc, Q, NO_ANGLES, x, P, D)
+        ukf.sigma_points(x, P, lam, NO_ANGLES, L, chi)
         Zs = np.ascontiguousarray(chi @ H.T)
-        status, _ = ukf._update(x, P, chi, Zs, z, R, wm, wc, NO_ANGLES, NO_ANGLES[:3], np.inf)
+        status, _ = ukf.update(x, P, chi, Zs, z, R, wm, wc, NO_ANGLES, NO_ANGLES[:3], np.inf)
         assert status == 0
         np.testing.assert_allclose(x, x_kf, rtol=0, atol=1e-9)
         np.testing.assert_allclose(P, P_kf, rtol=0, atol=1e-9)
@@ -56,8 +56,8 @@ def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
     dvl_Rt = np.ascontiguousarray(rpy_to_matrix([0.0, 0.0, 0.05]).T)
     arm, baro = np.array([0.164, 0.004, 0.284]), np.zeros(3)
     sensors = model.SensorModel(imu_Rt, dvl_Rt, arm, baro, np.full(4, np.inf))
-    H = model._jacobians(sensors)
-    wm, wc, lam = ukf._weights(18, 1.0, 2.0, 0.0)
+    H = model.jacobians(sensors)
+    wm, wc, lam = ukf.weights(18, 1.0, 2.0, 0.0)
     R = np.diag([1e-3, 2e-3, 5e-4])
     for kind in (model.IMU, model.DVL, model.DR):
         angles = np.full(3, kind == model.DR)
@@ -66,14 +66,14 @@ def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
             z[2] = -np.pi + 0.02  # across +-pi from the state's yaw + bias
         x, P = x0.copy(), P0.copy()
         chi, L = np.empty((37, 18)), np.zeros((18, 18))
-        ukf._sigma_points(x, P, lam, model.STATE_ANGLES, L, chi)
+        ukf.sigma_points(x, P, lam, model.STATE_ANGLES, L, chi)
         Zs, col, Rw = np.empty((37, 3)), np.empty(3), np.empty((3, 3))
         for i in range(37):
-            model._h(kind, chi[i], sensors, col, Rw)
+            model.h(kind, chi[i], sensors, col, Rw)
             Zs[i] = col
-        ukf._update(x, P, chi, Zs, z, R, wm, wc, model.STATE_ANGLES, angles, np.inf)
+        ukf.update(x, P, chi, Zs, z, R, wm, wc, model.STATE_ANGLES, angles, np.inf)
         x_lin, P_lin = x0.copy(), P0.copy()
-        ukf._update_linear(x_lin, P_lin, H[kind], z, R, model.STATE_ANGLES, angles, np.inf)
+        ukf.update_linear(x_lin, P_lin, H[kind], z, R, model.STATE_ANGLES, angles, np.inf)
         np.testing.assert_allclose(wrap_angle(x_lin - x), 0.0, atol=1e-10)
         np.testing.assert_allclose(P_lin, P, atol=1e-12)
 
@@ -81,7 +81,7 @@ def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
 def test_cholesky_repair_makes_pd():
     P = np.diag([1.0, 1e-3, -1e-6])
     L = np.zeros((3, 3))
-    assert ukf._cholesky_repair(P, L) == 1
+    assert ukf.cholesky_repair(P, L) == 1
     np.testing.assert_allclose(L @ L.T, P, atol=1e-12)
     assert np.all(np.linalg.eigvalsh(P) > 0)
 
@@ -117,19 +117,21 @@ def test_full_model_agrees_with_filterpy():
         m = 1 if kinds[k] == 3 else 3
         z[k, :m] = ref.hx(x0, kinds[k]) + rng.normal(0, 0.02, m)
         Rm[k, :m, :m] = np.diag(rng.uniform(1e-4, 1e-3, m))
-    wm, wc, lam = ukf._weights(n, alpha, beta, kappa)
+    wm, wc, lam = ukf.weights(n, alpha, beta, kappa)
     process = model.ProcessModel(wm, wc, lam, Q_ACC, Q_B, MU, dt_max, False)
     sensors = model.SensorModel(np.ascontiguousarray(R_IMU.T), np.ascontiguousarray(R_DVL.T),
                                 R_DVL_ARM, BARO_ARM, np.full(4, np.inf))  # fmt: skip
-    meas = model.pack_measurements(t, kinds, z, Rm)
-    out_t, out_x, out_P, counts, _ = model._run_filter(meas, 0.0, x0, P0, process, sensors, None)
+    meas = filter_loop.pack_measurements(t, kinds, z, Rm)
+    out_t, out_x, out_P, counts, _ = filter_loop.run_filter(
+        meas, 0.0, x0, P0, process, sensors, None
+    )
     rows = []
     for k in range(N):
         x, P = ref.step(t[k], kinds[k], z[k], Rm[k])
         if k == N - 1 or t[k + 1] != t[k]:
             rows.append((t[k], x.copy(), P.copy()))
-    used = [model.USED + kind for kind in range(4)]
-    assert counts[used].sum() == N and counts[model.DT_CAPPED] == 1  # all used, one dt capped
+    used = [filter_loop.USED + kind for kind in range(4)]
+    assert counts[used].sum() == N and counts[filter_loop.DT_CAPPED] == 1  # all used, one dt capped
     np.testing.assert_allclose(out_t, [r[0] for r in rows])
     for (_, xr, Pr), xk, Pk in zip(rows, out_x, out_P, strict=True):
         np.testing.assert_allclose(wrap_angle(xk - xr), 0, atol=1e-9)

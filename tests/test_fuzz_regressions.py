@@ -174,7 +174,7 @@ def test_sidecar_dvl_geometry_int_too_large(field):
     """A YAML integer too large for a float in the sidecar's dvl_geometry (found by
     test_ros2_sidecar_undertow_yaml): the one-line ConfigError the reader turns into a note,
     not an OverflowError."""
-    from undertow.log import DvlGeometry
+    from undertow.robot import DvlGeometry
 
     data = {"tilt_deg": 22.5, "azimuths_deg": [135, -135, -45, 45], "beam_width_deg": 2.0}
     data[field] = [10**400] * 4 if field == "azimuths_deg" else 10**400

@@ -720,15 +720,15 @@ def test_links_and_grid_load_their_code_ahead():
 import sys
 from undertow.live.links.mavlink_udp import MavlinkLink
 from undertow.live.links.ping1d import Ping1DLink
-from undertow.mapping import grid, kernels
+from undertow.mapping import chunks, grid
 mav, ping = MavlinkLink("udpin:127.0.0.1:0"), Ping1DLink("udp://127.0.0.1:9")
 loaded = lambda prefix: any(m.startswith(prefix) for m in sys.modules)
 assert not loaded("pymavlink.dialects.v20") and not loaded("brping")
-assert not kernels._rehash.signatures
+assert not chunks.rehash.signatures
 mav.load(); ping.load(); grid.load_kernels()
 from pymavlink import mavutil
 assert "pymavlink.dialects.v20." + mavutil.current_dialect in sys.modules
-assert loaded("brping") and kernels._rehash.signatures
+assert loaded("brping") and chunks.rehash.signatures
 """
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                           timeout=120)  # fmt: skip

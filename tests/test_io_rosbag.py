@@ -18,7 +18,8 @@ from rosbags.typesys import Stores, get_typestore
 from undertow.errors import ReaderError, UndertowError
 from undertow.io import TopicMap, read_log, write_log
 from undertow.io.msgdefs import dvl_typestore
-from undertow.log import Log, Mounting, Pressure, SensorMount
+from undertow.log import Log, Pressure
+from undertow.robot import Mounting, SensorMount
 
 REAL = REAL_DATA
 BAG = REAL / "a50_ros1_circle.bag"

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from undertow.errors import DataError, MissingStreamError
-from undertow.log import Dvl, Imu, Log, Mounting, Pressure, SonarRange, a50_beam_units
+from undertow.log import Dvl, Imu, Log, Pressure, SonarRange
+from undertow.robot import Mounting, a50_beam_units
 
 
 def test_a50_beam_geometry_matches_the_datasheet():

@@ -5,11 +5,12 @@ import pytest
 
 from undertow.errors import ConfigError, ReaderError
 from undertow.io.ply import write_map_ply
-from undertow.log import Dvl, Log, Mounting, SonarRange
+from undertow.log import Dvl, Log, SonarRange
 from undertow.mapping.config import MappingConfig
 from undertow.mapping.mappers import make_mapper, mapper_from_config
 from undertow.mapping.samples import Samples, build_samples, samples_from_config
 from undertow.occupancy import OccupancyMap
+from undertow.robot import Mounting
 from undertow.rotations import rpy_to_matrix
 from undertow.trajectory import Trajectory
 

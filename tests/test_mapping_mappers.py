@@ -199,7 +199,7 @@ def test_numpy_arrays_are_accepted_as_settings():
 def test_chunk_count_matches_the_chunks_the_scatter_creates(method):
     """The memory estimate counts the distinct chunks the supports touch without storing them:
     the same number the scatter then allocates."""
-    from undertow.mapping.kernels import _count_chunks
+    from undertow.mapping.kernels import count_chunks
 
     rng = np.random.default_rng(3)
     points = rng.uniform(-2, 2, (500, 3))
@@ -214,7 +214,7 @@ def test_chunk_count_matches_the_chunks_the_scatter_creates(method):
         bounds = (np.zeros(3), np.zeros(3))
     mode = {"csm": 2, "bki": 1, "adaptive": 0}[method]
     table = np.full(1 << 16, -1, np.int64)
-    n = _count_chunks(mode, samples.points, samples.pose_variance, *bounds, lo, hi, 0.05, table,
+    n = count_chunks(mode, samples.points, samples.pose_variance, *bounds, lo, hi, 0.05, table,
                       0, 10**6)  # fmt: skip
     mapper.integrate(samples)
     assert n == mapper.grid.n_chunks

@@ -11,7 +11,8 @@ import pytest
 
 from undertow.mapping import make_mapper
 from undertow.mapping import threads as threads_module
-from undertow.mapping.kernels import _extent, _slab_splits
+from undertow.mapping.grid import points_extent
+from undertow.mapping.kernels import slab_splits
 from undertow.mapping.samples import Samples
 
 BOUNDS = ((1e-4, 1e-4, 1e-4), (1.1e-3, 1.1e-3, 2e-4))
@@ -70,7 +71,7 @@ def test_any_slabs_give_the_same_map(monkeypatch, parts):
 def test_slab_splits_balance_the_samples():
     rng = np.random.default_rng(3)
     points = np.column_stack([rng.normal(0, 5, 20000), rng.normal(0, 1, 20000), np.zeros(20000)])
-    axis, splits = _slab_splits(points, 0.1, 4, *_extent(points)[:2])
+    axis, splits = slab_splits(points, 0.1, 4, *points_extent(points)[:2])
     assert axis == 0 and splits[0] < -(1 << 60) and splits[-1] > 1 << 60
     index = np.floor(points[:, 0] / 0.1)
     counts = [
@@ -79,7 +80,7 @@ def test_slab_splits_balance_the_samples():
     assert sum(counts) == 20000 and max(counts) - min(counts) < 0.02 * 20000
     # sparse spread (wider than 4 n + 4096 cells): the sorted path, same balance
     far = np.column_stack([np.arange(100) * 1e3, np.zeros(100), np.zeros(100)])
-    axis, splits = _slab_splits(far, 0.1, 2, *_extent(far)[:2])
+    axis, splits = slab_splits(far, 0.1, 2, *points_extent(far)[:2])
     index = np.floor(far[:, 0] / 0.1)
     assert axis == 0 and np.sum(index < splits[1]) == 50
 

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError, DataError, MissingStreamError
-from undertow.log import Dvl, Log, Mounting, SonarRange
+from undertow.log import Dvl, Log, SonarRange
 from undertow.mapping.samples import SENSOR_DVL, SENSOR_SONAR, build_samples
+from undertow.robot import Mounting
 from undertow.trajectory import Trajectory
 
 TILT = np.deg2rad(22.5)

@@ -16,20 +16,18 @@ from undertow.io import read_log, write_log
 from undertow.io.msgdefs import dvl_typestore
 from undertow.io.rosbag_streams import cloud_points
 from undertow.io.rosbag_write import MessageBuilder, multibeam_message
-from undertow.log import (
+from undertow.log import GroundTruth, Log, Multibeam
+from undertow.mapping.config import MappingConfig
+from undertow.mapping.mappers import mapper_from_config
+from undertow.mapping.samples import SENSOR_MULTIBEAM, build_samples
+from undertow.robot import (
     DVL_PRESETS,
     DvlGeometry,
-    GroundTruth,
-    Log,
     Mounting,
-    Multibeam,
     SensorMount,
     a50_beam_units,
     dvl_preset,
 )
-from undertow.mapping.config import MappingConfig
-from undertow.mapping.mappers import mapper_from_config
-from undertow.mapping.samples import SENSOR_MULTIBEAM, build_samples
 from undertow.rotations import rpy_to_matrix
 from undertow.sim import Scenario, load_scenario, simulate
 from undertow.sim.scenario.sensors import MultibeamModel

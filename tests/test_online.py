@@ -121,11 +121,11 @@ def test_chunked_filter_is_bit_identical(session, variant, how, seed):
 def test_outputs_in_blocks_are_one_array(monkeypatch):
     """The online filter's states are stored in blocks: appends in any pieces, across block
     boundaries, with rewinds (n set back), read back as one array would hold them."""
-    from undertow.estimation.online import _Outputs
+    from undertow.estimation.online_run import OutputBlocks
 
-    monkeypatch.setattr(_Outputs, "BLOCK", 7)
+    monkeypatch.setattr(OutputBlocks, "BLOCK", 7)
     rng = np.random.default_rng(4)
-    out, ref = _Outputs(), np.zeros((0, 1 + 18 + 18 * 18))
+    out, ref = OutputBlocks(), np.zeros((0, 1 + 18 + 18 * 18))
     for _ in range(60):
         if rng.random() < 0.2 and out.n:  # a rewind
             out.n = int(rng.integers(0, out.n + 1))
@@ -403,13 +403,13 @@ def test_pushes_that_take_the_previews_states_are_the_offline_run(session, varia
 
 
 def test_depth_rate_verdicts_are_those_of_the_whole_history():
-    """_DepthRate (the online depth-rate check) against depth_jumps over every depth so far:
+    """DepthRateCheck (the online depth-rate check) against depth_jumps over every depth so far:
     depths added in random pieces (a spike, a plateau, noise), each piece first peeked (its
     verdicts as if the log ended with it), then added; the verdicts in use once everything is
     in, and every peek, are those of the whole history cut where it was."""
     from undertow.estimation.config import LocalizerConfig
     from undertow.estimation.health import depth_jumps
-    from undertow.estimation.online import _DepthRate
+    from undertow.estimation.online_run import DepthRateCheck
 
     cfg = LocalizerConfig()
     rng = np.random.default_rng(4)
@@ -418,7 +418,7 @@ def test_depth_rate_verdicts_are_those_of_the_whole_history():
     d[50] += 3.0
     d[200:204] += 4.0
     d[300:330] += 2.0
-    rate = _DepthRate(cfg)
+    rate = DepthRateCheck(cfg)
     k = 0
     for n in rng.integers(1, 9, 200):
         part = slice(k, min(k + int(n), t.size))

@@ -18,8 +18,8 @@ from undertow.errors import ConfigError, DataError, ReaderError
 from undertow.io import read_log
 from undertow.io.msgdefs import dvl_typestore
 from undertow.live.recorder import POSE_TOPIC, STATUS_TOPIC, WAVE_TOPIC, Recorder
-from undertow.log import Mounting
 from undertow.records import RECORD_FIELDS, Record, records_to_log
+from undertow.robot import Mounting
 from undertow.rotations import quaternion_to_rpy
 
 T0 = 1_700_000_000.0

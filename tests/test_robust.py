@@ -17,7 +17,8 @@ from typer.testing import CliRunner
 from undertow.cli import app
 from undertow.errors import DataError
 from undertow.estimation.localizer import localize
-from undertow.log import Dvl, Imu, Mounting, Pressure, SensorMount
+from undertow.log import Dvl, Imu, Pressure
+from undertow.robot import Mounting, SensorMount
 from undertow.rotations import quaternion_to_rpy
 
 WAVE = "wave-a0.10-f0.75"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError
-from undertow.log import a50_beam_units
+from undertow.robot import a50_beam_units
 from undertow.sim import Scenario, list_scenarios, load_scenario, simulate
 from undertow.sim.scenario.model import FloorModel
 from undertow.sim.seabed import (

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from undertow.log import a50_beam_units
+from undertow.robot import a50_beam_units
 from undertow.sim.tank import Tank
 
 TANK = Tank(110.0, 6.7, 3.0, rock_x=50.0, rock_y=0.0, rock_length=1.0, rock_width=0.8,

@@ -1,5 +1,6 @@
-"""The package's shape: stages import only upstream, functions stay short, the source cites no
-private notes, and test-only code does not ship.
+"""The package's shape: stages import only upstream, modules import no cycle and no other
+module's private names, functions stay short, the source cites no private notes, and test-only
+code does not ship.
 
 Every check reads the source with :mod:`ast` (nothing is imported), so a failure names the file,
 the line and what to change.
@@ -25,6 +26,7 @@ STAGE_OF = {
     "rotations": "core",
     "log": "core",
     "records": "core",
+    "robot": "core",
     "trajectory": "core",
     "occupancy": "core",
     "wavetrack": "core",
@@ -55,6 +57,13 @@ NUMBA_DECORATORS = {"njit", "jit"}
 #: packages only the tests use; the installed package must not import them
 TEST_ONLY = {"pytest", "filterpy", "hypothesis", "_pytest"}
 PRIVATE_NOTES = re.compile(r"\b(NOTES|DESIGN)(\.md)?\b")
+#: Private names still imported across modules, by importing file (relative to the package):
+#: each is in a file another change of issue 24 is moving (the sea state's estimator, the
+#: commands), which makes the name public there. The lead empties this at the merge; the test
+#: fails on an offender not listed here, and on an entry that no longer offends.
+PENDING_MOVES: dict[str, set[str]] = {
+    "estimation/waves.py": {"_wavenumber_flat"},  # from estimation.wave_transfer (sea state)
+}
 
 
 def _modules() -> list[Path]:
@@ -82,24 +91,27 @@ def _is_submodule(dotted: str) -> bool:
     return (SRC / rel).with_suffix(".py").is_file() or (SRC / rel / "__init__.py").is_file()
 
 
+def _from_target(path: Path, node: ast.ImportFrom) -> str:
+    """The absolute dotted name of the module ``from X import ...`` in ``path`` names as X."""
+    if not node.level:
+        return node.module or ""
+    module = _module_name(path)
+    base = (module if _is_package(path) else module.rpartition(".")[0]).split(".")
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
 def _imported_modules(path: Path, tree: ast.Module | None = None):
     """(line, absolute dotted name) of every ``undertow`` module ``path`` (or ``tree`` read as
     the file at ``path``) imports, at any depth (lazy imports inside functions count);
     ``from X import y`` names X.y when y is a module."""
-    module = _module_name(path)
-    package = module if _is_package(path) else module.rpartition(".")[0]
     for node in ast.walk(tree or _tree(path)):
         if isinstance(node, ast.Import):
             for alias in node.names:
                 if alias.name.split(".")[0] == PACKAGE:
                     yield node.lineno, alias.name
         elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package.split(".")
-                base = base[: len(base) - (node.level - 1)]
-                target = ".".join(base + ([node.module] if node.module else []))
-            else:
-                target = node.module or ""
+            target = _from_target(path, node)
             if target.split(".")[0] != PACKAGE:
                 continue
             for alias in node.names:
@@ -136,6 +148,133 @@ def test_no_module_imports_from_a_downstream_stage():
                 edges.append(f"{here} ({a}) -> {target} ({b})  at {path.relative_to(SRC)}:{line}")
     order = " < ".join(RANK)
     assert not edges, f"imports from a downstream stage (order: {order}):\n" + "\n".join(edges)
+
+
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _private_imports(path: Path):
+    """(line, module, name) of every private name ``path`` takes from another undertow module:
+    ``from X import _y`` (y not a submodule) and ``X._y`` on a module X it imported."""
+    here = _module_name(path)
+    modules = {}  # local name -> undertow module, for the attribute form
+    for node in ast.walk(_tree(path)):
+        if isinstance(node, ast.ImportFrom):
+            target = _from_target(path, node)
+            if target.split(".")[0] != PACKAGE:
+                continue
+            for alias in node.names:
+                if _is_submodule(f"{target}.{alias.name}"):
+                    modules[alias.asname or alias.name] = f"{target}.{alias.name}"
+                elif _is_private(alias.name) and target != here:
+                    yield node.lineno, target, alias.name
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.asname and alias.name.split(".")[0] == PACKAGE:
+                    modules[alias.asname] = alias.name
+    for node in ast.walk(_tree(path)):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                and node.value.id in modules and _is_private(node.attr)):  # fmt: skip
+            yield node.lineno, modules[node.value.id], node.attr
+
+
+def test_no_private_name_is_imported_across_modules():
+    found, hits = {}, []
+    for path in _modules():
+        rel = path.relative_to(SRC).as_posix()
+        for line, module, name in _private_imports(path):
+            found.setdefault(rel, set()).add(name)
+            if name not in PENDING_MOVES.get(rel, set()):
+                hits.append(f"{rel}:{line}: {name} from {module}")
+    stale = sorted(
+        f"{rel}: {sorted(names - found.get(rel, set()))}"
+        for rel, names in PENDING_MOVES.items()
+        if names - found.get(rel, set())
+    )
+    assert not hits, (
+        "private names imported from another module; make the shared name public in its home "
+        "module (or move it to the one module that uses it):\n" + "\n".join(dict.fromkeys(hits))
+    )
+    assert not stale, "PENDING_MOVES lists imports that are gone; remove them:\n" + "\n".join(stale)
+
+
+def _import_graph() -> dict[str, dict[str, str]]:
+    """module -> {imported undertow module: where (file:line)}, lazy imports included."""
+    graph = {}
+    for path in _modules():
+        here = _module_name(path)
+        edges = graph.setdefault(here, {})
+        for line, target in _imported_modules(path):
+            if target != here:
+                edges.setdefault(target, f"{path.relative_to(SRC)}:{line}")
+    return graph
+
+
+def _cycles(graph: dict[str, dict[str, str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each as one cycle
+    through its first module (a path back to itself inside the component)."""
+    index, low, stack, on_stack, components = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, {}):
+            if w not in graph:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                components.append(component)
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    cycles = []
+    for component in components:
+        start = min(component)
+        paths = {start: [start]}  # breadth first inside the component, back to start
+        queue = [start]
+        while queue:
+            v = queue.pop(0)
+            for w in sorted(graph[v]):
+                if w == start:
+                    cycles.append(paths[v] + [start])
+                    queue = []
+                    break
+                if w in component and w not in paths:
+                    paths[w] = paths[v] + [w]
+                    queue.append(w)
+    return cycles
+
+
+def test_the_import_graph_has_no_cycles():
+    graph = _import_graph()
+    lines = []
+    for cycle in _cycles(graph):
+        where = ", ".join(graph[a][b] for a, b in zip(cycle[:-1], cycle[1:], strict=True))
+        lines.append(f"{' -> '.join(cycle)}  ({where})")
+    assert not lines, (
+        "import cycles between modules (lazy imports count: they only hide a cycle); move what "
+        "both need to a module both can import:\n" + "\n".join(lines)
+    )
+
+
+def test_the_cycle_finder_names_a_cycle():
+    graph = {"a": {"b": "a.py:1"}, "b": {"c": "b.py:1"}, "c": {"a": "c.py:1", "d": ""}, "d": {}}
+    assert _cycles(graph) == [["a", "b", "c", "a"]]
 
 
 def _decorator_names(node) -> set[str]:

@@ -2,18 +2,8 @@
 in waves."""
 
 from .errors import UndertowError
-from .log import (
-    DeadReckoning,
-    Dvl,
-    GroundTruth,
-    Imu,
-    Log,
-    Mounting,
-    Pressure,
-    SensorMount,
-    SonarRange,
-    WaveProbe,
-)
+from .log import DeadReckoning, Dvl, GroundTruth, Imu, Log, Pressure, SonarRange, WaveProbe
+from .robot import Mounting, SensorMount
 
 __version__ = "0.1.0"
 

@@ -120,6 +120,12 @@ def atomic_path(
         shutil.rmtree(holder, ignore_errors=True)
 
 
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through :func:`atomic_path`."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
 def check_output_folder(path: str | Path, overwrite: bool = False, inputs=()) -> Path:
     """Refuse an output folder that is a file, that holds files unless ``overwrite``, that is
     or contains one of the command's ``inputs`` (replacing it would delete them), or whose

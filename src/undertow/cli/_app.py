@@ -46,10 +46,10 @@ err = Console(stderr=True)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
-    _print_warnings([str(message)])
+    print_warnings([str(message)])
 
 
-def _print_warnings(lines) -> None:
+def print_warnings(lines) -> None:
     """One ``warning: ...`` line on stderr per warning (a result's ``warnings``)."""
     for line in lines:
         err.print(f"[yellow]warning:[/] {line}", highlight=False, soft_wrap=True)
@@ -93,7 +93,7 @@ def _error_exit(message: str, code: int) -> None:
     raise typer.Exit(code) from None
 
 
-def _progress(quiet: bool):
+def progress_bar(quiet: bool):
     from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
     return Progress(
@@ -107,12 +107,12 @@ def _progress(quiet: bool):
     )
 
 
-def _print_json(data) -> None:
+def print_json(data) -> None:
     text = json.dumps(json_safe(data), indent=2, allow_nan=False, default=float)
     sys.stdout.write(text + "\n")
 
 
-def _triple(text: str | None, name: str):
+def parse_triple(text: str | None, name: str):
     if text is None:
         return None
     try:
@@ -161,5 +161,5 @@ def settings_with_time(config: Path | None, time: str | None):
     return settings
 
 
-def _fmt(value, digits: int = 3) -> str:
+def fmt_number(value, digits: int = 3) -> str:
     return "-" if value is None else f"{value:.{digits}f}"

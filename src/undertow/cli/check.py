@@ -13,11 +13,11 @@ from ._app import (
     ConfigOption,
     TimeOption,
     TopicsOption,
-    _print_json,
-    _print_warnings,
     app,
     console,
     err,
+    print_json,
+    print_warnings,
     user_errors,
 )
 
@@ -47,9 +47,9 @@ def check(
     from ..commands.check import check_file
 
     result = check_file(path, config, topics=topics, time=time, write_config=write_config)
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     if as_json:
-        _print_json(result.to_dict())
+        print_json(result.to_dict())
     else:
         _print_check(result)
     if not result.ready:

@@ -14,12 +14,12 @@ from ._app import (
     ConfigOption,
     TimeOption,
     TopicsOption,
-    _print_json,
-    _print_warnings,
-    _progress,
     app,
     console,
     err,
+    print_json,
+    print_warnings,
+    progress_bar,
     settings_with_time,
     user_errors,
 )
@@ -53,9 +53,9 @@ def info(
         result = info_file(path, topics=topics, settings=settings)
     lines = list(result.warnings)
     lines += [str(w.message) for w in caught if str(w.message) not in lines]
-    _print_warnings(dict.fromkeys(lines))
+    print_warnings(dict.fromkeys(lines))
     if as_json:
-        _print_json(result.to_dict())
+        print_json(result.to_dict())
     else:
         console.print(summary_table(result.summary))
 
@@ -115,7 +115,7 @@ def simulate(
         raise UndertowError("simulate needs a SCENARIO and --out DIR (or --list)")
     if seed is not None and seed < 0:
         raise UndertowError(f"--seed {seed}: must be a non-negative integer")
-    with _progress(quiet) as progress:
+    with progress_bar(quiet) as progress:
         simulate_to_folder(
             scenario,
             out_dir,

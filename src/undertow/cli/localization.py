@@ -13,14 +13,14 @@ from ._app import (
     OverwriteOption,
     TimeOption,
     TopicsOption,
-    _print_json,
-    _print_warnings,
-    _progress,
-    _triple,
     app,
     console,
     err,
     evaluate_app,
+    parse_triple,
+    print_json,
+    print_warnings,
+    progress_bar,
     settings_with_time,
     user_errors,
 )
@@ -97,9 +97,9 @@ def localize(
     options = {
         "variant": variant,
         "output_rate_hz": output_rate,
-        "initial_position": _triple(initial_position, "--initial-position"),
+        "initial_position": parse_triple(initial_position, "--initial-position"),
     }
-    with _progress(quiet) as progress:
+    with progress_bar(quiet) as progress:
         progress.add_task(f"localizing{f' ({variant})' if variant else ''}", total=None)
         result = localize_file(
             log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
@@ -109,7 +109,7 @@ def localize(
             **{name: value for name, value in options.items() if value is not None},
             **gate_option(gate),
         )  # fmt: skip
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     if not quiet:
         _print_localized(result, out_dir, wave)
 
@@ -182,11 +182,11 @@ def calibrate(
     """
     from ..commands.localization import calibrate_file
 
-    with _progress(quiet) as progress:
+    with progress_bar(quiet) as progress:
         progress.add_task("calibrating", total=None)
         result = calibrate_file(log_path, ground_truth, config, topics=topics, out=out)
-    _print_warnings(result.warnings)
-    _print_json(result.calibration.to_dict())
+    print_warnings(result.warnings)
+    print_json(result.calibration.to_dict())
     if not quiet:
         err.print(
             f"wrote {out} (estimated: {', '.join(result.calibration.estimated)})",
@@ -244,14 +244,14 @@ def evaluate_trajectory(
         estimate, reference_path, align, reference=reference, settings=config, topics=topics,
         checkpoints=checkpoints,
     )  # fmt: skip
-    _print_warnings(evaluation.warnings)
+    print_warnings(evaluation.warnings)
     if reference_path is None and evaluation.consistency is None:
         raise DataError(
             f"{estimate}: the trajectory carries no consistency report (written before undertow "
             "recorded one, or not by `undertow localize`); give a REFERENCE to compare it with"
         )
     if as_json:
-        _print_json(evaluation.to_dict())
+        print_json(evaluation.to_dict())
         return
     if evaluation.errors is not None:
         _print_errors(evaluation.errors, estimate)

@@ -13,12 +13,12 @@ from ._app import (
     OverwriteOption,
     TimeOption,
     TopicsOption,
-    _print_json,
-    _progress,
     app,
     console,
     err,
     evaluate_app,
+    print_json,
+    progress_bar,
     settings_with_time,
     user_errors,
 )
@@ -83,13 +83,13 @@ def map_command(
     options = {"method": method, "resolution": resolution, "length_scale": length_scale,
                "variance_bounds": _variance_bounds(variance_bounds)}  # fmt: skip
     given = {k: v for k, v in options.items() if v is not None}  # options win over the file
-    with _progress(quiet) as progress:
+    with progress_bar(quiet) as progress:
         progress.add_task(f"mapping ({method})" if method else "mapping", total=None)
         result = map_file(log_path, trajectory, settings_with_time(config, time), topics=topics,
                           prior=prior,
                           out_dir=out_dir, overwrite=overwrite, tiles=tiles,
                           scheduler=scheduler, **given)  # fmt: skip
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     if not quiet:
         normalization = result.metadata["mapper"].get("normalization")
         how = f", {normalization} normalization" if normalization else ""
@@ -101,7 +101,7 @@ def map_command(
         )
 
 
-def _print_warnings(lines: list[str]) -> None:
+def print_warnings(lines: list[str]) -> None:
     for line in lines:
         err.print(f"[yellow]warning:[/] {line}", highlight=False, soft_wrap=True)
 
@@ -144,10 +144,10 @@ def evaluate_map_command(
     from ..commands.mapping import evaluate_map_file
 
     result = evaluate_map_file(map_path, ground_truth, threshold)
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     values = result.to_dict()
     if as_json:
-        _print_json(values)
+        print_json(values)
         return
     for key, value in values.items():
         shown = f"{value:.4f}" if isinstance(value, float) and key != "threshold" else value

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from ..errors import Terminated
-from ._app import _print_json, app, console, err, user_errors
+from ._app import app, console, err, print_json, user_errors
 
 
 def _print_start(session, quiet: bool) -> None:
@@ -35,7 +35,7 @@ def _print_start(session, quiet: bool) -> None:
 
 def _print_summary(summary: dict, as_json: bool) -> None:
     if as_json:
-        _print_json(summary)
+        print_json(summary)
         return
     from rich.table import Table
 

@@ -10,12 +10,12 @@ import typer
 from ._app import (
     ConfigOption,
     TopicsOption,
-    _fmt,
-    _print_json,
-    _progress,
     app,
     console,
     err,
+    fmt_number,
+    print_json,
+    progress_bar,
     user_errors,
 )
 
@@ -44,13 +44,13 @@ def characterize_command(
     """
     from ..commands.study import characterize_files
 
-    with _progress(quiet) as progress:
+    with progress_bar(quiet) as progress:
         progress.add_task("characterizing", total=None)
         result = characterize_files(logs, config, topics=topics, out=out)
     for warning in result.warnings:
         err.print(f"[yellow]warning:[/] {warning}", highlight=False, soft_wrap=True)
     if as_json:
-        _print_json(result.to_dict())
+        print_json(result.to_dict())
         return
     console.print(_characterize_table(result.rows()))
     if out is not None and not quiet:
@@ -68,13 +68,13 @@ def _characterize_table(rows: list[dict]):
     for row in rows:
         table.add_row(
             row["source"],
-            _fmt(row["amplitude_m"]),
-            _fmt(row["frequency_hz"]),
-            _fmt(row.get("onboard_amplitude_m")),
-            _fmt(row.get("onboard_frequency_hz")),
-            *(_fmt(v) for v in row["dvl_std_m_s"]),
-            _fmt(row["dvl_extra_std_m_s"][0]),
-            _fmt(row["depth_std_m"]),
+            fmt_number(row["amplitude_m"]),
+            fmt_number(row["frequency_hz"]),
+            fmt_number(row.get("onboard_amplitude_m")),
+            fmt_number(row.get("onboard_frequency_hz")),
+            *(fmt_number(v) for v in row["dvl_std_m_s"]),
+            fmt_number(row["dvl_extra_std_m_s"][0]),
+            fmt_number(row["depth_std_m"]),
         )
     return table
 
@@ -130,7 +130,7 @@ def _run_study(job, out_dir: Path, quiet: bool, **options) -> None:
     """Run a study job under a progress line, then print its tables and where it wrote."""
     from rich.markdown import Markdown
 
-    with _progress(quiet) as progress:
+    with progress_bar(quiet) as progress:
         task = progress.add_task("starting", total=None)
         result = job(out_dir, progress=lambda msg: progress.update(task, description=msg),
                      **options)  # fmt: skip

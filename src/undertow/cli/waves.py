@@ -10,11 +10,11 @@ import typer
 from ._app import (
     ConfigOption,
     TopicsOption,
-    _print_json,
-    _print_warnings,
     app,
     console,
     err,
+    print_json,
+    print_warnings,
     user_errors,
 )
 
@@ -58,9 +58,9 @@ def waves(
         log_path, config, topics=topics, platform=platform, window_periods=window_periods,
         water_depth_m=water_depth, plot=plot,
     )  # fmt: skip
-    _print_warnings(result.warnings)
+    print_warnings(result.warnings)
     if as_json:
-        _print_json(result.to_dict())
+        print_json(result.to_dict())
     else:
         console.print(window_table(result))
         for note in result.estimate.notes:

@@ -27,7 +27,8 @@ from .._util.atomic import atomic_path, check_output_file
 from .._util.plain import json_safe
 from ..errors import MissingStreamError, UndertowError
 from ..estimation.config import LocalizerConfig
-from ..estimation.localizer import depth_reference, sensor_coverage
+from ..estimation.localizer import sensor_coverage
+from ..estimation.rows import depth_reference
 from ..estimation.sensor_checks import dvl_pitch_offset, imu_axes
 from ..io import detect_format
 from ..io.rosbag import bag_topics

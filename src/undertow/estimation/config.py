@@ -13,9 +13,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, PlainValidator, field_validator
 from pydantic_core import PydanticCustomError
 
-from ..log import Mounting
+from ..robot import Mounting
 from . import model
-from .ukf import _weights
+from .ukf import weights
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -129,7 +129,7 @@ class LocalizerConfig(BaseModel):
     beta: float = Field(2.0, ge=0.0, le=10.0, allow_inf_nan=False)
     kappa: float = Field(0.0, ge=0.0, le=3.0 * 18, allow_inf_nan=False)
     # adaptive-r: forgetting factor alpha of R_k = alpha R_{k-1} + (1 - alpha)(eps eps^T +
-    # H P^+ H^T) (model._adapt_r). Akhlaghi et al. (2017) use alpha = 0.3 on 1-per-step power
+    # H P^+ H^T) (model.adapt_r). Akhlaghi et al. (2017) use alpha = 0.3 on 1-per-step power
     # system data; here R must follow the wave-induced variance, stationary over many wave
     # periods, not each wave's phase: 1 / (1 - alpha) = 50 updates, 6-10 s of the A50's
     # 5-8 Hz (6-10 periods of a 1 Hz wave), within the 0.95-0.99 fading factors usual for
@@ -149,7 +149,7 @@ class LocalizerConfig(BaseModel):
 
     @property
     def adapts_r(self) -> bool:
-        """adaptive-r: the DVL and DR noise R adapted from the residuals (model._adapt_r)."""
+        """adaptive-r: the DVL and DR noise R adapted from the residuals (model.adapt_r)."""
         return self.variant == "adaptive-r"
 
     @property
@@ -161,7 +161,7 @@ class LocalizerConfig(BaseModel):
         Gamma densities, the mean drifts (zeros for the variants without bias states).
         ``held``: names of :data:`HELD_GROUPS` held at 0 because the log has no sensor that
         informs them."""
-        wm, wc, lam = _weights(model.N_STATE, self.alpha, self.beta, self.kappa)
+        wm, wc, lam = weights(model.N_STATE, self.alpha, self.beta, self.kappa)
         unknown = set(held) - set(HELD_GROUPS)
         if unknown:
             raise ValueError(f"held bias groups {sorted(unknown)}: expected {HELD_GROUPS}")

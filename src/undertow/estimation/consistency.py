@@ -6,7 +6,7 @@ every measurement is zero-mean with the covariance S_k the filter computes, and 
 to the one before (Bar-Shalom, Li and Kirubarajan, "Estimation with Applications to Tracking and
 Navigation", Wiley 2001, sec. 5.4.2; Mehra, "On the identification of variances and adaptive
 Kalman filtering", IEEE TAC 1970). The filter loop records for each measurement its whitened
-innovation w_k = L_k^-1 nu_k (S_k = L_k L_k^T, :func:`~undertow.estimation.model._run_filter`),
+innovation w_k = L_k^-1 nu_k (S_k = L_k L_k^T, :func:`~undertow.estimation.filter_loop.run_filter`),
 so that NIS_k = nu_k^T S_k^-1 nu_k = w_k^T w_k ~ chi2(m), m = dim z. Per sensor kind, over its K
 evaluated innovations (applied or gated):
 

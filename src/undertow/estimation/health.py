@@ -27,7 +27,7 @@ import warnings
 import numpy as np
 
 from ..errors import DataError
-from ..log import Mounting
+from ..robot import Mounting
 from . import model
 
 # a sensor more than this fraction of whose measurements did not update the filter is reported

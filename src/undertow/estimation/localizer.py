@@ -6,7 +6,7 @@ Variants (the paper's ablation, tab:ablation): ``baseline`` (no bias states, no 
 bias estimation the six bias states are held at 0 with a tiny variance and no correlation.
 ``adaptive-r``, a peer baseline outside the paper: bias estimation as ``be``, no wave noise, and
 the DVL and DR noise R adapted from the residuals after each update (Akhlaghi, Zhou and Huang
-2017; :func:`~undertow.estimation.model._adapt_r`):
+2017; :func:`~undertow.estimation.model.adapt_r`):
 
     R_k = alpha R_{k-1} + (1 - alpha) (eps_k eps_k^T + H P_k^+ H^T),   eps_k = z_k - h(x_k^+)
 
@@ -31,8 +31,9 @@ its gyro bias b-bar^g is held at 0, without DR the DR bias b^g is held at 0 (and
 attitude comes from the ground truth, else the IMU's orientation report, else zeros), without a
 barometer the depth is integrated from the DVL velocity only.
 
-Measurements of all streams are merged and processed in time order (a prediction per
-measurement, as in the paper); see :mod:`undertow.estimation.model` for the equations.
+Measurements of all streams are merged (:mod:`undertow.estimation.rows`) and processed in time
+order (a prediction per measurement, as in the paper; :mod:`undertow.estimation.filter_loop`); see
+:mod:`undertow.estimation.model` for the equations.
 
 :class:`Localizer` runs with exactly its :class:`~undertow.estimation.config.LocalizerConfig`;
 :func:`localize` (what ``undertow localize`` runs) fills, for every field the caller leaves
@@ -56,7 +57,6 @@ refused before anything runs (:func:`check_options`).
 
 from __future__ import annotations
 
-import functools
 import warnings
 from pathlib import Path
 
@@ -64,26 +64,18 @@ import numpy as np
 
 from .._util.validate import validate
 from ..errors import ConfigError, MissingStreamError
-from ..io.units import depth_reference as log_depth_reference
 from ..io.units import reading_record
 from ..log import Log
-from ..rotations import matrix_to_rpy, quaternion_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
 from ..wavetrack import WaveTrack
-from . import model
+from . import filter_loop, model
 from .calibration import Calibration
 from .config import LocalizerConfig
 from .consistency import innovation_consistency
-from .health import (
-    check_mounting,
-    dvl_inside,
-    imu_inside,
-    per_sensor,
-    pressure_inside,
-    warn_unhealthy,
-)
-from .noise import NoiseProfile, TrackNoise, WaveNoise
+from .health import check_mounting, per_sensor, warn_unhealthy
+from .noise import NoiseProfile
 from .noise_physics import PHYSICS, REFUSE, extrapolation_note, outside_policy, sensor_site
+from .rows import depth_reference, initial_state, measurements, start_attitude
 from .smoother import smooth as urts_smooth
 
 # a run where more than this fraction of the processed measurements needed a covariance repair
@@ -133,18 +125,18 @@ class Localizer:
         unobserved, held = sensor_coverage(log, cfg)
         check_mounting(log.mounting)
         noise, wave_meta = self._wave_noise(log)
-        meas, rejected = _measurements(log, cfg, noise)
+        meas, rejected = measurements(log, cfg, noise)
         if meas.size == 0:
             raise ConfigError("Localizer: the log has no finite, valid DVL/IMU measurements")
-        x0, P0 = _initial_state(log, cfg)
+        x0, P0 = initial_state(log, cfg)
         r_adapted = np.zeros((len(model.KIND_NAMES), 3, 3))
         whitened = np.full((meas.size, 3), np.nan)  # each row's innovation, for the report
-        out_t, out_x, out_P, counts, nis = model._run_filter(
+        out_t, out_x, out_P, counts, nis = filter_loop.run_filter(
             meas, float(meas["t"][0]), x0, P0, cfg.process_model(held=held),
             cfg.sensor_model(log.mounting), _output_times(meas["t"], cfg.output_rate_hz),
             r_adapted, whitened,
         )  # fmt: skip
-        counts = {**rejected, **dict(zip(model.COUNT_NAMES, counts.tolist(), strict=True))}
+        counts = {**rejected, **dict(zip(filter_loop.COUNT_NAMES, counts.tolist(), strict=True))}
         _warn_if_frozen(counts, int(meas.size))
         rows = np.bincount(meas["kind"], minlength=len(model.KIND_NAMES))
         sensors = per_sensor(counts, dict(zip(model.KIND_NAMES, rows.tolist(), strict=True)))
@@ -153,7 +145,7 @@ class Localizer:
             "variant": cfg.variant,
             "counts": counts,
             "sensors": sensors,
-            "nis": _nis_summary(nis),
+            "nis": nis_summary(nis),
             "consistency": innovation_consistency(meas["kind"], whitened).to_dict(),
             **wave_meta,
             "unobserved": unobserved,
@@ -163,7 +155,7 @@ class Localizer:
             "log": reading_record(log.metadata),
         }
         if cfg.adapts_r:
-            metadata["adaptive_r"] = _adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)
+            metadata["adaptive_r"] = adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
 
     def _wave_noise(self, log: Log):
@@ -333,7 +325,7 @@ def sensor_coverage(log: Log, cfg: LocalizerConfig) -> tuple[list[str], list[str
                           "angular velocity is inferred from the DR attitude alone")  # fmt: skip
     if not has["dead_reckoning"]:
         held.append("dr_bias")
-        start = _start_attitude(log)[1]
+        start = start_attitude(log)[1]
         unobserved.append(
             "no DVL dead reckoning: the DR bias b^g (x[12:15]) is held at 0; roll, pitch and yaw "
             f"are integrated from the IMU gyro only, their variance grows; {start}"
@@ -351,25 +343,7 @@ def sensor_coverage(log: Log, cfg: LocalizerConfig) -> tuple[list[str], list[str
     return unobserved, held
 
 
-def _start_attitude(log: Log) -> tuple[np.ndarray | None, str]:
-    """(rpy or None, where from) of the initial attitude of a log without DR: the first
-    ground-truth pose, else the IMU's first orientation report, else None (zeros)."""
-    gt = log.ground_truth
-    if gt is not None and len(gt):
-        ok = np.flatnonzero(_finite_rows(np.asarray(gt.orientation, float)))
-        if ok.size:
-            return np.array(gt.orientation[ok[0]], float), "initial attitude from the ground truth"
-    imu = log.imu
-    if imu is not None and imu.orientation is not None and len(imu):
-        q = np.asarray(imu.orientation, float)
-        ok = np.flatnonzero(_finite_rows(q) & (np.linalg.norm(q, axis=1) > 0.5))
-        if ok.size:
-            rpy = quaternion_to_rpy(q[ok[0]] / np.linalg.norm(q[ok[0]]))
-            return np.asarray(rpy, float), "initial attitude from the IMU's orientation report"
-    return None, "initial attitude zeros (no ground truth or IMU orientation report)"
-
-
-def _adapted_summary(r_adapted: np.ndarray, rows: np.ndarray, alpha: float) -> dict:
+def adapted_summary(r_adapted: np.ndarray, rows: np.ndarray, alpha: float) -> dict:
     """adaptive-r's final R per adapted sensor (DVL, DR) with the run's alpha."""
     out = {"alpha": float(alpha)}
     for kd in (model.DVL, model.DR):
@@ -400,7 +374,7 @@ def _warn_if_frozen(counts: dict, n_measurements: int) -> None:
         )
 
 
-def _nis_summary(stats: np.ndarray) -> dict:
+def nis_summary(stats: np.ndarray) -> dict:
     """Per sensor: mean NIS (sum nu^T S^-1 nu / count; None without innovations), its expected
     value dof = dim z, the fraction with NIS <= chi2_95(dof) and the count."""
     out = {}
@@ -414,187 +388,6 @@ def _nis_summary(stats: np.ndarray) -> dict:
             "count": n,
         }
     return out
-
-
-def _measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise):
-    """The merged, time-sorted :data:`~undertow.estimation.model.MEASUREMENT` array (at equal
-    times IMU, DVL, DR, baro) and the rows rejected up front, by stream."""
-    parts, rejected = [], {}
-    for stream in (_imu_rows, _dvl_rows, _dr_rows, _pressure_rows):
-        part = stream(log, cfg, noise, rejected)
-        if part is not None:
-            t, kind, z, R, ok = part
-            parts.append((t[ok], kind, z[ok], R[ok]))
-    rows, _ = merged_rows(parts, cfg.std_floor**2)
-    return rows, rejected
-
-
-def merged_rows(parts, floor2: float) -> tuple[np.ndarray, np.ndarray]:
-    """One :data:`~undertow.estimation.model.MEASUREMENT` array of the streams' rows ``parts``
-    [(t (n,), kind, z (n, d), R (n, d, d))]: z and R zero-padded to three dimensions, the
-    diagonal of R floored at ``floor2``, merged by time, then kind. Also the merge order (the
-    index into the parts' rows concatenated), to carry values kept beside the rows."""
-    n = sum(part[0].size for part in parts)
-    rows = np.zeros(n, model.MEASUREMENT)
-    rt, rk, rz, rR = rows["t"], rows["kind"], rows["z"], rows["R"]
-    a = 0
-    for t, kind, z, R in parts:
-        b, d = a + t.size, z.shape[1]
-        rt[a:b], rk[a:b] = t, kind
-        rz[a:b, :d] = z
-        rR[a:b, :d, :d] = R
-        a = b
-    diagonal = rR.reshape(n, 9)[:, ::4]  # (a view: each row's 3 x 3 are contiguous)
-    np.maximum(diagonal, floor2, out=diagonal)
-    order = np.lexsort((rk, rt))
-    return rows[order], order
-
-
-def _diag(std, n: int, cfg: LocalizerConfig) -> np.ndarray:
-    """n copies of diag(max(std, std_floor)^2)."""
-    std = tuple(std) if isinstance(std, (list, tuple)) else float(std)
-    return np.repeat(_diag_one(std, cfg.std_floor), n, axis=0)  # (np.tile, without its set-up)
-
-
-@functools.lru_cache(maxsize=64)
-def _diag_one(std, floor: float) -> np.ndarray:
-    """diag(max(std, floor)^2) as a (1, 3, 3) array (read-only: shared by every call)."""
-    D = np.diag(np.maximum(np.asarray(std, float), floor) ** 2)[None]
-    D.flags.writeable = False
-    return D
-
-
-def _imu_rows(
-    log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict, warn: bool = True
-):
-    """IMU angular velocity z (rad/s, IMU frame), R = diag(imu_gyro_std_rad_s^2). None
-    without an IMU."""
-    imu = log.imu
-    if imu is None or not len(imu):
-        return None
-    w = imu.angular_velocity
-    ok = _finite_rows(w)
-    rejected["rejected_imu"] = _count_false(ok)
-    ok = imu_inside(imu.t, w, ok, cfg.gyro_max_rate_rad_s, rejected, warn)
-    return imu.t, model.IMU, w, _diag(cfg.imu_gyro_std_rad_s, len(imu), cfg), ok
-
-
-def _dvl_rows(
-    log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict, warn: bool = True
-):
-    """DVL velocity z = v_measured / scale (m/s, DVL frame) with the log's covariance (scaled
-    by 1 / scale^2, symmetrized) or diag(dvl_velocity_std_m_s^2), its diagonal floored at
-    dvl_std_floor_m_s^2, plus gamma_DVL^2 (at the row's time, for a track) for the variants with
-    wave noise."""
-    dvl = log.dvl
-    v = dvl.velocity / cfg.dvl_scale_factor
-    cov = np.array(dvl.covariance, float) / cfg.dvl_scale_factor**2
-    cov = 0.5 * (cov + np.swapaxes(cov, 1, 2))
-    has_cov = np.isfinite(cov).all(axis=(1, 2))
-    R = np.where(has_cov[:, None, None], cov, _diag(cfg.dvl_velocity_std_m_s, len(dvl), cfg))
-    diagonal = R.reshape(-1, 9)[:, ::4]  # (a view: R is a new contiguous array)
-    np.maximum(diagonal, cfg.dvl_std_floor_m_s**2, out=diagonal)
-    if cfg.adds_wave_noise:
-        diagonal += noise.std_at("dvl", dvl.t) ** 2
-    finite = _finite_rows(v)
-    rejected["rejected_dvl_invalid"] = _count_false(dvl.valid)
-    rejected["rejected_dvl_nonfinite"] = int(np.count_nonzero(dvl.valid & ~finite))
-    ok = dvl_inside(dvl.t, dvl.velocity, finite & dvl.valid, cfg.dvl_max_speed_m_s, rejected, warn)
-    return dvl.t, model.DVL, v, R, ok
-
-
-def _dr_rows(
-    log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise, rejected: dict, warn: bool = True
-):
-    """DR orientation z (rad; reported for the DVL frame, R_dr = R_body R_mount, it is moved to
-    the body: R_body = R_dr R_mount^T), R = diag(dr_orientation_std_rad^2) plus gamma_DR^2 for
-    the variants with wave noise. None when the log has no DR."""
-    dr = log.dead_reckoning
-    if dr is None or not len(dr):
-        return None
-    rpy = np.array(dr.orientation, float)
-    ok = _finite_rows(rpy)
-    if cfg.dr_orientation_frame == "dvl":
-        rpy[ok] = matrix_to_rpy(rpy_to_matrix(rpy[ok]) @ log.mounting.dvl.rotation_matrix().T)
-    R = _diag(cfg.dr_orientation_std_rad, len(dr), cfg)
-    if cfg.adds_wave_noise:
-        i = np.arange(3)
-        R[:, i, i] += noise.std_at("dr", dr.t) ** 2
-    rejected["rejected_dead_reckoning"] = _count_false(ok)
-    return dr.t, model.DR, rpy, R, ok
-
-
-def _pressure_rows(
-    log: Log,
-    cfg: LocalizerConfig,
-    noise: WaveNoise | TrackNoise,
-    rejected: dict,
-    warn: bool = True,
-    jumps: bool = True,
-):
-    """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2. None without pressure.
-    ``jumps`` False: the depth-rate check (:func:`~undertow.estimation.health.depth_jumps`) is
-    left to the caller (the online filter, which sees the depths in pieces)."""
-    p = log.pressure
-    if p is None or not len(p):
-        return None
-    d = p.depth(*depth_reference(log, cfg))[:, None]
-    ok = _finite_rows(d)
-    rejected["rejected_pressure"] = _count_false(ok)
-    ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected, warn, jumps)
-    return p.t, model.BARO, d, _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1], ok
-
-
-def depth_reference(log: Log, cfg: LocalizerConfig) -> tuple[float, float]:
-    """(water density rho kg/m^3, surface pressure p_surface Pa) of d = (p - p_surface) / (rho g):
-    the config's when set, else the log's (``metadata`` ``water_density_kg_m3`` and
-    ``surface_pressure_pa``, as its reader resolved them), else fresh water and one standard
-    atmosphere (:func:`undertow.io.units.depth_reference`)."""
-    return log_depth_reference(log.metadata, cfg.water_density_kg_m3, cfg.surface_pressure_pa)
-
-
-def _finite_rows(a: np.ndarray) -> np.ndarray:
-    return np.isfinite(a).all(axis=1)
-
-
-def _count_false(ok: np.ndarray) -> int:
-    return ok.size - int(np.count_nonzero(ok))
-
-
-def _initial_state(log: Log, cfg: LocalizerConfig):
-    """x0 from the config, else zeros with the first DR orientation (without DR:
-    :func:`_start_attitude`) and the first depth, and the configured start position (DVL and IMU
-    observe no absolute x, y: the user gives the start); P0 = diag(max(initial_std, 1e-9)^2)."""
-    P0 = np.diag(np.maximum(np.asarray(cfg.initial_std, float), 1e-9) ** 2)
-    if cfg.initial_state is not None:
-        return np.array(cfg.initial_state, float), P0
-    x0 = np.zeros(model.N_STATE)
-    dr = log.dead_reckoning
-    if dr is not None and len(dr):
-        ok = np.flatnonzero(_finite_rows(np.asarray(dr.orientation)))
-        if ok.size:
-            rpy = np.array(dr.orientation[ok[0]], float)
-            if cfg.dr_orientation_frame == "dvl":
-                rpy = matrix_to_rpy(rpy_to_matrix(rpy) @ log.mounting.dvl.rotation_matrix().T)
-            x0[3:6] = rpy
-    else:
-        rpy, _ = _start_attitude(log)
-        if rpy is not None:
-            x0[3:6] = rpy
-    if log.pressure is not None and len(log.pressure):
-        d = log.pressure.depth(*depth_reference(log, cfg))
-        lo, hi = cfg.min_depth_m, cfg.max_depth_m  # the first depth within the envelope
-        with np.errstate(invalid="ignore"):
-            inside = np.isfinite(d) & (d >= (-np.inf if lo is None else lo))
-            ok = np.flatnonzero(inside & (d <= (np.inf if hi is None else hi)))
-        if ok.size:
-            lever = rpy_to_matrix(x0[3:6]) @ np.asarray(log.mounting.barometer.translation, float)
-            x0[2] = d[ok[0]] - lever[2]
-    if cfg.initial_position is not None:
-        x0[0:3] = cfg.initial_position
-    x0[12:15] = cfg.dr_bias_rad  # held at 0 by the variants without bias states
-    x0[15:18] = cfg.gyro_bias_rad_s
-    return x0, P0
 
 
 def _output_times(t: np.ndarray, rate_hz: float | None):

@@ -33,12 +33,13 @@ from ..trajectory import Trajectory
 from . import model
 from .config import LocalizerConfig
 from .ukf import (
-    _cholesky_repair,
-    _gain,
-    _residuals,
-    _symmetrize,
-    _weighted_outer,
-    _wrap,
+    all_finite,
+    cholesky_repair,
+    gain,
+    residuals,
+    symmetrize,
+    weighted_outer,
+    wrap,
 )
 
 SMOOTHER_COUNT_NAMES = ("cholesky_repairs", "nonfinite_kept_filtered")
@@ -63,22 +64,22 @@ def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, 
     """
     DxT, C, L, G, row, d, GA = ws
     n = x.size
-    _residuals(chi, x, angle_mask, DxT)
-    _weighted_outer(DxT, DfT, wc, C)  # C = sum W^c (chi_i - x_k)(f(chi_i) - m^-)^T
-    status = _cholesky_repair(P_pred, L)
+    residuals(chi, x, angle_mask, DxT)
+    weighted_outer(DxT, DfT, wc, C)  # C = sum W^c (chi_i - x_k)(f(chi_i) - m^-)^T
+    status = cholesky_repair(P_pred, L)
     if status < 0:
         return -1
-    _gain(C, L, G, row)  # G = C (P^-)^-1
+    gain(C, L, G, row)  # G = C (P^-)^-1
     for a in range(n):
         v = xs_next[a] - m_pred[a]
-        d[a] = _wrap(v) if angle_mask[a] else v
+        d[a] = wrap(v) if angle_mask[a] else v
     for i in range(n):
         s = 0.0
         for a in range(n):
             s += G[i, a] * d[a]
         x[i] += s
         if angle_mask[i]:
-            x[i] = _wrap(x[i])
+            x[i] = wrap(x[i])
     for i in range(n):  # GA = G (P^s_{k+1} - P^-)
         for b in range(n):
             s = 0.0
@@ -93,8 +94,8 @@ def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, 
             v = P[i, j] + s
             P[i, j] = v
             P[j, i] = v
-    _symmetrize(P)
-    repaired = _cholesky_repair(P, L)  # floor eigenvalues if round-off made P^s indefinite
+    symmetrize(P)
+    repaired = cholesky_repair(P, L)  # floor eigenvalues if round-off made P^s indefinite
     return status + max(repaired, 0)
 
 
@@ -115,7 +116,7 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
     xs = xf.copy()
     Ps = Pf.copy()
     counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
-    ws = model._predict_workspace()
+    ws = model.predict_workspace()
     ws_rts = _rts_workspace(n)
     m = np.empty(n)
     Pm = np.empty((n, n))
@@ -125,19 +126,19 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
         dt = min(t[k + 1] - t[k], dt_max)
         m[:] = xf[k]
         Pm[:, :] = Pf[k]
-        status = model._predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws)
+        status = model.predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws)
         if freeze:
-            model._freeze_bias(m, Pm, first, last)
+            model.freeze_states(m, Pm, first, last)
         x[:] = xf[k]
         P[:, :] = Pf[k]
         flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], wc,
                          model.STATE_ANGLES, ws_rts)  # fmt: skip
-        if status < 0 or flag < 0 or not (model._all_finite(x) and model._all_finite(P)):
+        if status < 0 or flag < 0 or not (all_finite(x) and all_finite(P)):
             counts[1] += 1
             continue
         counts[0] += max(status, 0) + flag
         if freeze:
-            model._freeze_bias(x, P, first, last)
+            model.freeze_states(x, P, first, last)
         xs[k] = x
         Ps[k] = P
     return xs, Ps, counts

@@ -37,7 +37,7 @@ EIG_FLOOR_ABS = 1e-18  # absolute eigenvalue floor in a repair
 
 
 @njit(cache=True)
-def _wrap(a):
+def wrap(a):
     """wrap(a) to [-pi, pi) (NaN stays NaN)."""
     if -np.pi <= a < np.pi:
         return a
@@ -46,7 +46,14 @@ def _wrap(a):
 
 
 @njit(cache=True)
-def _weights(n, alpha, beta, kappa):
+def all_finite(a):
+    """No NaN or infinity in a (a sum propagates either; a finite overflow to inf also counts
+    as not finite, which is what the callers want)."""
+    return np.isfinite(a.sum())
+
+
+@njit(cache=True)
+def weights(n, alpha, beta, kappa):
     """Mean and covariance weights (W^m, W^c) and lambda of the scaled unscented transform."""
     lam = alpha * alpha * (n + kappa) - n
     wm = np.full(2 * n + 1, 0.5 / (n + lam))
@@ -79,7 +86,7 @@ def _cholesky(A, L):
 
 
 @njit(cache=True)
-def _symmetrize(P):
+def symmetrize(P):
     n = P.shape[0]
     for i in range(n):
         for j in range(i + 1, n):
@@ -89,7 +96,7 @@ def _symmetrize(P):
 
 
 @njit(cache=True)
-def _cholesky_repair(P, L):
+def cholesky_repair(P, L):
     """L L^T = P. If P is not positive definite, repair P in place (symmetrize, floor the
     eigenvalues at EIG_FLOOR_REL * max + EIG_FLOOR_ABS) and factor again.
 
@@ -102,7 +109,7 @@ def _cholesky_repair(P, L):
         for j in range(n):
             if not np.isfinite(P[i, j]):
                 return -1
-    _symmetrize(P)
+    symmetrize(P)
     w, V = np.linalg.eigh(P)
     floor = EIG_FLOOR_REL * max(w.max(), 0.0) + EIG_FLOOR_ABS
     for i in range(n):
@@ -122,15 +129,15 @@ def _cholesky_repair(P, L):
 
 
 @njit(cache=True)
-def _sigma_points(x, P, lam, angle_mask, L, chi):
+def sigma_points(x, P, lam, angle_mask, L, chi):
     """Sigma points chi (2n+1, n) of N(x, P); angle entries wrapped. Returns the repair flag."""
-    status = _cholesky_repair(P, L)
-    _spread(x, L, lam, angle_mask, chi)
+    status = cholesky_repair(P, L)
+    spread(x, L, lam, angle_mask, chi)
     return status
 
 
 @njit(cache=True)
-def _spread(x, L, lam, angle_mask, chi):
+def spread(x, L, lam, angle_mask, chi):
     """Sigma points chi (2n+1, n) around x from a Cholesky factor L of P; angles wrapped."""
     n = x.size
     c = np.sqrt(n + lam)
@@ -144,7 +151,7 @@ def _spread(x, L, lam, angle_mask, chi):
     for j in range(n):
         if angle_mask[j]:
             for i in range(2 * n + 1):
-                chi[i, j] = _wrap(chi[i, j])
+                chi[i, j] = wrap(chi[i, j])
 
 
 @njit(cache=True)
@@ -156,8 +163,8 @@ def _mean(chi, wm, angle_mask, out):
             ref = chi[0, j]
             s = 0.0
             for i in range(npts):
-                s += wm[i] * _wrap(chi[i, j] - ref)
-            out[j] = _wrap(ref + s)
+                s += wm[i] * wrap(chi[i, j] - ref)
+            out[j] = wrap(ref + s)
         else:
             s = 0.0
             for i in range(npts):
@@ -166,21 +173,21 @@ def _mean(chi, wm, angle_mask, out):
 
 
 @njit(cache=True)
-def _residuals(chi, mean, angle_mask, DT):
+def residuals(chi, mean, angle_mask, DT):
     """DT[:, i] = chi_i - mean (wrapped for angles), stored transposed (n, 2n+1)."""
     npts, n = chi.shape
     for j in range(n):
         mj = mean[j]
         if angle_mask[j]:
             for i in range(npts):
-                DT[j, i] = _wrap(chi[i, j] - mj)
+                DT[j, i] = wrap(chi[i, j] - mj)
         else:
             for i in range(npts):
                 DT[j, i] = chi[i, j] - mj
 
 
 @njit(cache=True, fastmath={"reassoc", "contract"})
-def _weighted_outer(AT, BT, wc, out):
+def weighted_outer(AT, BT, wc, out):
     """out = sum_i wc_i A_i B_i^T from transposed residuals AT (na, npts), BT (nb, npts)."""
     na, npts = AT.shape
     nb = BT.shape[0]
@@ -206,17 +213,17 @@ def _weighted_gram(AT, wc, out):
 
 
 @njit(cache=True)
-def _predict_moments(chi_f, wm, wc, Q, angle_mask, x, P, D):
+def predict_moments(chi_f, wm, wc, Q, angle_mask, x, P, D):
     """Unscented prediction: x = mean(f(chi)), P = sum W^c dx dx^T + Q (symmetrized);
     D is a workspace (n, 2n+1)."""
     _mean(chi_f, wm, angle_mask, x)
-    _residuals(chi_f, x, angle_mask, D)
+    residuals(chi_f, x, angle_mask, D)
     _weighted_gram(D, wc, P)
     n = x.size
     for i in range(n):
         for j in range(n):
             P[i, j] += Q[i, j]
-    _symmetrize(P)
+    symmetrize(P)
 
 
 @njit(cache=True)
@@ -242,7 +249,7 @@ def _solve_upper_t(L, b):
 
 
 @njit(cache=True)
-def _gain(C, L, out, row):
+def gain(C, L, out, row):
     """out = C A^{-1} for symmetric positive definite A = L L^T (the Kalman gain K = C S^{-1}
     and the RTS gain G = C (P^-)^{-1}), solved row by row: out_i^T = A^{-1} C_i^T."""
     n, m = C.shape
@@ -256,7 +263,7 @@ def _gain(C, L, out, row):
 
 
 @njit(cache=True)
-def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate, w_out=None):
+def update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate, w_out=None):
     """Unscented measurement update with additive noise R, in place on (x, P).
 
     chi: sigma points (2n+1, n) drawn from (x, P); Zs: h(chi_i) as rows (2n+1, m).
@@ -270,31 +277,31 @@ def _update(x, P, chi, Zs, z, R, wm, wc, x_angles, z_angles, gate, w_out=None):
     zhat = np.empty(m)
     _mean(Zs, wm, z_angles, zhat)
     Dz = np.empty((m, npts))
-    _residuals(Zs, zhat, z_angles, Dz)
+    residuals(Zs, zhat, z_angles, Dz)
     Dx = np.empty((n, npts))
-    _residuals(chi, x, x_angles, Dx)
+    residuals(chi, x, x_angles, Dx)
     S = np.empty((m, m))
     _weighted_gram(Dz, wc, S)
     for a in range(m):
         for b in range(m):
             S[a, b] += R[a, b]
-    _symmetrize(S)
+    symmetrize(S)
     C = np.empty((n, m))
-    _weighted_outer(Dx, Dz, wc, C)
+    weighted_outer(Dx, Dz, wc, C)
     return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate, w_out)
 
 
 @njit(cache=True)
-def _update_linear(x, P, H, z, R, x_angles, z_angles, gate, w_out=None):
+def update_linear(x, P, H, z, R, x_angles, z_angles, gate, w_out=None):
     """Measurement update for a linear h(x) = H x (angle entries of z wrapped), in place.
 
     The unscented transform is exact for a linear function: with sigma points of N(x, P),
     mean(H chi) = H x, sum W^c dz dz^T = H P H^T and sum W^c dx dz^T = P H^T. So this equals
-    :func:`_update` on the same (x, P) (tested) without drawing sigma points:
+    :func:`update` on the same (x, P) (tested) without drawing sigma points:
 
-        z_hat = H x,  S = H P H^T + R,  C = P H^T,  then as :func:`_update`.
+        z_hat = H x,  S = H P H^T + R,  C = P H^T,  then as :func:`update`.
 
-    Returns (status, nis) as :func:`_update`."""
+    Returns (status, nis) as :func:`update`."""
     n = x.size
     m = z.size
     zhat = np.empty(m)
@@ -303,7 +310,7 @@ def _update_linear(x, P, H, z, R, x_angles, z_angles, gate, w_out=None):
         s = 0.0
         for j in range(n):
             s += H[a, j] * x[j]
-        zhat[a] = _wrap(s) if z_angles[a] else s
+        zhat[a] = wrap(s) if z_angles[a] else s
     for i in range(n):
         for a in range(m):
             s = 0.0
@@ -317,7 +324,7 @@ def _update_linear(x, P, H, z, R, x_angles, z_angles, gate, w_out=None):
             for j in range(n):
                 s += H[a, j] * C[j, b]
             S[a, b] = s
-    _symmetrize(S)
+    symmetrize(S)
     return _correct(x, P, C, S, _innovation(z, zhat, z_angles), x_angles, gate, w_out)
 
 
@@ -328,7 +335,7 @@ def _innovation(z, zhat, z_angles):
     y = np.empty(m)
     for a in range(m):
         d = z[a] - zhat[a]
-        y[a] = _wrap(d) if z_angles[a] else d
+        y[a] = wrap(d) if z_angles[a] else d
     return y
 
 
@@ -336,10 +343,10 @@ def _innovation(z, zhat, z_angles):
 def _correct(x, P, C, S, y, x_angles, gate, w_out=None):
     """Kalman correction from the moments: K = C S^-1, x += K y, P -= K S K^T (upper triangle
     mirrored), gated on nis = y^T S^-1 y = w^T w, w = L_S^-1 y. Returns (status, nis) as
-    :func:`_update`; ``w_out`` receives w."""
+    :func:`update`; ``w_out`` receives w."""
     n, m = C.shape
     Ls = np.zeros((m, m))
-    if _cholesky_repair(S, Ls) < 0:
+    if cholesky_repair(S, Ls) < 0:
         return 2, np.inf
     w = y.copy()
     _solve_lower(Ls, w)
@@ -353,14 +360,14 @@ def _correct(x, P, C, S, y, x_angles, gate, w_out=None):
         return 1, nis
     _solve_upper_t(Ls, w)  # w = S^-1 y
     K = np.empty((n, m))
-    _gain(C, Ls, K, np.empty(m))  # K = C S^-1
+    gain(C, Ls, K, np.empty(m))  # K = C S^-1
     for i in range(n):
         s = 0.0
         for a in range(m):
             s += C[i, a] * w[a]
         x[i] += s
         if x_angles[i]:
-            x[i] = _wrap(x[i])
+            x[i] = wrap(x[i])
     KS = np.empty((n, m))
     for i in range(n):
         for b in range(m):

@@ -16,8 +16,8 @@ import math
 from dataclasses import dataclass
 
 from ..errors import DataError
-from ..log import Mounting
 from ..records import Record, records_to_log
+from ..robot import Mounting
 from .waves import WaveWindow, estimate_sea_state
 
 #: the streams the estimator reads

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ReaderError
-from ..log import A50_UNITS, Dvl
+from ..log import Dvl
+from ..robot import A50_UNITS
 
 #: what one malformed line, message or field of untrusted input can raise while being decoded:
 #: bad values (ValueError, TypeError, KeyError, AttributeError, IndexError), numbers too large

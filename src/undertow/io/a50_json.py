@@ -53,7 +53,8 @@ def is_position_report(obj: dict) -> bool:
     return obj.get("type") == "position_local"
 
 
-def _covariance(obj: dict):
+def report_covariance(obj: dict):
+    """A report's ``covariance`` field as a 3 x 3 array; None when absent or not 3 x 3."""
     cov = obj.get("covariance")
     if cov is None:
         return None
@@ -76,7 +77,7 @@ def add_velocity_report(rows: DvlRows, obj: dict, t: float) -> None:
         (float(obj["vx"]), float(obj["vy"]), float(obj["vz"])),
         bool(obj.get("velocity_valid", True)),
         fom=float(obj.get("fom", math.nan)),
-        covariance=_covariance(obj),
+        covariance=report_covariance(obj),
         altitude=float(obj.get("altitude", math.nan)),
         beams=_beams(obj),
         raw_altitude=float(obj.get("altitude", math.nan)),
@@ -91,7 +92,7 @@ def velocity_fields(obj: dict) -> tuple[dict, float]:
     _report_time_ms(obj)
     tov = obj.get("time_of_validity")
     velocity = (float(obj["vx"]), float(obj["vy"]), float(obj["vz"]))
-    cov = _covariance(obj)
+    cov = report_covariance(obj)
     rng, ok, vel = beam_columns(_beams(obj))
     fields = {
         "velocity": velocity,

@@ -55,7 +55,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ReaderError
-from ..log import Log, Mounting
+from ..log import Log
+from ..robot import Mounting
 from ._collect import MALFORMED, Notes, read_regular_bytes
 from .dataflash_records import (
     BinaryScanner,

@@ -38,8 +38,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ConfigError
-from ..log import G0, Mounting, SensorMount
+from ..log import G0
 from ..records import Record
+from ..robot import Mounting, SensorMount
 from ..rotations import matrix_to_rpy, rpy_to_quaternion_scalar
 from ._collect import MALFORMED
 

@@ -14,11 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .._util.atomic import atomic_path
+from .._util.atomic import atomic_path, atomic_write_text
 from ..errors import DataError, ReaderError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
 from ._collect import MALFORMED, read_regular_bytes
-from .tum import _atomic_write_text
 
 _TYPES = {
     "char": "i1",
@@ -69,7 +68,7 @@ def write_ply(path, points, properties: dict | None = None, binary: bool = True)
             tmp.write_bytes(header.encode("ascii") + table.tobytes())
     else:
         body = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in table.tolist())
-        _atomic_write_text(path, header + body)
+        atomic_write_text(path, header + body)
     return path
 
 

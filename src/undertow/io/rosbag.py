@@ -11,7 +11,7 @@ to its sensor frames, body forward-right-down; see :mod:`undertow.io.topics`), e
 defaults; ``metadata['mounting_source']`` says which. A user-given topic that is not in the bag
 gives one warning line. A directory without ``metadata.yaml`` holding a single ``.mcap``/``.db3``
 is read as that file. DVL messages without beam vectors (the A50 driver's) get the A50 geometry,
-or the one recorded in the sidecar's ``metadata.dvl_geometry`` (``log.DvlGeometry.to_dict``:
+or the one recorded in the sidecar's ``metadata.dvl_geometry`` (``robot.DvlGeometry.to_dict``:
 a Nortek or Teledyne head, say). The multibeam (``sensor_msgs/PointCloud2`` detections) takes
 its range limits from the sidecar's ``multibeam`` entry when there is one. rosbags errors
 become one-line :class:`~undertow.errors.ReaderError`.
@@ -35,10 +35,11 @@ import yaml
 from rosbags.highlevel import AnyReader
 
 from ..errors import ReaderError, UndertowError
-from ..log import Dvl, DvlGeometry, Log, Mounting
+from ..log import Dvl, Log
+from ..robot import DvlGeometry, Mounting
 from ..rotations import quaternion_to_rpy
 from ._collect import MALFORMED, DvlRows, Notes, check_regular
-from .a50_json import _covariance, add_velocity_report, dead_reckoning_from_rows
+from .a50_json import add_velocity_report, dead_reckoning_from_rows, report_covariance
 from .msgdefs import dvl_typestore
 from .read_options import LogOptions
 from .rosbag_choices import apply_time_base, depth_sign, dvl_frame, resolve_topics
@@ -327,7 +328,7 @@ def _merge_json(dvl: Dvl, order: np.ndarray, rows: Rows, metadata: dict) -> Dvl:
         obj = by_key.get(key)
         if obj is None:
             continue
-        obj_cov = _covariance(obj)
+        obj_cov = report_covariance(obj)
         if obj_cov is not None and np.isnan(cov[i]).all():
             cov[i] = obj_cov
         if obj.get("time_of_validity") is not None:

@@ -11,7 +11,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..log import Dvl, Mounting
+from ..log import Dvl
+from ..robot import Mounting
 from ._collect import Notes
 from .clock import choose_time_base
 from .read_options import LogOptions

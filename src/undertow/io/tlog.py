@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ReaderError
-from ..log import Log, Mounting
+from ..log import Log
 from ..records import records_to_log
+from ..robot import Mounting
 from ._collect import MALFORMED, Notes, read_regular_bytes
 from .mavlink import MavlinkConfig, MavlinkMapper
 

@@ -39,7 +39,7 @@ STREAM_FIELDS = (
 )
 
 
-SENSOR_NAMES = ("imu", "dvl", "sonar", "barometer")  # as in log.Mounting; always in /tf_static
+SENSOR_NAMES = ("imu", "dvl", "sonar", "barometer")  # as in robot.Mounting; always in /tf_static
 #: every sensor with a tf frame: the multibeam's transform is written when the log has one
 ALL_SENSOR_NAMES = (*SENSOR_NAMES, "multibeam")
 

@@ -14,16 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .._util.atomic import atomic_path
+from .._util.atomic import atomic_write_text
 from ..errors import DataError, ReaderError
 from ..log import GroundTruth
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
 from ._collect import Notes, check_regular, time_order
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
 
 
 def write_tum(path, t, position, orientation_rpy) -> Path:
@@ -41,7 +36,7 @@ def write_tum(path, t, position, orientation_rpy) -> Path:
     q = rpy_to_quaternion(rpy).reshape(n, 4)
     rows = np.column_stack([t, position, q])
     text = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows)
-    _atomic_write_text(path, "# t tx ty tz qx qy qz qw\n" + text)
+    atomic_write_text(path, "# t tx ty tz qx qy qz qw\n" + text)
     return path
 
 

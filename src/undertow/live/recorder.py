@@ -102,8 +102,9 @@ from ..io.rosbag_write import (
     tf_static_message,
 )
 from ..io.topics import SENSOR_NAMES, TopicMap
-from ..log import Mounting, SonarRange
+from ..log import SonarRange
 from ..records import RECORD_FIELDS, Record
+from ..robot import Mounting
 from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
 from .cdr import DVL_FORM, DVL_TAIL, CdrTemplate, stamp, string_cdr
 from .mcap_append import MessageAppender

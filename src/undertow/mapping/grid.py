@@ -2,10 +2,10 @@
 
 :class:`ChunkedGrid` holds the evidence mass sum_i k(m_*, m_i) y_i and sum_i k(m_*, m_i)(1 - y_i)
 of ``eq:alpha_param`` / ``eq:beta_param`` in dense 8^3 chunks (float32) found through a hash of
-chunk coordinates, so memory grows with the mapped volume, not with the bounding box. Cell index
-i = floor(p / res), centre (i + 1/2) res. The priors alpha_0, beta_0 are added when the map is
-read out (:class:`~undertow.occupancy.OccupancyMap`), so only cells that received kernel mass are
-reported.
+chunk coordinates (:mod:`undertow.mapping.chunks`), so memory grows with the mapped volume, not
+with the bounding box. Cell index i = floor(p / res), centre (i + 1/2) res. The priors alpha_0,
+beta_0 are added when the map is read out (:class:`~undertow.occupancy.OccupancyMap`), so only
+cells that received kernel mass are reported.
 """
 
 from __future__ import annotations
@@ -13,22 +13,19 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from ..errors import DataError
-from .kernels import _OFFSET as _CHUNK_LIMIT
+from .chunks import CHUNK, CHUNK_LIMIT, add_mass_to_cells, rehash
 from .kernels import (
     ALL_CELLS,
-    CHUNK,
     MODE_CELL,
     MODE_PRODUCT,
-    _add_mass,
-    _count_chunks,
-    _extent,
-    _insert_chunks,
-    _rehash,
-    _scatter_parallel,
-    _scatter_slab,
-    _slab_splits,
+    count_chunks,
+    insert_chunks,
+    scatter_parallel,
+    scatter_slab,
+    slab_splits,
 )
 from .threads import parallel_slot
 
@@ -72,7 +69,7 @@ class ChunkedGrid:
         keys, alpha, beta = self._keys, self._alpha, self._beta
         self._allocate(keys.shape[0] * 3 // 2)
         self._keys[:n], self._alpha[:n], self._beta[:n] = keys[:n], alpha[:n], beta[:n]
-        _rehash(self._keys, n, self._table_keys, self._table_vals)
+        rehash(self._keys, n, self._table_keys, self._table_vals)
 
     @property
     def n_chunks(self) -> int:
@@ -103,7 +100,7 @@ class ChunkedGrid:
         lo, hi = var_bounds
         res = self.resolution
         while start < n:
-            start = _insert_chunks(start, mode, points, variance, lo, hi, l_min, l_max, res,
+            start = insert_chunks(start, mode, points, variance, lo, hi, l_min, l_max, res,
                                    *self._tables()[:4])  # fmt: skip
             if start < n:
                 self._grow()
@@ -112,14 +109,14 @@ class ChunkedGrid:
                 beta)  # fmt: skip
         with parallel_slot(n) as parts:
             if parts > 1:
-                _scatter_parallel(*_slab_splits(points, res, parts, *extent[:2]), *args)
+                scatter_parallel(*slab_splits(points, res, parts, *extent[:2]), *args)
             else:
-                _scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
+                scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
 
     def _check_extent(self, extent) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range (and
         finite); ``extent`` as :func:`points_extent`."""
-        limit = (_CHUNK_LIMIT - 2) * CHUNK * self.resolution
+        limit = (CHUNK_LIMIT - 2) * CHUNK * self.resolution
         lo, hi, finite = extent
         if not (finite and max(-lo.min(), hi.max()) < limit):
             raise DataError(f"map coordinates beyond +-{limit:.0f} m: shift the origin closer")
@@ -165,9 +162,9 @@ class ChunkedGrid:
             return int(peak(held + chunks_per_sample))  # one sample's support alone is too much
         limit_chunks = held + int(limit_bytes // (GROWTH_PEAK * CHUNK_BYTES)) + 1
         table = np.full(1 << int(np.ceil(np.log2(2 * limit_chunks + 2))), -1, np.int64)
-        _rehash(self._keys, held, table, np.zeros(table.size, np.int64))
+        rehash(self._keys, held, table, np.zeros(table.size, np.int64))
         lo, hi = var_bounds
-        chunks = _count_chunks(mode, points, variance, lo, hi, l_min, l_max, self.resolution,
+        chunks = count_chunks(mode, points, variance, lo, hi, l_min, l_max, self.resolution,
                                table, held, limit_chunks)  # fmt: skip
         return int(peak(chunks))
 
@@ -178,7 +175,7 @@ class ChunkedGrid:
             return
         self._check_extent(points_extent((cells + 0.5) * self.resolution))
         while start < n:
-            start = _add_mass(start, cells, d_alpha, d_beta, *self._tables())
+            start = add_mass_to_cells(start, cells, d_alpha, d_beta, *self._tables())
             if start < n:
                 self._grow()
 
@@ -189,3 +186,22 @@ class ChunkedGrid:
         c, i, j, k = np.nonzero((alpha + beta) > 0)
         cells = self._keys[c] * CHUNK + np.stack([i, j, k], axis=1)
         return cells, alpha[c, i, j, k].astype(float), beta[c, i, j, k].astype(float)
+
+
+@njit(cache=True)
+def _extent(points):
+    """(min (3,), max (3,), all finite) over the rows of ``points`` (N, 3), N > 0, in one pass
+    (numpy's axis-0 reductions of an (N, 3) array are many times slower)."""
+    lo = points[0].copy()
+    hi = points[0].copy()
+    finite = True
+    for i in range(points.shape[0]):
+        for j in range(3):
+            v = points[i, j]
+            if v < lo[j]:
+                lo[j] = v
+            elif v > hi[j]:
+                hi[j] = v
+            elif v != v:
+                finite = False
+    return lo, hi, finite

@@ -12,15 +12,17 @@ Public (numpy, for users and tests):
   and the per-axis distance is |d_j| (the signed d_j would make the kernel one-sided and not
   sparse). The support is the box |d_j| < l_j, so off the axes it differs from the radial kernel.
 
-Private (numba, plain arrays): the scatter kernel loops over training samples and adds each
-sample's kernel weight to the cells inside its compact support, found by index arithmetic
-(cell index i = floor(p / res), centre (i + 1/2) res); the grid is a hash of dense 8^3 chunks in
-plain arrays (open addressing, linear probing). A scatter is two passes: :func:`_insert_chunks`
-places every chunk the supports touch (returning the first sample it could not place when the
-chunk arrays are full; the caller grows them and resumes), then :func:`_scatter_slab` adds the
-mass with the table read only, so :func:`_scatter_parallel` can run it on several threads, each
-owning a slab of cells along x or y and walking all samples in order: every cell receives the
-same terms in the same order whatever the slabs, so the map is the same bit for bit.
+Numba, plain arrays: the scatter kernel loops over training samples and adds each sample's
+kernel weight to the cells inside its compact support, found by index arithmetic (cell index
+i = floor(p / res), centre (i + 1/2) res); the grid is a hash of dense 8^3 chunks in plain arrays
+(:mod:`undertow.mapping.chunks`). A scatter is two passes: :func:`insert_chunks` places every
+chunk the supports touch (returning the first sample it could not place when the chunk arrays
+are full; the caller grows them and resumes), then :func:`scatter_slab` adds the mass with the
+table read only, so :func:`scatter_parallel` can run it on several threads, each owning a slab
+of cells along x or y (:func:`slab_splits`) and walking all samples in order: every cell
+receives the same terms in the same order whatever the slabs, so the map is the same bit
+for bit. :func:`count_chunks` counts the chunks a scatter would touch (the grid's memory
+estimate).
 """
 
 from __future__ import annotations
@@ -28,9 +30,17 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-CHUNK = 8  # cells per chunk edge
-CHUNK_SHIFT = 3  # log2(CHUNK)
-_OFFSET = 1 << 20  # chunk coordinates are packed in 21 bits per axis
+from .chunks import (
+    CHUNK,
+    CHUNK_SHIFT,
+    chunk_box,
+    find_or_insert,
+    home_slot,
+    pack_key,
+    same_box,
+    set_box,
+)
+
 MODE_PRODUCT, MODE_RADIAL, MODE_CELL = 0, 1, 2
 ALL_CELLS = 1 << 62  # slab bounds (-ALL_CELLS, ALL_CELLS) hold every cell
 _TWO_PI = 2.0 * np.pi
@@ -52,25 +62,6 @@ def product_kernel(delta, length_scales, sigma0: float = 1.0) -> np.ndarray:
     """
     delta = np.asarray(delta, dtype=float)
     return sigma0 * np.prod(sparse_kernel(delta, length_scales), axis=-1)
-
-
-@njit(cache=True)
-def _extent(points):
-    """(min (3,), max (3,), all finite) over the rows of ``points`` (N, 3), N > 0, in one pass
-    (numpy's axis-0 reductions of an (N, 3) array are many times slower)."""
-    lo = points[0].copy()
-    hi = points[0].copy()
-    finite = True
-    for i in range(points.shape[0]):
-        for j in range(3):
-            v = points[i, j]
-            if v < lo[j]:
-                lo[j] = v
-            elif v > hi[j]:
-                hi[j] = v
-            elif v != v:
-                finite = False
-    return lo, hi, finite
 
 
 @njit(cache=True, inline="always")
@@ -111,97 +102,6 @@ def _sincos(x):
     if q == 2:
         return -s, -c
     return -c, s
-
-
-@njit(cache=True, inline="always")
-def _pack(cx, cy, cz):
-    return ((cx + _OFFSET) << 42) | ((cy + _OFFSET) << 21) | (cz + _OFFSET)
-
-
-@njit(cache=True, inline="always")
-def _slot(key, mask):
-    h = np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)
-    h ^= h >> np.uint64(29)
-    return np.int64(h & np.uint64(mask))
-
-
-@njit(cache=True)
-def _find_or_insert(cx, cy, cz, table_keys, table_vals, chunk_keys, n_chunks):
-    """Index of chunk (cx, cy, cz), inserting it if new; -1 when the chunk arrays are full."""
-    key = _pack(cx, cy, cz)
-    mask = table_keys.shape[0] - 1
-    s = _slot(key, mask)
-    while True:
-        k = table_keys[s]
-        if k == key:
-            return table_vals[s]
-        if k == -1:
-            n = n_chunks[0]
-            if n >= chunk_keys.shape[0]:
-                return -1
-            table_keys[s] = key
-            table_vals[s] = n
-            chunk_keys[n, 0] = cx
-            chunk_keys[n, 1] = cy
-            chunk_keys[n, 2] = cz
-            n_chunks[0] = n + 1
-            return n
-        s = (s + 1) & mask
-
-
-@njit(cache=True)
-def _rehash(chunk_keys, n, table_keys, table_vals):
-    """Fill an empty (all -1) table with the first n chunks."""
-    mask = table_keys.shape[0] - 1
-    for c in range(n):
-        key = _pack(chunk_keys[c, 0], chunk_keys[c, 1], chunk_keys[c, 2])
-        s = _slot(key, mask)
-        while table_keys[s] != -1:
-            s = (s + 1) & mask
-        table_keys[s] = key
-        table_vals[s] = c
-
-
-@njit(cache=True, inline="always")
-def _same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
-    """Whether chunk box (first chunk, counts) is the one held in ``box``."""
-    return (box[0] == c0x and box[1] == c0y and box[2] == c0z and box[3] == ncx
-            and box[4] == ncy and box[5] == ncz)  # fmt: skip
-
-
-@njit(cache=True, inline="always")
-def _set_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
-    box[0], box[1], box[2], box[3], box[4], box[5] = c0x, c0y, c0z, ncx, ncy, ncz
-
-
-@njit(cache=True, inline="always")
-def _lookup(cx, cy, cz, table_keys, table_vals):
-    """Index of chunk (cx, cy, cz), which must be in the table (read only: thread safe)."""
-    key = _pack(cx, cy, cz)
-    mask = table_keys.shape[0] - 1
-    s = _slot(key, mask)
-    while table_keys[s] != key:
-        s = (s + 1) & mask
-    return table_vals[s]
-
-
-@njit(cache=True, inline="always")
-def _chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals):
-    """The chunks of the support box (first cell ``lo``, ``cnt`` cells per axis) into
-    ``chunks``, indexed from chunk ``c0`` (set here), unless ``box`` already holds them:
-    neighbouring samples share chunks. The table is only read (thread safe)."""
-    c0x, c0y, c0z = lo[0] >> CHUNK_SHIFT, lo[1] >> CHUNK_SHIFT, lo[2] >> CHUNK_SHIFT
-    ncx = ((lo[0] + cnt[0] - 1) >> CHUNK_SHIFT) - c0x + 1
-    ncy = ((lo[1] + cnt[1] - 1) >> CHUNK_SHIFT) - c0y + 1
-    ncz = ((lo[2] + cnt[2] - 1) >> CHUNK_SHIFT) - c0z + 1
-    c0[0], c0[1], c0[2] = c0x, c0y, c0z
-    if _same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
-        return
-    for a in range(ncx):
-        for b in range(ncy):
-            for c in range(ncz):
-                chunks[a, b, c] = _lookup(c0x + a, c0y + b, c0z + c, table_keys, table_vals)
-    _set_box(box, c0x, c0y, c0z, ncx, ncy, ncz)
 
 
 @njit(cache=True, inline="always")
@@ -284,10 +184,10 @@ def _add_sample(s, mode, label, sigma0, l0, lo, cnt, w, a0, a1, b0, b1, chunks, 
 
 
 @njit(cache=True, nogil=True)
-def _insert_chunks(start, mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys,
+def insert_chunks(start, mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys,
                    table_vals, chunk_keys, n_chunks):  # fmt: skip
     """Insert every chunk the supports of samples start.. touch (the pass before
-    :func:`_scatter_slab`); returns len(points) when done, else the first sample whose
+    :func:`scatter_slab`); returns len(points) when done, else the first sample whose
     chunks did not fit (the caller grows the arrays and resumes there)."""
     n = points.shape[0]
     lo = np.zeros(3, np.int64)
@@ -300,16 +200,16 @@ def _insert_chunks(start, mode, points, variance, var_lo, var_hi, l_min, l_max, 
         ncx = ((lo[0] + cnt[0] - 1) >> CHUNK_SHIFT) - c0x + 1
         ncy = ((lo[1] + cnt[1] - 1) >> CHUNK_SHIFT) - c0y + 1
         ncz = ((lo[2] + cnt[2] - 1) >> CHUNK_SHIFT) - c0z + 1
-        if _same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
+        if same_box(box, c0x, c0y, c0z, ncx, ncy, ncz):
             continue
         for a in range(ncx):
             for b in range(ncy):
                 for c in range(ncz):
-                    ci = _find_or_insert(c0x + a, c0y + b, c0z + c, table_keys, table_vals,
+                    ci = find_or_insert(c0x + a, c0y + b, c0z + c, table_keys, table_vals,
                                          chunk_keys, n_chunks)  # fmt: skip
                     if ci < 0:
                         return s
-        _set_box(box, c0x, c0y, c0z, ncx, ncy, ncz)
+        set_box(box, c0x, c0y, c0z, ncx, ncy, ncz)
     return n
 
 
@@ -327,13 +227,13 @@ def _scratch(l_min, l_max, res):
 
 
 @njit(cache=True, nogil=True)  # other threads (links, Dask tiles) run meanwhile
-def _scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_lo, var_hi,
+def scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_lo, var_hi,
                   l_min, l_max, res, table_keys, table_vals, alpha, beta):  # fmt: skip
     """Add k(m_*, m_i) y_i to alpha and k(m_*, m_i)(1 - y_i) to beta (``eq:alpha_param``,
     ``eq:beta_param``; ``eq:new_conc_params_*`` in product mode) for every sample, in the cells
     whose index along ``axis`` (0 or 1) is in [first, stop) (the slab; everything with
     first, stop = -ALL_CELLS, ALL_CELLS). Every chunk touched must already be in the table
-    (:func:`_insert_chunks`).
+    (:func:`insert_chunks`).
 
     mode 0: sigma_0 prod_j k(|d_j|; l_ij) with l_ij from ``eq:lengthscale_1``:
     l_ij = s~_ij^2 (l_max_j - l_min_j) + l_min_j,
@@ -359,7 +259,7 @@ def _scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_
             continue
         _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt)
         _support_weights(s, mode, points, res, lo, cnt, w)
-        _chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals)
+        chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals)
         a0, a1, b0, b1 = (u0, u1, 0, cnt[1]) if axis == 0 else (0, cnt[0], u0, u1)
         _add_sample(s, mode, label, sigma0, lengths[0], lo, cnt, w, a0, a1, b0, b1, chunks, c0,
                     alpha, beta)  # fmt: skip
@@ -368,7 +268,7 @@ def _scatter_slab(axis, first, stop, mode, points, label, sigma0, variance, var_
 @njit(cache=True, nogil=True)
 def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo, var_hi, l_min,
                      l_max, res, table_keys, table_vals, alpha, beta):  # fmt: skip
-    """:func:`_scatter_slab` in product mode (the adaptive kernel), in its own loop: numba did
+    """:func:`scatter_slab` in product mode (the adaptive kernel), in its own loop: numba did
     not specialize the shared loop on a constant mode, and this runs about twice as fast as the
     shared loop did. The per-axis kernels are written out here: as an inlined helper writing
     ``w`` they ran about 1.5x slower."""
@@ -407,7 +307,7 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
                 else:
                     w[j, a] = (2.0 + cs) * (1.0 - r) * _THIRD + (sn if d >= 0.0 else -sn) * _INV_2PI
                 cs, sn = cs * cd - sn * sd, sn * cd + cs * sd
-        _chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals)
+        chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals)
         a0, a1, b0, b1 = (u0, u1, 0, cnt[1]) if axis == 0 else (0, cnt[0], u0, u1)
         # scalars, not array reads, in the loops: the stores to alpha/beta could alias them
         y, sig, lx, ly, lz, nz = label[s], sigma0[s], lo[0], lo[1], lo[2], cnt[2]
@@ -437,24 +337,24 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def _scatter_parallel(axis, splits, mode, points, label, sigma0, variance, var_lo, var_hi, l_min,
+def scatter_parallel(axis, splits, mode, points, label, sigma0, variance, var_lo, var_hi, l_min,
                       l_max, res, table_keys, table_vals, alpha, beta):  # fmt: skip
-    """:func:`_scatter_slab` for the slabs [splits[t], splits[t + 1]) on numba's threads. Each
+    """:func:`scatter_slab` for the slabs [splits[t], splits[t + 1]) on numba's threads. Each
     thread walks the samples in order and writes only its own slab's cells, so every cell gets
     the same terms in the same order as in one slab (bit-identical maps) and no two threads
     write one cell."""
     for part in prange(splits.shape[0] - 1):
-        _scatter_slab(axis, splits[part], splits[part + 1], mode, points, label, sigma0,
+        scatter_slab(axis, splits[part], splits[part + 1], mode, points, label, sigma0,
                       variance, var_lo, var_hi, l_min, l_max, res, table_keys, table_vals, alpha,
                       beta)  # fmt: skip
 
 
 @njit(cache=True)
-def _slab_splits(points, res, parts, p_lo, p_hi):
-    """(axis, splits) for :func:`_scatter_parallel`: the horizontal axis along which the
+def slab_splits(points, res, parts, p_lo, p_hi):
+    """(axis, splits) for :func:`scatter_parallel`: the horizontal axis along which the
     samples' cells spread most, and ``parts`` + 1 cell-index boundaries along it (open at both
     ends) at the quantiles of the samples' cells, so each slab gets about as many samples;
-    ``p_lo``, ``p_hi``: the points' extent (:func:`_extent`)."""
+    ``p_lo``, ``p_hi``: the points' extent (:func:`~undertow.mapping.grid.points_extent`)."""
     n = points.shape[0]
     lo0, hi0, lo1, hi1 = p_lo[0], p_hi[0], p_lo[1], p_hi[1]
     axis = 0 if hi0 - lo0 >= hi1 - lo1 else 1
@@ -480,10 +380,10 @@ def _slab_splits(points, res, parts, p_lo, p_hi):
 
 
 @njit(cache=True)
-def _count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys, n,
+def count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys, n,
                   limit):  # fmt: skip
     """Number of distinct chunks the scatter kernel would touch (the supports of ``points``,
-    computed as in :func:`_scatter_slab`), counting on from ``n`` chunks already in ``table_keys``
+    computed as in :func:`scatter_slab`), counting on from ``n`` chunks already in ``table_keys``
     (a key-only hash set, size a power of two > 2 ``limit``); stops once it exceeds ``limit``."""
     mask = table_keys.shape[0] - 1
     lo = np.zeros(3, np.int64)
@@ -498,8 +398,8 @@ def _count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, tab
         for cx in range(lo[0], hi[0] + 1):
             for cy in range(lo[1], hi[1] + 1):
                 for cz in range(lo[2], hi[2] + 1):
-                    key = _pack(cx, cy, cz)
-                    slot = _slot(key, mask)
+                    key = pack_key(cx, cy, cz)
+                    slot = home_slot(key, mask)
                     while table_keys[slot] != -1 and table_keys[slot] != key:
                         slot = (slot + 1) & mask
                     if table_keys[slot] == -1:
@@ -508,53 +408,3 @@ def _count_chunks(mode, points, variance, var_lo, var_hi, l_min, l_max, res, tab
                         if n > limit:
                             return n
     return n
-
-
-@njit(cache=True)
-def _add_mass(start, cells, d_alpha, d_beta, table_keys, table_vals, chunk_keys, n_chunks,
-              alpha, beta):  # fmt: skip
-    """Add per-cell mass (seeding from a prior map); resumes as :func:`_insert_chunks` does."""
-    for s in range(start, cells.shape[0]):
-        ix, iy, iz = cells[s, 0], cells[s, 1], cells[s, 2]
-        ci = _find_or_insert(ix >> CHUNK_SHIFT, iy >> CHUNK_SHIFT, iz >> CHUNK_SHIFT,
-                             table_keys, table_vals, chunk_keys, n_chunks)  # fmt: skip
-        if ci < 0:
-            return s
-        alpha[ci, ix & 7, iy & 7, iz & 7] += d_alpha[s]
-        beta[ci, ix & 7, iy & 7, iz & 7] += d_beta[s]
-    return cells.shape[0]
-
-
-@njit(cache=True, nogil=True)
-def _expand_part(i0, i1, origin, direction, r, var, sig, sensor, first, f, points, label, sigma0,
-                 pose_variance, ray, sensor_out):  # fmt: skip
-    """Training samples of rays i0 .. i1 - 1 (see ``samples.py``): ray i's hit at o + r v (label
-    1) in row i, its free samples at o + k f v, k = 0 .. (label 0), in rows first[i] ..
-    first[i + 1] - 1; every sample carries its ray's variance, sigma_0, index and sensor. Each
-    ray writes only its own rows, so parts run on separate threads."""
-    for i in range(i0, i1):
-        for j in range(3):
-            points[i, j] = origin[i, j] + r[i] * direction[i, j]
-            pose_variance[i, j] = var[i, j]
-        label[i] = 1.0
-        sigma0[i] = sig[i]
-        ray[i] = i
-        sensor_out[i] = sensor[i]
-        for k in range(first[i], first[i + 1]):
-            s = (k - first[i]) * f
-            for j in range(3):
-                points[k, j] = origin[i, j] + s * direction[i, j]
-                pose_variance[k, j] = var[i, j]
-            label[k] = 0.0
-            sigma0[k] = sig[i]
-            ray[k] = i
-            sensor_out[k] = sensor[i]
-
-
-@njit(cache=True, parallel=True, nogil=True)
-def _expand_parallel(splits, origin, direction, r, var, sig, sensor, first, f, points, label,
-                     sigma0, pose_variance, ray, sensor_out):  # fmt: skip
-    """:func:`_expand_part` for the rays [splits[t], splits[t + 1]) on numba's threads."""
-    for part in prange(splits.shape[0] - 1):
-        _expand_part(splits[part], splits[part + 1], origin, direction, r, var, sig, sensor,
-                     first, f, points, label, sigma0, pose_variance, ray, sensor_out)  # fmt: skip

@@ -25,8 +25,9 @@ import dataclasses
 import numpy as np
 
 from ..errors import ConfigError
-from ..log import Log, Mounting
+from ..log import Log
 from ..occupancy import OccupancyMap
+from ..robot import Mounting
 from ..trajectory import Trajectory
 from .config import MappingConfig
 from .mappers import mapper_from_config

@@ -24,13 +24,13 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit, prange
 
 from ..errors import DataError, MissingStreamError
 from ..log import Log
 from ..rotations import rpy_to_matrix, wrap_angle
 from ..trajectory import Trajectory
 from .config import MappingConfig
-from .kernels import _expand_parallel, _expand_part
 from .threads import parallel_slot
 
 SENSOR_DVL, SENSOR_SONAR, SENSOR_MULTIBEAM = 0, 1, 2
@@ -252,8 +252,8 @@ def _ray_splits(first: np.ndarray, parts: int) -> np.ndarray:
 
 def expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
     """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f (numba kernel
-    :func:`~undertow.mapping.kernels._expand_part`: hits first, then free samples ray by ray,
-    on numba's threads for large batches)."""
+    :func:`_expand_part`: hits first, then free samples ray by ray, on numba's threads for
+    large batches)."""
     origin, direction, r, var, sig = (np.ascontiguousarray(a, float)
                                       for a in (origin, direction, r, var, sig))  # fmt: skip
     n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
@@ -273,3 +273,38 @@ def expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
     if rays_ok:  # every sample is finite, labelled 0 or 1, with its ray's sigma_0 and variance
         return Samples._checked_rays(*arrays, origin, dropped)
     return Samples(*arrays, origin, dropped)  # names the bad field
+
+
+@njit(cache=True, nogil=True)
+def _expand_part(i0, i1, origin, direction, r, var, sig, sensor, first, f, points, label, sigma0,
+                 pose_variance, ray, sensor_out):  # fmt: skip
+    """Training samples of rays i0 .. i1 - 1 (see ``samples.py``): ray i's hit at o + r v (label
+    1) in row i, its free samples at o + k f v, k = 0 .. (label 0), in rows first[i] ..
+    first[i + 1] - 1; every sample carries its ray's variance, sigma_0, index and sensor. Each
+    ray writes only its own rows, so parts run on separate threads."""
+    for i in range(i0, i1):
+        for j in range(3):
+            points[i, j] = origin[i, j] + r[i] * direction[i, j]
+            pose_variance[i, j] = var[i, j]
+        label[i] = 1.0
+        sigma0[i] = sig[i]
+        ray[i] = i
+        sensor_out[i] = sensor[i]
+        for k in range(first[i], first[i + 1]):
+            s = (k - first[i]) * f
+            for j in range(3):
+                points[k, j] = origin[i, j] + s * direction[i, j]
+                pose_variance[k, j] = var[i, j]
+            label[k] = 0.0
+            sigma0[k] = sig[i]
+            ray[k] = i
+            sensor_out[k] = sensor[i]
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _expand_parallel(splits, origin, direction, r, var, sig, sensor, first, f, points, label,
+                     sigma0, pose_variance, ray, sensor_out):  # fmt: skip
+    """:func:`_expand_part` for the rays [splits[t], splits[t + 1]) on numba's threads."""
+    for part in prange(splits.shape[0] - 1):
+        _expand_part(splits[part], splits[part + 1], origin, direction, r, var, sig, sensor,
+                     first, f, points, label, sigma0, pose_variance, ray, sensor_out)  # fmt: skip

@@ -25,9 +25,10 @@ omega + k V (oncoming waves).
 Free vehicle: a plan-view path (x_p(s), y_p(s), psi(s)) by arc length s -- lawnmower passes
 (straight legs along x joined by half circles) or way points joined by straight legs whose
 corners are circular arcs of radius r (tangent length r tan(|phi|/2) for a turn phi; yaw rate
-V / r on the arc) -- followed at speed V with ramps at a commanded depth d, plus the orbital
-particle displacement xi(x, d, t) at the vehicle (it is carried by the flow); roll and pitch
-follow the local slope of the orbital surface through the vehicle, scaled by an attitude gain G:
+V / r on the arc; :mod:`undertow.sim.paths`) -- followed at speed V with ramps at a commanded
+depth d, plus the orbital particle displacement xi(x, d, t) at the vehicle (it is carried by the
+flow); roll and pitch follow the local slope of the orbital surface through the vehicle, scaled
+by an attitude gain G:
 
     p(t) = (x_p, y_p, d) + xi(x_p, y_p, d, t),   yaw = psi,
     pitch = G sigma cos(beta - psi),   roll = -G sigma sin(beta - psi),
@@ -47,6 +48,7 @@ from functools import cached_property
 import numpy as np
 
 from ..rotations import rpy_to_matrix
+from .paths import waypoint_path
 from .scenario.model import CarriageModel, SurveyModel, WaypointsModel
 from .wavefield import WaveField
 from .waves import LinearWave
@@ -207,44 +209,6 @@ class WaypointMotion:
 
     def pose(self, t) -> tuple[np.ndarray, np.ndarray]:
         return free_pose(self.config, self.wave, self.path, t)
-
-
-def corner_geometry(points: np.ndarray, radius: float):
-    """Per interior point i: unit directions in/out, turn phi_i (rad, left positive) and the
-    tangent length T_i = r tan(|phi_i| / 2) (arc from P_i - T_i u_in to P_i + T_i u_out)."""
-    d = np.diff(points, axis=0)
-    length = np.linalg.norm(d, axis=1)
-    u = d / length[:, None]
-    cross = u[:-1, 0] * u[1:, 1] - u[:-1, 1] * u[1:, 0]
-    dot = np.sum(u[:-1] * u[1:], axis=1)
-    phi = np.arctan2(cross, dot)
-    return u, length, phi, radius * np.tan(np.abs(phi) / 2)
-
-
-def waypoint_path(points: np.ndarray, radius: float, ds: float = 0.01):
-    """(s, xy, psi) sampled every ~``ds`` m along the polyline with arcs of ``radius`` at the
-    corners; psi is exact (constant on a leg, linear in s on an arc), unwrapped."""
-    u, length, phi, tang = corner_geometry(points, radius)
-    heading = np.arctan2(u[:, 1], u[:, 0])
-    cut = np.concatenate([[0.0], tang]), np.concatenate([tang, [0.0]])
-    xy, psi = [points[:1]], [heading[:1]]
-    for i in range(len(u)):
-        a = points[i] + cut[0][i] * u[i]
-        b = points[i + 1] - cut[1][i] * u[i]
-        n = max(int(np.ceil(np.linalg.norm(b - a) / ds)), 1)
-        w = np.linspace(0.0, 1.0, n + 1)[1:]
-        xy.append(a + w[:, None] * (b - a))
-        psi.append(np.full(n, heading[i]))
-        if i + 1 < len(u) and phi[i] != 0.0:
-            side = np.sign(phi[i])
-            centre = b + side * radius * np.array([-u[i, 1], u[i, 0]])
-            m = max(int(np.ceil(radius * abs(phi[i]) / ds)), 2)
-            ang = heading[i] + np.linspace(0.0, phi[i], m + 1)[1:]
-            xy.append(centre + side * radius * np.stack([np.sin(ang), -np.cos(ang)], 1))
-            psi.append(ang)
-    xy, psi = np.concatenate(xy), np.unwrap(np.concatenate(psi))
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
-    return s, xy, psi
 
 
 @dataclass(frozen=True)

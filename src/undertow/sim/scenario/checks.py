@@ -38,6 +38,7 @@ from pydantic import ValidationError
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from ...errors import ConfigError
+from ..paths import corner_geometry
 from ..seabed import scenario_heightfield, uses_heightfield
 from ..seastate import build_wave, schedule_track, segments
 from ..wavefield import solve_wavenumbers
@@ -314,8 +315,6 @@ def _check_slowly_varying(s, path: PathExtent) -> None:
 
 def _check_waypoints(v) -> None:
     """No zero-length leg, no reversal, each leg long enough for its two rounded corners."""
-    from ..motion import corner_geometry
-
     loc = ("motion", "waypoints")
     pts = np.asarray(v.points, float)
     pts = np.concatenate([pts] + [pts[1:]] * (v.laps - 1))

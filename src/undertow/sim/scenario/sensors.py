@@ -8,7 +8,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from ...log import DVL_PRESETS, DvlGeometry, Mounting, SensorMount
+from ...robot import DVL_PRESETS, DvlGeometry, Mounting, SensorMount
 
 Vec3 = tuple[float, float, float]
 
@@ -38,7 +38,7 @@ class ImuModel(_Model):
 
 
 class DvlModel(_Model):
-    """The DVL. ``model`` picks a beam-geometry preset (``log.DVL_PRESETS``: Water Linked A50,
+    """The DVL. ``model`` picks a beam-geometry preset (``robot.DVL_PRESETS``: Water Linked A50,
     Nortek DVL1000, Teledyne RDI Pathfinder, from their datasheets); ``beam_tilt_deg``,
     ``beam_azimuths_deg`` and ``beam_width_deg`` left out take the preset's values, given they
     override it. Four beams: the log's DVL stream and both ROS DVL messages carry four."""

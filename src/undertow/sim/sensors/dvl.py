@@ -1,7 +1,7 @@
 """DVL model (bottom track): four beams, ray-cast ranges, least squares velocity.
 
 Beams b_i (DVL frame) from the scenario's geometry (``DvlModel.geometry()``: a preset of
-``log.DVL_PRESETS``, the Water Linked A50 by default, or tilt and azimuths given), world
+``robot.DVL_PRESETS``, the Water Linked A50 by default, or tilt and azimuths given), world
 directions R_wd b_i with
 R_wd = R_wb R_bd (Mounting.dvl). Per report at t_n, with v_d = R_wd^T v the DVL-point velocity
 over the fixed floor in the DVL frame:
@@ -35,7 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...log import DeadReckoning, Dvl, SensorMount
+from ...log import DeadReckoning, Dvl
+from ...robot import SensorMount
 from ...rotations import rpy_to_matrix, wrap_angle
 from ..motion import kinematics
 from ..scenario.sensors import DeadReckoningModel, DvlModel

@@ -20,7 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...log import Pressure, SensorMount, SonarRange, WaveProbe
+from ...log import Pressure, SonarRange, WaveProbe
+from ...robot import SensorMount
 from ..motion import kinematics
 from ..scenario.sensors import BarometerModel, SonarModel, WaveProbeModel
 from ..tank import Tank

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...log import Imu, SensorMount
+from ...log import Imu
+from ...robot import SensorMount
 from ..motion import kinematics
 from ..scenario.sensors import ImuModel
 

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...log import Multibeam, SensorMount
+from ...log import Multibeam
+from ...robot import SensorMount
 from ..motion import kinematics
 from ..scenario.sensors import MultibeamModel
 from ..tank import Tank
