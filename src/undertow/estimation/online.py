@@ -276,5 +276,3 @@ class OnlineLocalizer:
             kinds = np.array([rows[k] for k in model.KIND_NAMES])
             metadata["adaptive_r"] = adapted_summary(run.state.Ra, kinds, cfg.adaptive_r_alpha)
         return metadata
-
-
