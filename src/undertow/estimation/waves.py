@@ -2,7 +2,7 @@
 
 Per window of about 20 wave periods, one regular linear wave (amplitude a, intrinsic angular
 frequency omega, propagation direction beta) is fitted coherently to every channel at once,
-through the transfer functions of :mod:`undertow.estimation.wave_transfer` (Dean & Dalrymple,
+through the transfer functions of :mod:`undertow.sim.waves` (Dean & Dalrymple,
 "Water Wave Mechanics for Engineers and Scientists", 1991, ch. 3-4; the encounter-frequency
 and pressure/velocity "PUV" ideas of wave gauging from moving and fixed instruments, e.g.
 Lewis, "Principles of Naval Architecture" vol. III, SNAME 1989, and Tucker & Pitt, "Waves in
@@ -67,8 +67,8 @@ from numba import njit
 from ..errors import ConfigError, DataError
 from ..log import FRESH_WATER_DENSITY, G0, P_ATM, Log
 from ..rotations import quaternion_to_rpy, rpy_to_matrix, wrap_angle
+from ..sim.waves import intrinsic_from_encounter, wavenumber, wavenumber_array
 from ..wavetrack import WaveTrack
-from .wave_transfer import _wavenumber_flat, intrinsic_from_encounter, wavenumber
 
 PLATFORMS = ("auto", "rigid", "free")
 F_LOW_HZ = 0.2  # lowest encounter frequency searched (periods up to 5 s)
@@ -496,7 +496,7 @@ def _fit_kernel(omega, ex, ey, g0, h, free, hp, T, X, Y, VX, VY, D, starts, kind
     passes the filter almost unchanged), then the weighted least squares c and each channel's
     residual sum of squares."""
     G, C = omega.size, kinds.size
-    k = _wavenumber_flat(omega, h, g0)
+    k = wavenumber_array(omega, h, g0)
     chi2, cc, rss = np.empty(G), np.zeros((G, 2)), np.empty((G, C))
     nmax = int(np.max(starts[1:] - starts[:-1]))
     A, B = np.empty(nmax), np.empty(nmax)
