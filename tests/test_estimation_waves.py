@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError, DataError, UndertowError
-from undertow.estimation.waves import SeaStateEstimate, WaveWindow, estimate_sea_state
 from undertow.log import Log
+from undertow.seastate import SeaStateEstimate, WaveWindow, estimate_sea_state
 from undertow.sim import load_scenario, simulate
 from undertow.sim.waves import (
     LinearWave,

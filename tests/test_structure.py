@@ -31,6 +31,7 @@ STAGE_OF = {
     "io": "io",
     "sim": "sim",
     "estimation": "estimation",
+    "seastate": "estimation",
     "mapping": "mapping",
     "settings": "settings",
     "evaluation": "evaluation",

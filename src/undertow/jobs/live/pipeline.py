@@ -53,7 +53,6 @@ from ...estimation.calibration import Calibration
 from ...estimation.config import LocalizerConfig
 from ...estimation.localizer import calibration_fields
 from ...estimation.online import FILTER_STREAMS, OnlineLocalizer, concat_logs
-from ...estimation.waves_online import OnlineSeaState
 from ...io.links.common import Record, ScaledClock, records_to_log
 from ...io.recorder import Recorder
 from ...io.results import save_map, save_trajectory
@@ -61,6 +60,7 @@ from ...log import Mounting
 from ...mapping.grid import load_kernels as load_grid_kernels
 from ...mapping.online import OnlineMapper
 from ...mapping.samples import rays_from_pose
+from ...seastate.online import OnlineSeaState
 from ...settings import LIVE_VARIANCE_BOUNDS, Settings
 from .links import expected_streams, open_links
 from .preview import PreviewCheckpoints

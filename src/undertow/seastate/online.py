@@ -1,5 +1,5 @@
 """The sea state estimated while the data arrives:
-:func:`~undertow.estimation.waves.estimate_sea_state` over a sliding window of the latest records.
+:func:`~undertow.seastate.estimate_sea_state` over a sliding window of the latest records.
 
 Every ``update_s`` seconds of sensor time, the records of the last ``window_s`` seconds (IMU,
 DVL, dead reckoning, pressure) are fitted as one log and the newest complete window of that
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from ..errors import DataError
 from ..io.links.common import Record, records_to_log
 from ..log import Mounting
-from .waves import WaveWindow, estimate_sea_state
+from .fit import WaveWindow, estimate_sea_state
 
 #: the streams the estimator reads
 WAVE_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure")
