@@ -1,4 +1,4 @@
-"""Onboard sea-state estimate (`undertow.estimation.waves.estimate_sea_state`): speed and accuracy.
+"""Onboard sea-state estimate (`undertow.seastate.estimate_sea_state`): speed and accuracy.
 
 `main()` (run by run_all.py) prints the cost in seconds of estimation per hour of log, measured on
 one hour of simulated free-vehicle survey (the rock-survey scenario in waves a = 0.07 m,
@@ -22,8 +22,8 @@ import time
 
 import numpy as np
 
-from undertow.estimation.waves import estimate_sea_state
 from undertow.log import Log
+from undertow.seastate import estimate_sea_state
 from undertow.sim import Scenario, load_scenario, simulate
 
 #: held-out conditions (a m, f Hz); the built-ins are (0.05, 0.75), (0.10, 0.75), (0.10, 1.0)

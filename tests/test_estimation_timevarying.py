@@ -6,13 +6,12 @@ scalar condition, bit for bit."""
 
 from __future__ import annotations
 
-import sys
-import types
 import warnings
 
 import numpy as np
 import pytest
 
+from undertow import seastate
 from undertow.errors import ConfigError
 from undertow.estimation import localize
 from undertow.estimation.config import LocalizerConfig
@@ -121,7 +120,7 @@ def test_nodes_outside_the_profile(wave_log):
 
 
 def test_auto_uses_the_estimate_from_the_log(wave_log, monkeypatch):
-    """wave="auto" asks undertow.estimation.waves for the sea state (replaced here by a stub:
+    """wave="auto" asks undertow.seastate for the sea state (replaced here by a stub:
     the estimator has its own tests) and filters with its track, as if given."""
     track = WaveTrack(np.array([5.0, 35.0]), np.array([0.05, 0.1]), np.array([0.75, 1.0]),
                       "estimated")  # fmt: skip
@@ -138,12 +137,7 @@ def test_auto_uses_the_estimate_from_the_log(wave_log, monkeypatch):
         calls.append(log)
         return Estimate()
 
-    stub = types.ModuleType("undertow.estimation.waves")
-    stub.estimate_sea_state = estimate_sea_state
-    monkeypatch.setitem(sys.modules, "undertow.estimation.waves", stub)
-    import undertow.estimation as pkg
-
-    monkeypatch.setattr(pkg, "waves", stub, raising=False)
+    monkeypatch.setattr(seastate, "estimate_sea_state", estimate_sea_state)
     run = localize(wave_log, "proposed", wave="auto")
     assert calls == [wave_log]
     meta = run.metadata
@@ -156,8 +150,7 @@ def test_auto_uses_the_estimate_from_the_log(wave_log, monkeypatch):
 
 @pytest.mark.slow
 def test_auto_with_the_real_estimator(wave_log):
-    """End to end with undertow.estimation.waves (helper W's module; skipped until it exists)."""
-    pytest.importorskip("undertow.estimation.waves", reason="estimation/waves.py not yet merged")
+    """End to end with undertow.seastate."""
     run = localize(wave_log, "proposed", wave="auto")
     meta = run.metadata
     assert meta["wave_condition_source"] == WAVE_ESTIMATED

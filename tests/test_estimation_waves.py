@@ -15,16 +15,17 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError, DataError, UndertowError
-from undertow.estimation.wave_transfer import (
+from undertow.log import Log
+from undertow.seastate import SeaStateEstimate, WaveWindow, estimate_sea_state
+from undertow.sim import load_scenario, simulate
+from undertow.sim.waves import (
+    LinearWave,
     depth_factors,
     encounter_frequency,
     intrinsic_from_encounter,
+    solve_wavenumber,
     wavenumber,
 )
-from undertow.estimation.waves import SeaStateEstimate, WaveWindow, estimate_sea_state
-from undertow.log import Log
-from undertow.sim import load_scenario, simulate
-from undertow.sim.waves import LinearWave, solve_wavenumber
 from undertow.wavetrack import WaveTrack
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))

@@ -34,6 +34,7 @@ STAGE_OF = {
     "io": "io",
     "sim": "sim",
     "estimation": "estimation",
+    "seastate": "estimation",
     "mapping": "mapping",
     "settings": "settings",
     "evaluation": "evaluation",
@@ -57,13 +58,6 @@ NUMBA_DECORATORS = {"njit", "jit"}
 #: packages only the tests use; the installed package must not import them
 TEST_ONLY = {"pytest", "filterpy", "hypothesis", "_pytest"}
 PRIVATE_NOTES = re.compile(r"\b(NOTES|DESIGN)(\.md)?\b")
-#: Private names still imported across modules, by importing file (relative to the package):
-#: each is in a file another change of issue 24 is moving (the sea state's estimator, the
-#: commands), which makes the name public there. The lead empties this at the merge; the test
-#: fails on an offender not listed here, and on an entry that no longer offends.
-PENDING_MOVES: dict[str, set[str]] = {
-    "estimation/waves.py": {"_wavenumber_flat"},  # from estimation.wave_transfer (sea state)
-}
 
 
 def _modules() -> list[Path]:
@@ -180,23 +174,15 @@ def _private_imports(path: Path):
 
 
 def test_no_private_name_is_imported_across_modules():
-    found, hits = {}, []
+    hits = []
     for path in _modules():
         rel = path.relative_to(SRC).as_posix()
         for line, module, name in _private_imports(path):
-            found.setdefault(rel, set()).add(name)
-            if name not in PENDING_MOVES.get(rel, set()):
-                hits.append(f"{rel}:{line}: {name} from {module}")
-    stale = sorted(
-        f"{rel}: {sorted(names - found.get(rel, set()))}"
-        for rel, names in PENDING_MOVES.items()
-        if names - found.get(rel, set())
-    )
+            hits.append(f"{rel}:{line}: {name} from {module}")
     assert not hits, (
         "private names imported from another module; make the shared name public in its home "
         "module (or move it to the one module that uses it):\n" + "\n".join(dict.fromkeys(hits))
     )
-    assert not stale, "PENDING_MOVES lists imports that are gone; remove them:\n" + "\n".join(stale)
 
 
 def _import_graph() -> dict[str, dict[str, str]]:

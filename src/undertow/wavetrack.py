@@ -1,5 +1,5 @@
 """The wave condition over time: what a scenario schedules, a probe measures or the onboard
-estimator (:mod:`undertow.estimation.waves`) infers, and what the filter's noise follows.
+estimator (:mod:`undertow.seastate`) infers, and what the filter's noise follows.
 
 A :class:`WaveTrack` holds nodes (t_i, a_i, f_i): amplitude a (m, 0 = calm) and frequency f (Hz,
 NaN where calm). Between nodes both are linear in time; before the first node and after the

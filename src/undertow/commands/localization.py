@@ -82,7 +82,7 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     settings' ``localizer`` section. ``profile``: noise profile (YAML path or NoiseProfile,
     default the paper's Table I); ``wave``: condition name or (amplitude, frequency), default
     the one the log records, else calm; ``"auto"`` estimates it over time from the log's own
-    sensors (:mod:`undertow.estimation.waves`); ``calibration``: a Calibration or its YAML file.
+    sensors (:mod:`undertow.seastate`); ``calibration``: a Calibration or its YAML file.
     The options are checked before the log is read; with ``out_dir`` the folder is checked too
     and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``)."""
     settings_path = None if isinstance(settings, Settings) else settings

@@ -51,7 +51,7 @@ def characterize_files(
     out: str | Path | None = None,
 ) -> CharacterizeResult:
     """Wave amplitude and frequency (wave probe; without one, the onboard estimate of
-    :mod:`undertow.estimation.waves`, which is also shown next to the probe's for comparison)
+    :mod:`undertow.seastate`, which is also shown next to the probe's for comparison)
     and the DVL noise per axis during the waves,
     about the true motion (the paper's Table I), plus the barometer's wave-induced depth noise,
     of the logs at ``paths``; a calm run among them is the reference whose noise is subtracted.

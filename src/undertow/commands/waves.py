@@ -1,5 +1,5 @@
 """`undertow waves` as a library function: the wave condition over time estimated from a log's
-own sensors (:func:`undertow.estimation.waves.estimate_sea_state`), with the truth the log
+own sensors (:func:`undertow.seastate.estimate_sea_state`), with the truth the log
 carries when it has one (a simulated run's scenario, a wave probe) for comparison::
 
     from undertow.commands.waves import waves_file
@@ -32,7 +32,7 @@ class WavesResult:
     """The estimate, the truth it is compared with (None without one), the warnings raised and
     the figure written (None when none was asked for)."""
 
-    estimate: object  # undertow.estimation.waves.SeaStateEstimate
+    estimate: object  # undertow.seastate.SeaStateEstimate
     truth: WaveTrack | None
     warnings: tuple[str, ...]
     plot: Path | None = None
@@ -51,7 +51,7 @@ def waves_file(path: str | Path, settings: Settings | str | Path | None = None, 
                plot: str | Path | None = None) -> WavesResult:  # fmt: skip
     """Estimate the sea state of the log at ``path`` (options checked before it is read);
     with ``plot``, draw the estimate (and the truth, when the log has one) to that PNG."""
-    from ..estimation.waves import estimate_sea_state
+    from ..seastate import estimate_sea_state
 
     if platform not in PLATFORMS:
         raise ConfigError(f"--platform must be one of {', '.join(PLATFORMS)}, not {platform!r}")

@@ -75,7 +75,7 @@ class RunCharacterization:
     depth_std_m: float | None
     reference: str
     notes: list[str] = field(default_factory=list)
-    # the onboard estimate (undertow.estimation.waves) over the whole run: amplitude_m,
+    # the onboard estimate (undertow.seastate) over the whole run: amplitude_m,
     # frequency_hz, windows, platform; the probe's condition when there is one is the reference
     onboard: dict | None = None
 
@@ -220,11 +220,11 @@ def characterize_run(
 
 
 def onboard_waves(log: Log, notes: list[str]) -> dict | None:
-    """The onboard sea-state estimate (:func:`undertow.estimation.waves.estimate_sea_state`)
+    """The onboard sea-state estimate (:func:`undertow.seastate.estimate_sea_state`)
     over the whole run, summarized: the median over windows of amplitude and frequency (calm:
     frequency None) and the streams used. None, with a note, when it cannot be made."""
     from ..errors import UndertowError
-    from .waves import estimate_sea_state
+    from ..seastate import estimate_sea_state
 
     try:
         est = estimate_sea_state(log)

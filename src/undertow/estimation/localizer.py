@@ -15,7 +15,7 @@ starting from the nominal R, alpha = ``adaptive_r_alpha`` (0.98).
 Wave noise (variants ``an``, ``proposed``): a constant condition adds gamma^2 to every DVL
 (and DR) row; a condition that changes over time (a :class:`~undertow.wavetrack.WaveTrack`, a
 log whose ``metadata["wave"]`` is a track with ``t`` lists, or ``wave="auto"``: estimated from
-the log by :mod:`undertow.estimation.waves`) adds each row's gamma(t)^2, gamma interpolated in
+the log by :mod:`undertow.seastate`) adds each row's gamma(t)^2, gamma interpolated in
 time between the track's nodes (:class:`~undertow.estimation.noise.TrackNoise`). A condition
 (or track node) outside the characterized ones gets the ``extrapolate`` policy
 (:mod:`~undertow.estimation.noise`): ``"physics"`` by default (False): the nearest characterized
@@ -284,9 +284,9 @@ def wave_condition(wave, log: Log) -> tuple[object, str]:
 def _estimated_track(log: Log):
     """(track, estimate): the sea state estimated from the log itself (wave="auto")."""
     try:
-        from .waves import estimate_sea_state
+        from ..seastate import estimate_sea_state
     except ImportError as exc:  # pragma: no cover - the module ships with the package
-        msg = f"Localizer: wave 'auto' needs undertow.estimation.waves ({exc})"
+        msg = f"Localizer: wave 'auto' needs undertow.seastate ({exc})"
         raise ConfigError(msg) from None
     estimate = estimate_sea_state(log)
     return estimate.track(), estimate

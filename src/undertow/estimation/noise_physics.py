@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..io.units import depth_reference
 from ..log import G0, Log
-from .wave_transfer import depth_factors, wavenumber
+from ..sim.waves import depth_factors, wavenumber
 
 # what a condition outside a profile's gets (undertow.estimation.noise): an error, the nearest
 # characterized condition as it is, or that condition scaled by the physics below

@@ -53,12 +53,12 @@ from ..estimation.config import LocalizerConfig
 from ..estimation.localizer import calibration_fields
 from ..estimation.online import OnlineLocalizer
 from ..estimation.rows import FILTER_STREAMS
-from ..estimation.waves_online import OnlineSeaState
 from ..io.results import save_map, save_trajectory
 from ..mapping.online import OnlineMapper
 from ..mapping.samples import rays_from_pose
 from ..records import Record, concat_logs, records_to_log
 from ..robot import Mounting
+from ..seastate.online import OnlineSeaState
 from ..settings import LIVE_VARIANCE_BOUNDS, Settings
 from .preview import PreviewCheckpoints
 from .recorder import Recorder

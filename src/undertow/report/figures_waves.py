@@ -1,4 +1,4 @@
-"""The wave condition over time: the onboard estimate (:mod:`undertow.estimation.waves`) per
+"""The wave condition over time: the onboard estimate (:mod:`undertow.seastate`) per
 window against the truth when there is one (a scenario's schedule, a wave probe)."""
 
 from __future__ import annotations

@@ -34,21 +34,7 @@ import numpy as np
 
 from ..log import FRESH_WATER_DENSITY
 from ..wavetrack import WaveTrack
-from .waves import solve_wavenumber
-
-
-def solve_wavenumbers(omega: np.ndarray, depth: float, g: float, tol: float = 1e-12):
-    """Vectorized :func:`~undertow.sim.waves.solve_wavenumber`: Newton on
-    g k tanh(k h) - omega^2 from max(omega^2 / g, omega / sqrt(g h)), for omega > 0."""
-    omega = np.asarray(omega, float)
-    k = np.maximum(omega * omega / g, omega / np.sqrt(g * depth))
-    for _ in range(100):
-        th = np.tanh(k * depth)
-        step = (g * k * th - omega * omega) / (g * th + g * k * depth * (1.0 - th * th))
-        k = k - step
-        if np.all(np.abs(step) < tol * k):
-            break
-    return k
+from .waves import depth_factors_finite, solve_wavenumber, solve_wavenumbers
 
 
 def phase_integral(t, t_nodes: np.ndarray, omega_nodes: np.ndarray) -> np.ndarray:
@@ -137,11 +123,7 @@ class WaveField:
     def _factors(self, d, t):
         """(a, omega, k, cosh(k(h-d))/sinh(kh), sinh(k(h-d))/sinh(kh), cosh(k(h-d))/cosh(kh))."""
         a, omega, k = self.amplitude_at(t), self.omega_at(t), self.k_at(t)
-        kh = k * self.h
-        s = k * (self.h - np.clip(np.asarray(d, dtype=float), 0.0, self.h))
-        e, e2 = np.exp(s - kh), np.exp(-s - kh)
-        one_m, one_p = 1.0 - np.exp(-2.0 * kh), 1.0 + np.exp(-2.0 * kh)
-        return a, omega, k, (e + e2) / one_m, (e - e2) / one_m, (e + e2) / one_p
+        return a, omega, k, *depth_factors_finite(k, self.h, d)
 
     def velocity_amplitude_at(self, d, t) -> tuple[np.ndarray, np.ndarray]:
         """(U, W) = a omega (cosh, sinh)(k (h - d)) / sinh(k h) at depth d and times t."""

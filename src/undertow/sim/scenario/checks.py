@@ -41,8 +41,7 @@ from ...errors import ConfigError
 from ..paths import corner_geometry
 from ..seabed import scenario_heightfield, uses_heightfield
 from ..seastate import build_wave, schedule_track, segments
-from ..wavefield import solve_wavenumbers
-from ..waves import LinearWave
+from ..waves import LinearWave, solve_wavenumbers
 
 BREAKING_STEEPNESS = 1.0 / 7.0  # H / lambda above which a wave breaks (Michell's limit)
 RAMP_PERIODS = 2.0  # a ramp that changes the sea lasts at least this many wave periods

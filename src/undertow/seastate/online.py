@@ -1,12 +1,13 @@
 """The sea state estimated while the data arrives:
-:func:`~undertow.estimation.waves.estimate_sea_state` over a sliding window of the latest records.
+:func:`~undertow.seastate.estimate_sea_state` over a sliding window of the latest records.
 
 Every ``update_s`` seconds of sensor time, the records of the last ``window_s`` seconds (IMU,
 DVL, dead reckoning, pressure) are fitted as one log and the newest complete window of that
 estimate is the current condition (a, f). The window must hold about 20 wave periods for the
-fit (the offline estimator's window, see its module), so ``window_s`` = 60 s serves waves down to
-about 0.35 Hz; until it spans three periods there is no estimate. What a live filter adds to its
-measurement noise is then piecewise constant in time, changing at the updates.
+fit (the offline estimator's window, see :mod:`undertow.seastate.windows`), so ``window_s`` =
+60 s serves waves down to about 0.35 Hz; until it spans three periods there is no estimate.
+What a live filter adds to its measurement noise is then piecewise constant in time, changing at
+the updates.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ from dataclasses import dataclass
 from ..errors import DataError
 from ..records import Record, records_to_log
 from ..robot import Mounting
-from .waves import WaveWindow, estimate_sea_state
+from .estimate import estimate_sea_state
+from .result import WaveWindow
 
 #: the streams the estimator reads
 WAVE_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure")
