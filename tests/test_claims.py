@@ -12,6 +12,7 @@ import pytest
 
 from undertow.mapping.config import MappingConfig
 from undertow.study import claims, paper
+from undertow.study.claim_model import MissingQuantity
 from undertow.study.claims import (
     CHANGING_SEA_CLAIMS,
     CLAIMS,
@@ -19,7 +20,6 @@ from undertow.study.claims import (
     FIXED_RUNS,
     MAP_SCENARIO_CLAIMS,
     TABLE1_CLAIMS,
-    MissingQuantity,
     evaluate_seed,
 )
 from undertow.study.pipeline import (
