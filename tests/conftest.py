@@ -1,7 +1,9 @@
 """Shared fixtures: where the real DVL recordings live, and simulated runs computed once.
 
 The recordings are in the project's shared folder (``../shared/data/real`` next to the
-checkout). Set UNDERTOW_REAL_DATA to point elsewhere.
+checkout). Set UNDERTOW_REAL_DATA to point elsewhere. Tests that read them carry the marker
+``realdata``; without the folder they fail (``UNDERTOW_SKIP_REAL_DATA=1`` skips them). Tests
+that open sockets on 127.0.0.1 carry ``network``.
 
 Simulated runs are deterministic per (scenario, seed), so several test files share one
 simulation per session: ``simulation(name, seed)`` gives the :class:`SimulationResult` (its
@@ -34,6 +36,21 @@ def _find_real_data() -> Path:
 
 
 REAL_DATA = _find_real_data()
+
+
+def pytest_runtest_setup(item):
+    """A test marked ``realdata`` fails loudly when the shared recordings are missing (CI always
+    has them: a silent skip would hide that the real-data tests did not run);
+    ``UNDERTOW_SKIP_REAL_DATA=1`` skips them instead, on a machine without the folder."""
+    if item.get_closest_marker("realdata") is None or REAL_DATA.is_dir():
+        return
+    if os.environ.get("UNDERTOW_SKIP_REAL_DATA"):
+        pytest.skip(f"real recordings not found at {REAL_DATA} (UNDERTOW_SKIP_REAL_DATA is set)")
+    pytest.fail(
+        f"real recordings not found at {REAL_DATA}: set UNDERTOW_REAL_DATA to their folder, or "
+        "UNDERTOW_SKIP_REAL_DATA=1 to skip the tests marked realdata",
+        pytrace=False,
+    )
 
 
 def one_error_line(result):

@@ -352,3 +352,22 @@ def test_test_only_packages_are_not_imported_by_the_package():
 def test_relative_imports_resolve_to_the_module_they_name(source, module, expected):
     got = {name for _, name in _imported_modules(SRC.parent / module, ast.parse(source))}
     assert got == expected
+
+
+#: project-level tests at the root of tests/ (not of one stage)
+ROOT_TESTS = {"test_structure.py", "test_examples.py", "test_readme_example.py"}
+
+
+def test_the_tests_mirror_the_source():
+    """Each test file sits in the folder of the stage it tests (tests/io/, tests/live/, ...:
+    a package of src/undertow, or tests/core/ for the core modules); the root holds only the
+    project-level tests and the shared fixtures."""
+    tests = Path(__file__).resolve().parent
+    packages = {p.name for p in SRC.iterdir() if (p / "__init__.py").is_file()} | {"core"}
+    misplaced = [
+        str(path.relative_to(tests))
+        for path in tests.rglob("test_*.py")
+        if (path.parent == tests and path.name not in ROOT_TESTS)
+        or (path.parent != tests and path.parent.name not in packages)
+    ]
+    assert not misplaced, f"test files outside a stage's folder: {misplaced}"
