@@ -9,100 +9,22 @@ import warnings
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
-from scipy.spatial.transform import Rotation
+from tlog_fixtures import (
+    EPOCH,
+    attitude_rows,
+    imu2_rows,
+    new_mav,
+    pressure_rows,
+    record,
+    sonar_rows,
+    vision_rows,
+    write_tlog,
+)
 
 from undertow.errors import ConfigError, ReaderError
 from undertow.io import detect_format, read_log, summarize
 from undertow.io.mavlink import MavlinkConfig
 from undertow.rotations import quaternion_to_rpy, rpy_to_matrix
-
-EPOCH = 1_700_000_000.0  # the simulated run starts at 0; a tlog stamps Unix time
-
-
-def _mav():
-    return mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
-
-
-def record(mav, t: float, msg) -> bytes:
-    """One tlog record: 8-byte big-endian receive time (us since the epoch) + the packed frame."""
-    return struct.pack(">Q", int(round((EPOCH + t) * 1e6))) + msg.pack(mav)
-
-
-def _attitude_rows(log):
-    gt, imu = log.ground_truth, log.imu
-    _, rpy, _ = gt.interpolate(imu.t)
-    return [
-        (t, mavlink2.MAVLink_attitude_message(int(t * 1000), *a, *w))
-        for t, a, w in zip(imu.t, rpy, imu.angular_velocity, strict=True)
-    ]
-
-
-def _imu2_rows(log):
-    imu = log.imu
-    gyro = np.round(imu.angular_velocity * 1000.0).astype(int)
-    acc = np.round(imu.linear_acceleration / 9.80665 * 1000.0).astype(int)
-    return [
-        (t, mavlink2.MAVLink_scaled_imu2_message(int(t * 1000), *a, *g, 0, 0, 0, 2000))
-        for t, g, a in zip(imu.t, gyro, acc, strict=True)
-    ]
-
-
-def _pressure_rows(log, msg_class=mavlink2.MAVLink_scaled_pressure2_message):
-    p = log.pressure
-    return [
-        (t, msg_class(int(t * 1000), pa / 100.0, 0.0, 1500))
-        for t, pa in zip(p.t, p.pressure, strict=True)
-    ]
-
-
-def _vision_rows(log):
-    """VISION_POSITION_DELTA for DVL samples 1..N-1: d_k = v_k dt_k (current body frame), a_k the
-    rotation vector of R(t_{k-1})^T R(t_k) from the ground-truth attitude."""
-    dvl = log.dvl
-    _, rpy, _ = log.ground_truth.interpolate(dvl.t)
-    R = rpy_to_matrix(rpy)
-    rows = []
-    for k in range(1, len(dvl)):
-        dt = dvl.t[k] - dvl.t[k - 1]
-        a = Rotation.from_matrix(R[k - 1].T @ R[k]).as_rotvec()
-        d = dvl.velocity[k] * dt
-        usec = int(round(dt * 1e6))
-        rows.append(
-            (
-                dvl.t[k],
-                mavlink2.MAVLink_vision_position_delta_message(
-                    int(dvl.t[k] * 1e6), usec, a, d, 90.0
-                ),
-            )
-        )
-    return rows, R
-
-
-def _sonar_rows(log, sensor_id=3):
-    s = log.sonar
-    return [
-        (
-            t,
-            mavlink2.MAVLink_distance_sensor_message(
-                int(t * 1000),
-                30,
-                10000,
-                int(round(r * 100)),
-                1,
-                sensor_id,
-                25,
-                0,
-                signal_quality=int(round(c * 100)),
-            ),
-        )
-        for t, r, c in zip(s.t, s.range, s.confidence, strict=True)
-    ]
-
-
-def write_tlog(path, rows) -> None:
-    mav = _mav()
-    rows = sorted(rows, key=lambda r: r[0])
-    path.write_bytes(b"".join(record(mav, t, m) for t, m in rows))
 
 
 @pytest.fixture(scope="module")
@@ -114,13 +36,13 @@ def sim_log(simulation):
 
 @pytest.fixture(scope="module")
 def tlog_file(tmp_path_factory, sim_log):
-    vision, R = _vision_rows(sim_log)
+    vision, R = vision_rows(sim_log)
     rows = (
-        _attitude_rows(sim_log)
-        + _imu2_rows(sim_log)
-        + _pressure_rows(sim_log)
+        attitude_rows(sim_log)
+        + imu2_rows(sim_log)
+        + pressure_rows(sim_log)
         + vision
-        + _sonar_rows(sim_log)
+        + sonar_rows(sim_log)
     )
     path = tmp_path_factory.mktemp("tlog") / "dive.tlog"
     write_tlog(path, rows)
@@ -176,7 +98,7 @@ def test_vision_position_delta_velocity_and_dead_reckoning(tlog_file, sim_log):
 
 def test_pressure_sensor_is_configurable(tmp_path, sim_log):
     path = tmp_path / "p.tlog"
-    write_tlog(path, _pressure_rows(sim_log, mavlink2.MAVLink_scaled_pressure3_message))
+    write_tlog(path, pressure_rows(sim_log, mavlink2.MAVLink_scaled_pressure3_message))
     with pytest.raises(ReaderError, match="no usable measurement .*SCALED_PRESSURE3 x"):
         read_log(path)
     log = read_log(path, mavlink=MavlinkConfig(pressure="SCALED_PRESSURE3"))
@@ -186,7 +108,7 @@ def test_pressure_sensor_is_configurable(tmp_path, sim_log):
 
 
 def test_distance_sensor_choice_and_rangefinder(tmp_path, sim_log):
-    rows = _sonar_rows(sim_log, sensor_id=3) + _sonar_rows(sim_log, sensor_id=0)
+    rows = sonar_rows(sim_log, sensor_id=3) + sonar_rows(sim_log, sensor_id=0)
     path = tmp_path / "r.tlog"
     write_tlog(path, rows)
     with pytest.warns(UserWarning, match="ids other than 3 ignored"):
@@ -242,9 +164,9 @@ def test_sniffed_without_suffix(tmp_path, tlog_file):
 
 
 def test_a_damaged_timestamp_drops_one_message(tmp_path, sim_log):
-    rows = _pressure_rows(sim_log)[:20]
-    mav = _mav()
-    chunks = [record(mav, t, m) for t, m in rows]
+    rows = pressure_rows(sim_log)[:20]
+    encoder = new_mav()
+    chunks = [record(encoder, t, m) for t, m in rows]
     stamp = struct.unpack(">Q", chunks[7][:8])[0] + 2 * 86_400 * 10**6  # two days off
     chunks[7] = struct.pack(">Q", stamp) + chunks[7][8:]  # the frame itself is intact
     path = tmp_path / "stamp.tlog"
@@ -279,7 +201,7 @@ def test_undertow_info_on_a_tlog(tlog_file):
 def test_the_autopilots_ground_pressure_parameter_is_the_surface_pressure(tmp_path, sim_log):
     """ArduSub's BARO2_GND_PRESS (the Bar30 of SCALED_PRESSURE2, calibrated at boot) in a
     PARAM_VALUE: the surface pressure, stated; BARO1_GND_PRESS (another barometer) is not."""
-    rows = _attitude_rows(sim_log) + _pressure_rows(sim_log)
+    rows = attitude_rows(sim_log) + pressure_rows(sim_log)
     t0 = rows[0][0]
     for name, value in ((b"BARO1_GND_PRESS", 99_800.0), (b"BARO2_GND_PRESS", 97_770.0)):
         rows.append((t0, mavlink2.MAVLink_param_value_message(name, value, 9, 300, 1)))

@@ -483,16 +483,16 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, mode):
     by pump() in the caller's, which is woken by the datagrams holding DVL messages, or
     (polled) read and decoded by pump() alone, stamped with the kernel's receive times."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
-    from test_io_tlog import _attitude_rows, _pressure_rows, _sonar_rows, _vision_rows, write_tlog
+    from tlog_fixtures import attitude_rows, pressure_rows, sonar_rows, vision_rows, write_tlog
 
     from undertow.live.links.mavlink_udp import MavlinkLink
 
     log = simulation("calm")
     log = log.log if hasattr(log, "log") else log
     log = log.replace(**{n: s.select(s.t < 3.0) for n, s in log.streams().items()})
-    vision, _ = _vision_rows(log)
+    vision, _ = vision_rows(log)
     rows = sorted(
-        _attitude_rows(log) + _pressure_rows(log) + vision + _sonar_rows(log), key=lambda r: r[0]
+        attitude_rows(log) + pressure_rows(log) + vision + sonar_rows(log), key=lambda r: r[0]
     )
     port = _free_udp_port()
     records, wakes, sent = [], [], []

@@ -85,7 +85,7 @@ TROUBLE_FRACTION = 0.5
 # in the log that recorded it
 WAVE_GIVEN = "given"
 WAVE_DEFAULT = "default"
-WAVE_ESTIMATED = "estimated from the log (undertow.estimation.waves)"
+WAVE_ESTIMATED = "estimated from the log (undertow.seastate)"
 WAVE_AUTO = "auto"
 
 

@@ -168,7 +168,7 @@ class Recorder:
     """A ROS 2 bag (mcap) recording written record by record (see the module docstring).
 
     ``path``: the bag directory to create (refused if it exists, unless ``overwrite``);
-    ``mounting``: the session's :class:`~undertow.log.Mounting` (``/tf_static`` and the sidecar);
+    ``mounting``: the session's :class:`~undertow.robot.Mounting` (``/tf_static`` and the sidecar);
     ``metadata``: plain values for the sidecar; ``topics``: the topic names (default TopicMap).
     """
 
