@@ -371,3 +371,21 @@ def test_the_tests_mirror_the_source():
         or (path.parent != tests and path.parent.name not in packages)
     ]
     assert not misplaced, f"test files outside a stage's folder: {misplaced}"
+
+
+MAX_MODULE_LINES = 600
+
+
+def test_no_module_is_longer_than_600_lines_outside_numba_kernels():
+    long = []
+    for path in _modules():
+        tree = _tree(path)
+        kernels = sum(
+            node.end_lineno - node.lineno + 1
+            for node in ast.walk(tree)
+            if isinstance(node, ast.FunctionDef) and _decorator_names(node) & NUMBA_DECORATORS
+        )
+        lines = len(path.read_text(encoding="utf-8").splitlines()) - kernels
+        if lines > MAX_MODULE_LINES:
+            long.append(f"{path.relative_to(SRC)}: {lines} lines")
+    assert not long, f"modules longer than {MAX_MODULE_LINES} lines outside numba kernels: {long}"

@@ -93,7 +93,7 @@ class _Stream:
         return self._shapes
 
     @classmethod
-    def _trusted(cls, **fields):
+    def trusted(cls, **fields):
         """The stream of ``fields`` without the constructor's checks and copies, for a builder
         that made every array itself in this class's dtypes and shapes, with finite times in
         order (:func:`undertow.records.records_to_log`, called for every few records
@@ -102,16 +102,20 @@ class _Stream:
         for name, default in _field_defaults(cls):
             value = fields.pop(name, default)
             if value is dataclasses.MISSING:
-                raise TypeError(f"{cls.__name__}._trusted: missing field {name}")
+                raise TypeError(f"{cls.__name__}.trusted: missing field {name}")
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
             object.__setattr__(obj, name, value)
         if fields:
-            raise TypeError(f"{cls.__name__}._trusted: unknown fields {sorted(fields)}")
+            raise TypeError(f"{cls.__name__}.trusted: unknown fields {sorted(fields)}")
         return obj
 
     def __len__(self) -> int:
         return int(self.t.size)
+
+    @classmethod
+    def array_fields(cls) -> tuple[str, ...]:  # per-row array fields besides t
+        return tuple(cls._shapes)
 
     @property
     def rate_hz(self) -> float:
@@ -228,11 +232,11 @@ class Dvl(_Stream):
     ) -> Dvl:
         """Build a Dvl stream with A50 beam geometry and NaN/False for what is not given."""
         t = np.asarray(t, dtype=np.float64).reshape(-1)
-        return cls(**cls._velocity_fields(t, velocity, valid, fom, covariance, altitude,
+        return cls(**cls.velocity_fields(t, velocity, valid, fom, covariance, altitude,
                                           beam_range, beam_valid, beam_velocity))  # fmt: skip
 
     @staticmethod
-    def _velocity_fields(t, velocity, valid, fom, covariance, altitude, beam_range, beam_valid,
+    def velocity_fields(t, velocity, valid, fom, covariance, altitude, beam_range, beam_valid,
                          beam_velocity) -> dict:  # fmt: skip
         """The fields of :meth:`from_velocity` (t a float64 array)."""
         n = t.size
@@ -481,17 +485,15 @@ class GroundTruth(_Stream):
 
 @dataclass(frozen=True, eq=False)
 class AutopilotPose(GroundTruth):
-    """The autopilot's own navigation estimate (ArduPilot EKF3's ``XKF1``: position north-east-
-    down about its origin, roll-pitch-yaw, world velocity): a *reference* to compare with, not a
-    truth. Same fields and helpers as :class:`GroundTruth`."""
+    """The autopilot's own estimate (ArduPilot EKF3's ``XKF1``, NED about its origin): a
+    *reference*, not a truth; the fields and helpers of :class:`GroundTruth`."""
 
     kind: ClassVar[str] = "autopilot"
 
 
 @dataclass(frozen=True, eq=False)
 class Depth(_Stream):
-    """Depth below the surface (m, positive down) as the vehicle itself reports it (a depth
-    topic, a pose's z with its sign resolved), not converted by undertow from a pressure."""
+    """Depth (m, positive down) as the vehicle itself reports it (a depth topic, a pose's z)."""
 
     kind: ClassVar[str] = "depth"
     _shapes: ClassVar[dict[str, tuple]] = {"depth": ()}

@@ -103,7 +103,7 @@ def _column(data: list[dict], key: str, shape: tuple, dtype=np.float64):
 
 
 def _imu(t, data) -> Imu:
-    return Imu._trusted(
+    return Imu.trusted(
         t=t,
         angular_velocity=_column(data, "angular_velocity", (3,)),
         linear_acceleration=_column(data, "linear_acceleration", (3,)),
@@ -115,7 +115,7 @@ def _dvl(t, data) -> Dvl:
     def col(key, shape=(), dtype=np.float64):
         return _column(data, key, shape, dtype)
 
-    fields = Dvl._velocity_fields(
+    fields = Dvl.velocity_fields(
         t,
         col("velocity", (3,)),
         valid=col("valid", (), np.bool_),
@@ -126,11 +126,11 @@ def _dvl(t, data) -> Dvl:
         beam_valid=col("beam_valid", (4,), np.bool_),
         beam_velocity=col("beam_velocity", (4,)),
     )
-    return Dvl._trusted(**fields)
+    return Dvl.trusted(**fields)
 
 
 def _dead_reckoning(t, data) -> DeadReckoning:
-    return DeadReckoning._trusted(
+    return DeadReckoning.trusted(
         t=t,
         position=_column(data, "position", (3,)),
         orientation=_column(data, "orientation", (3,)),
@@ -139,12 +139,12 @@ def _dead_reckoning(t, data) -> DeadReckoning:
 
 
 def _pressure(t, data) -> Pressure:
-    return Pressure._trusted(t=t, pressure=_column(data, "pressure", ()))
+    return Pressure.trusted(t=t, pressure=_column(data, "pressure", ()))
 
 
 def _sonar(t, data) -> SonarRange:
     extra = {k: data[-1][k] for k in ("field_of_view", "min_range", "max_range") if k in data[-1]}
-    return SonarRange._trusted(
+    return SonarRange.trusted(
         t=t, range=_column(data, "range", ()), confidence=_column(data, "confidence", ()), **extra
     )
 
@@ -170,7 +170,7 @@ def concat_logs(logs: list[Log], mounting: Mounting) -> Log:
             streams[name] = parts[0]
             continue
         changes = {"t": np.concatenate([p.t for p in parts])}
-        for field in parts[0]._shapes:
+        for field in parts[0].array_fields():
             values = [getattr(p, field) for p in parts]
             if all(v is None for v in values):
                 continue

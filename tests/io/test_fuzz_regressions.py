@@ -22,7 +22,7 @@ from conftest import REAL_DATA
 from undertow.commands.data import info_file
 from undertow.errors import ConfigError, ReaderError, UndertowError
 from undertow.io import read_log, write_log
-from undertow.io._collect import Notes
+from undertow.io.collect import Notes
 from undertow.io.rosbag_streams import Rows
 from undertow.log import GroundTruth, Log, Pressure
 from undertow.sim import load_scenario

@@ -124,7 +124,7 @@ class Localizer:
         cfg = self.config
         unobserved, held = sensor_coverage(log, cfg)
         check_mounting(log.mounting)
-        noise, wave_meta = self._wave_noise(log)
+        noise, wave_meta = self.wave_noise(log)
         meas, rejected = measurements(log, cfg, noise)
         if meas.size == 0:
             raise ConfigError("Localizer: the log has no finite, valid DVL/IMU measurements")
@@ -158,7 +158,7 @@ class Localizer:
             metadata["adaptive_r"] = adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
 
-    def _wave_noise(self, log: Log):
+    def wave_noise(self, log: Log):
         """(noise, metadata): the run's wave noise (:class:`WaveNoise` for a constant condition,
         :class:`TrackNoise` for one that changes) and its metadata entries (module doc)."""
         wave, source = wave_condition(self.wave, log)

@@ -229,7 +229,7 @@ class OnlineLocalizer:
         cfg = self.config
         unobserved, held = sensor_coverage(log, cfg)
         if self._noise is None:
-            self._noise, self._wave_meta = self._offline._wave_noise(log)
+            self._noise, self._wave_meta = self._offline.wave_noise(log)
         else:
             self._wave_meta = {"wave_condition_source": "set_wave"}
         x0, P0 = initial_state(log, cfg)

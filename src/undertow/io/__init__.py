@@ -17,8 +17,8 @@ from pathlib import Path
 
 from ..errors import ReaderError
 from ..log import Log
-from ._collect import check_regular
 from .a50_json import JSON_SUFFIXES, read_a50_json
+from .collect import check_regular
 from .dataflash import DATAFLASH_SUFFIXES, read_dataflash
 from .dataflash_records import looks_like_dataflash
 from .info import LogSummary, StreamSummary, summarize

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..errors import ReaderError
 from ..log import DeadReckoning, Dvl, Log
-from ._collect import (
+from .collect import (
     MALFORMED,
     DvlRows,
     Notes,

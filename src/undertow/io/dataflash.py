@@ -57,7 +57,7 @@ import numpy as np
 from ..errors import ReaderError
 from ..log import Log
 from ..robot import Mounting
-from ._collect import MALFORMED, Notes, read_regular_bytes
+from .collect import MALFORMED, Notes, read_regular_bytes
 from .dataflash_records import (
     BinaryScanner,
     Columns,

@@ -28,7 +28,7 @@ from collections import Counter
 from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING
 
-from ._collect import MALFORMED
+from .collect import MALFORMED
 
 if TYPE_CHECKING:
     from pymavlink.DFReader import DFFormat

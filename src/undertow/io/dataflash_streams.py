@@ -9,7 +9,7 @@ import numpy as np
 
 from ..log import AutopilotPose, DeadReckoning, Dvl, GpsFix, Imu, Pressure, SonarRange
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion, world_to_body, wrap_angle
-from ._collect import Notes, count_nan_rows, time_order
+from .collect import Notes, count_nan_rows, time_order
 from .geo import local_ned
 
 #: VISO confidence (%) below which a DVL velocity is flagged invalid (the tlog reader's default)

@@ -42,7 +42,7 @@ from ..log import G0
 from ..records import Record
 from ..robot import Mounting, SensorMount
 from ..rotations import matrix_to_rpy, rpy_to_quaternion_scalar
-from ._collect import MALFORMED
+from .collect import MALFORMED
 
 IMU_MESSAGES = ("SCALED_IMU", "SCALED_IMU2", "SCALED_IMU3", "RAW_IMU")
 PRESSURE_MESSAGES = ("SCALED_PRESSURE", "SCALED_PRESSURE2", "SCALED_PRESSURE3")

@@ -17,7 +17,7 @@ import numpy as np
 from .._util.atomic import atomic_path, atomic_write_text
 from ..errors import DataError, ReaderError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
-from ._collect import MALFORMED, read_regular_bytes
+from .collect import MALFORMED, read_regular_bytes
 
 _TYPES = {
     "char": "i1",

@@ -5,7 +5,7 @@ Every ROS DVL message carries the same few quantities under different names: a v
 validity (a flag, a mode, or a covariance of -1), a 3x3 covariance ((m/s)^2, row-major), an
 altitude (m), and per-beam values (radial velocity, range, validity; beam unit vectors where the
 message has them). :data:`DVL_TYPES` says where each type keeps them; :func:`dvl_report` reads
-one message into the arguments of :meth:`undertow.io._collect.DvlRows.append`. A new type with
+one message into the arguments of :meth:`undertow.io.collect.DvlRows.append`. A new type with
 the same meanings under other names is one more row of the table.
 
 Conventions of the sources (their message files):

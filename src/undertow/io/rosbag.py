@@ -38,8 +38,8 @@ from ..errors import ReaderError, UndertowError
 from ..log import Dvl, Log
 from ..robot import DvlGeometry, Mounting
 from ..rotations import quaternion_to_rpy
-from ._collect import MALFORMED, DvlRows, Notes, check_regular
 from .a50_json import add_velocity_report, dead_reckoning_from_rows, report_covariance
+from .collect import MALFORMED, DvlRows, Notes, check_regular
 from .msgdefs import dvl_typestore
 from .read_options import LogOptions
 from .rosbag_choices import apply_time_base, depth_sign, dvl_frame, resolve_topics

@@ -13,8 +13,8 @@ import numpy as np
 
 from ..log import Dvl
 from ..robot import Mounting
-from ._collect import Notes
 from .clock import choose_time_base
+from .collect import Notes
 from .read_options import LogOptions
 from .rosbag_streams import Rows
 from .topic_guess import propose_topics

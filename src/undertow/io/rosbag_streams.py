@@ -24,9 +24,9 @@ import numpy as np
 
 from ..log import Depth, GpsFix, GroundTruth, Imu, Multibeam, Pressure, SonarRange, WaveProbe
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
-from ._collect import MALFORMED, DvlRows, Notes, count_nan_rows, time_order
 from .a50_json import add_velocity_report, is_position_report, is_velocity_report, position_row
 from .clock import ClockTable
+from .collect import MALFORMED, DvlRows, Notes, count_nan_rows, time_order
 from .geo import local_ned
 from .msgdefs import WL_DVLDR
 from .ros_dvl import DVL_TYPES, dvl_report

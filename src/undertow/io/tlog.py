@@ -37,7 +37,7 @@ from ..errors import ReaderError
 from ..log import Log
 from ..records import records_to_log
 from ..robot import Mounting
-from ._collect import MALFORMED, Notes, read_regular_bytes
+from .collect import MALFORMED, Notes, read_regular_bytes
 from .mavlink import MavlinkConfig, MavlinkMapper
 
 TLOG_SUFFIXES = (".tlog",)

@@ -18,7 +18,7 @@ from .._util.atomic import atomic_write_text
 from ..errors import DataError, ReaderError
 from ..log import GroundTruth
 from ..rotations import quaternion_to_rpy, rpy_to_quaternion
-from ._collect import Notes, check_regular, time_order
+from .collect import Notes, check_regular, time_order
 
 
 def write_tum(path, t, position, orientation_rpy) -> Path:

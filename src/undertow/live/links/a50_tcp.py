@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from ...io._collect import MALFORMED
 from ...io.a50_json import is_position_report, is_velocity_report, position_fields, velocity_fields
+from ...io.collect import MALFORMED
 from ...records import Record
 from .base import Backoff, ClockPolicy, Link, LinkCounters
 
