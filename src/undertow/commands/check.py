@@ -193,7 +193,7 @@ def _missing(log: Log) -> list[str]:
     return missing
 
 
-def _problems_and_settings(log: Log, fmt: str, settings: Settings, streams) -> tuple:
+def _problems_and_settings(log: Log, fmt: str, settings: Settings) -> tuple:
     """(problems with their fixes, the proposed settings file as a dict with comments)."""
     meta = log.metadata
     problems: list[Problem] = []
@@ -312,7 +312,7 @@ def check_file(path: str | Path, settings: Settings | str | Path | None = None, 
                                            "model)" if unobserved else "")  # fmt: skip
         except (MissingStreamError, UndertowError) as exc:
             ready, reason = False, str(exc)
-    problems, proposed, comments = _problems_and_settings(log, fmt, settings, streams)
+    problems, proposed, comments = _problems_and_settings(log, fmt, settings)
     guess = propose_topics({t: m for t, (m, _) in types.items()}) if types else {}
     written = None
     if write_config is not None:

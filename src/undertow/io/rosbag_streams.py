@@ -62,17 +62,6 @@ def ns_to_s(ns: int) -> float:
     return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
 
 
-def header_stamp(msg) -> float:
-    """``header.stamp`` in seconds; NaN for a zero stamp (never filled) or no header."""
-    header = getattr(msg, "header", None)
-    if header is None:
-        return math.nan
-    st = header.stamp
-    if st.sec == 0 and st.nanosec == 0:
-        return math.nan
-    return st.sec + st.nanosec * 1e-9
-
-
 def _xyz(v) -> tuple[float, float, float]:
     return (v.x, v.y, v.z)
 
@@ -150,14 +139,15 @@ class Rows:
         self.dvl_frames: set[str] = set()
         #: the depth topic's kind: "pose" (z, sign to resolve) or "float" (positive down)
         self.depth_kind: str | None = None
-        #: gps rows: (t, lat, lon, alt, std) of NavSatFix, or (t, x, y, z, std) local (Odometry)
+        #: the gps rows are (t, x, y, z, std) in a local frame (Odometry), not (t, lat, lon, alt,
+        #: std) of NavSatFix
         self.gps_local = False
 
     def stamp(self, stream: str, msg, record_ns: int) -> float:
         """Register the message's two times; the row's time placeholder (its index). A zero stamp
         recorded within a second of time zero is a clock that starts at zero (a simulation), not
-        a stamp never filled. (:func:`header_stamp` and ``ClockTable.add`` inlined: called for
-        every message.)"""
+        a stamp never filled; a message without a header has no stamp (NaN). (``ClockTable.add``
+        inlined: called for every message.)"""
         record_s = record_ns // 1_000_000_000 + (record_ns % 1_000_000_000) * 1e-9
         header = getattr(msg, "header", None)
         if header is None:

@@ -210,9 +210,10 @@ def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
         elif verdict["unit"] == "ambiguous":
             lines.append(f"{src}imu: {verdict['evidence']}; set log: {{imu_units: deg/s}} (or "
                          "rad/s) to localize")  # fmt: skip
-    rho = options.water_density_kg_m3
-    if not (options.water == "fresh" and "water_density_kg_m3" in meta):
-        meta["water_density_kg_m3"] = rho
+    # the water: salt when the settings say so, else the density the log records (a simulated
+    # run's sidecar), else fresh
+    if options.water == "salt" or "water_density_kg_m3" not in meta:
+        meta["water_density_kg_m3"] = options.water_density_kg_m3
         meta["water"] = options.water
     if log.pressure is not None and len(log.pressure):
         rho = float(meta["water_density_kg_m3"])
