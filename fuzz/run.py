@@ -213,7 +213,7 @@ def mutate_yaml(rng: random.Random, data: bytes) -> bytes:
     else:
         for _ in range(rng.choice((1, 2, 4))):
             obj = mutate_value(rng, obj)
-            if rng.random() < 0.2 and isinstance(obj, dict):  # a non-string key
+            if rng.random() < 0.2 and isinstance(obj, dict) and obj:  # a non-string key
                 obj[rng.choice((1, 2.5, None, True))] = obj.pop(next(iter(obj)), None)
     text = yaml.safe_dump(obj, sort_keys=False, allow_unicode=True)
     return text.replace("'" + "[" * 100_000 + "'", "[" * 1000).encode()
