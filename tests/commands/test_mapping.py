@@ -227,7 +227,7 @@ def test_prior_may_be_a_map_folder(run, tmp_path):
     ("args", "message"),
     [
         (["--method", "csm", "--length-scale", "0.3"], "length_scale applies to the bki method"),
-        (["--length-scale", "0.3"], "length_scale applies to the bki method, not adaptive"),
+        (["--length-scale", "0.3"], "length_scale applies to the bki method, not tpu"),
         (
             ["--method", "bki", "--variance-bounds", "0,0,0,1,1,1"],
             "variance_bounds applies to the adaptive method, not bki",

@@ -164,7 +164,9 @@ def test_invalid_inputs_rejected_with_clear_message():
         make_mapper("adaptive", l_min=(0.2, 0.1, 0.05), l_max=(0.18, 0.18, 0.08))
     with pytest.raises(ConfigError, match=r"mapping.l_max: .*expected three values \(x, y, z\)"):
         make_mapper("adaptive", l_max=(0.18, 0.18))
-    with pytest.raises(ConfigError, match="mapping.method: Input should be 'csm', 'bki' or"):
+    with pytest.raises(
+        ConfigError, match="mapping.method: Input should be 'csm', 'bki', 'adaptive' or 'tpu'"
+    ):
         make_mapper("octree")
     with pytest.raises(ConfigError, match="variance_bounds need 0 <= min <= max"):
         make_mapper("adaptive", variance_bounds=((1, 1, 1), (0, 0, 0)))

@@ -19,7 +19,9 @@ from undertow.io.rosbag_write import MessageBuilder, multibeam_message
 from undertow.log import GroundTruth, Log, Multibeam
 from undertow.mapping.config import MappingConfig
 from undertow.mapping.mappers import mapper_from_config
+from undertow.mapping.run import map_log
 from undertow.mapping.samples import SENSOR_MULTIBEAM, build_samples
+from undertow.mapping.surface import map_surface
 from undertow.robot import (
     DVL_PRESETS,
     DvlGeometry,
@@ -329,7 +331,7 @@ def test_multibeam_samples_are_hits_on_the_plane_plus_free_samples_along_the_bea
 
 def test_the_mapper_maps_a_multibeam_survey_of_a_tilted_plane_onto_the_plane():
     log, traj = _tilted_plane_survey()
-    config = MappingConfig(use_dvl=False, use_sonar=False, use_multibeam=True)
+    config = MappingConfig(method="adaptive", use_dvl=False, use_sonar=False, use_multibeam=True)
     samples = build_samples(log, traj, **config.model_dump(include={"use_dvl", "use_sonar",
                                                                     "use_multibeam"}))  # fmt: skip
     mapper = mapper_from_config(config)
@@ -343,6 +345,22 @@ def test_the_mapper_maps_a_multibeam_survey_of_a_tilted_plane_onto_the_plane():
     assert np.mean(np.abs(dz) <= config.resolution) > 0.95
     # the swath is covered: occupied cells across the plane's width under the track
     assert np.ptp(c[:, 1]) > 6.0
+
+
+def test_the_tpu_surface_of_a_multibeam_survey_of_a_tilted_plane_is_the_plane():
+    """The default mapper's surface (depth per column) lies on the plane to within a fraction
+    of a cell, unbiased, and its standard deviation covers the plane's depth."""
+    log, traj = _tilted_plane_survey()
+    config = MappingConfig(method="tpu", use_dvl=False, use_sonar=False, use_multibeam=True)
+    occupancy = map_log(log, traj, config).map
+    surface = map_surface(occupancy)
+    p = surface.points()
+    j, i = np.nonzero(surface.coverage)
+    error = p[:, 2] - _plane_z(p[:, 0], p[:, 1])
+    assert len(p) > 1000 and np.ptp(p[:, 1]) > 6.0
+    assert np.sqrt(np.mean(error**2)) < 0.25 * config.resolution
+    assert abs(np.mean(error)) < 0.05 * config.resolution
+    assert np.mean(np.abs(error) <= 2 * surface.std[j, i] + 1e-9) > 0.9
 
 
 # -- the built-in survey --------------------------------------------------------------------------

@@ -72,7 +72,7 @@ def single_process(samples, config):
     return mapper.occupancy()
 
 
-@pytest.mark.parametrize("method", ["adaptive", "bki", "csm"])
+@pytest.mark.parametrize("method", ["adaptive", "bki", "csm", "tpu"])
 def test_tiled_equals_single_process(survey, method):
     config = MappingConfig(method=method)
     result = map_tiled(survey, config, TILE_M, scheduler="sync")
@@ -87,7 +87,7 @@ def test_tiled_equals_single_process(survey, method):
 def test_halo_is_needed(survey):
     """Without the halo the border cells lose the samples of the neighbouring tile: the
     comparison above can fail."""
-    config = MappingConfig()
+    config = MappingConfig(method="adaptive")
     single = single_process(survey, config)
     no_halo = Tiling(config.resolution, 8, 0.0)
     parts = no_halo.partition(survey.points)
@@ -229,7 +229,7 @@ def test_cli_tiled_map_equals_untiled(tmp_path, simulation, simulated_run):
         P[:, k, k] = 1e-4 + 1e-3 * (t - t[0]) / (t[-1] - t[0])
     Trajectory(t, x, P).save_npz(tmp_path / "est" / "trajectory.npz")
     log = str(simulated_run("calm", 0) / "log")
-    base = ["map", log, "--trajectory", str(tmp_path / "est"), "-q"]
+    base = ["map", log, "--trajectory", str(tmp_path / "est"), "-q", "--method", "adaptive"]
     assert runner.invoke(app, [*base, "--out", str(tmp_path / "one")]).exit_code == 0
     r = runner.invoke(app, [*base, "--out", str(tmp_path / "tiled"), "--tiles", "0.5",
                             "--scheduler", "threads"])  # fmt: skip

@@ -33,7 +33,7 @@ def _three(value):
 
 
 Triple = Annotated[tuple[Finite, Finite, Finite], BeforeValidator(_three)]
-Method = Literal["csm", "bki", "adaptive"]
+Method = Literal["csm", "bki", "adaptive", "tpu"]
 
 
 class MappingConfig(BaseModel):
@@ -43,13 +43,43 @@ class MappingConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    method: Method = "adaptive"
+    method: Method = "tpu"
     resolution: float = Field(0.1, gt=0, allow_inf_nan=False, description="grid size, m")
     length_scale: float = Field(
         0.15, gt=0, allow_inf_nan=False, description="isotropic l of the bki method, m"
     )
     l_min: Triple = Field((0.10, 0.10, 0.05), description="adaptive minimum length scales, m")
     l_max: Triple = Field((0.18, 0.18, 0.08), description="adaptive maximum length scales, m")
+    base_length: float = Field(
+        0.10, gt=0, allow_inf_nan=False,
+        description="tpu: across-floor length scale of a perfectly placed hit, m (paper's l_min)",
+    )  # fmt: skip
+    max_length: float = Field(
+        2.0, gt=0, allow_inf_nan=False,
+        description="tpu: largest across-floor length scale, m (bounds the cost and tile halo)",
+    )  # fmt: skip
+    range_std_dvl: float = Field(
+        0.005, gt=0, allow_inf_nan=False,
+        description="tpu: DVL beam range noise, m (not in the A50's spec: assumed)",
+    )  # fmt: skip
+    range_std_sonar: float = Field(
+        0.01, gt=0, allow_inf_nan=False, description="tpu: sonar range noise s_0, m (assumed)"
+    )
+    range_std_multibeam: float = Field(
+        0.01, gt=0, allow_inf_nan=False, description="tpu: multibeam range noise s_0, m (assumed)"
+    )
+    range_std_fraction: float = Field(
+        0.005, ge=0, allow_inf_nan=False,
+        description="tpu: sonar and multibeam range noise per metre of range (Ping2: 0.5 %)",
+    )  # fmt: skip
+    sonar_beam_width_deg: float = Field(
+        25.0, ge=0, lt=180, allow_inf_nan=False,
+        description="tpu: the sonar's full beam width, deg (Ping2 spec: 25)",
+    )  # fmt: skip
+    wave_range_noise: bool = Field(
+        True, description="tpu: add the waves' orbital displacement (the trajectory's wave) "
+        "to the range noise",
+    )  # fmt: skip
     alpha0: float = Field(1e-10, gt=0, allow_inf_nan=False)
     beta0: float = Field(1e-10, gt=0, allow_inf_nan=False)
     variance_bounds: Annotated[tuple[Triple, Triple] | None, BeforeValidator(_as_sequence)] = Field(
@@ -89,12 +119,17 @@ class MappingConfig(BaseModel):
             )
         # a length scale under a tenth of a cell puts a sample's kernel mass in at most one
         # cell centre, or none: the map would lose its samples
-        lengths = {"bki": ("length_scale", (self.length_scale,)), "adaptive": ("l_min", self.l_min)}
+        lengths = {"bki": ("length_scale", (self.length_scale,)), "adaptive": ("l_min", self.l_min),
+                   "tpu": ("base_length", (self.base_length,))}  # fmt: skip
         name, values = lengths.get(self.method, ("", ()))
         if any(v <= self.resolution / 10 for v in values):
             raise ValueError(
                 f"{name} {values if len(values) > 1 else values[0]} m is not above resolution / "
                 f"10 = {self.resolution / 10:g} m: use a finer resolution or longer length scales"
+            )
+        if self.base_length > self.max_length:
+            raise ValueError(
+                f"base_length {self.base_length} m exceeds max_length {self.max_length} m"
             )
         return self
 

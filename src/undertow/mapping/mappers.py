@@ -1,6 +1,7 @@
-"""Mappers: counting sensor model (CSM), BKI with the sparse kernel, and the paper's adaptive BKI.
+"""Mappers: counting sensor model (CSM), BKI with the sparse kernel, the paper's adaptive BKI and
+``tpu``, BKI with each hit's total propagated uncertainty (the default for users).
 
-All three share one verb, :meth:`Mapper.integrate`, and accumulate the posterior concentration
+All four share one verb, :meth:`Mapper.integrate`, and accumulate the posterior concentration
 parameters of ``eq:alpha_param`` / ``eq:beta_param``:
 
     alpha_* = alpha_0 + sum_i k(m_*, m_i) y_i,    beta_* = beta_0 + sum_i k(m_*, m_i)(1 - y_i)
@@ -15,6 +16,9 @@ parameters of ``eq:alpha_param`` / ``eq:beta_param``:
   taken over the samples of each :meth:`integrate` call, so integrate a whole session at once to
   follow the paper; with fixed ``variance_bounds=(min(3,), max(3,))`` the mapper can run
   incrementally (online). Where max == min on an axis, s~ = 0 there, i.e. l_min is used.
+- ``tpu``: the product kernel with each hit's own length scales from its pose's standard
+  deviation (not normalized over the session), its mass kept and its vertical placement exact
+  (:mod:`undertow.mapping.tpu`).
 
 The kernel is evaluated at cell centres; sums are scattered into a sparse chunked grid by numba
 kernels (see :mod:`undertow.mapping.kernels`).
@@ -34,6 +38,7 @@ from .config import MappingConfig, Method
 from .grid import ChunkedGrid, points_extent
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
 from .samples import Samples
+from .tpu import tpu_training
 
 DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
 
@@ -211,6 +216,50 @@ class AdaptiveBkiMapper(Mapper):
         }  # fmt: skip
 
 
+class TpuBkiMapper(Mapper):
+    """BKI with each hit's total propagated uncertainty (:mod:`undertow.mapping.tpu`): the
+    kernel spread across the floor by the pose's horizontal standard deviation with its mass
+    kept, the hit weighted by its vertical precision and placed on the vertical with its depth
+    and variance kept. The default mapper; its surface is
+    :func:`~undertow.mapping.surface.evidence_surface`."""
+
+    method = "tpu"
+
+    def __init__(self, *, base_length, max_length, range_std, range_std_fraction,
+                 sonar_beam_width_deg, wave=None, **base) -> None:  # fmt: skip
+        super().__init__(**base)
+        self.sonar_beam_width_deg = float(sonar_beam_width_deg)
+        #: (amplitude m, frequency Hz) of the waves whose orbital motion adds to the range
+        #: noise (:func:`~undertow.mapping.tpu.trajectory_wave`), or None
+        self.wave = wave
+        self.base_length, self.max_length = float(base_length), float(max_length)
+        self.range_std = tuple(float(v) for v in range_std)  # DVL, sonar, multibeam
+        self.range_std_fraction = float(range_std_fraction)
+
+    def _scatter(self, samples: Samples) -> None:
+        points, label, weight, lengths = tpu_training(
+            samples, resolution=self.resolution, base_length=self.base_length,
+            max_length=self.max_length, range_std=self.range_std,
+            range_std_fraction=self.range_std_fraction,
+            sonar_beam_width_deg=self.sonar_beam_width_deg, wave=self.wave,
+        )  # fmt: skip
+        # the product kernel's l_j = s_j (l_max_j - l_min_j) + l_min_j with bounds (0, 1):
+        # s_j = l_j / cap gives each sample its own lengths (cap fixed by the settings, so
+        # a sample's lengths do not depend on the batch: tiles map as the whole)
+        cap = np.full(3, max(self.max_length, self.resolution / 2))
+        training = Samples.from_points(points, label, weight, lengths / cap)
+        bounds = (np.zeros(3), np.ones(3))
+        self._grid_scatter(MODE_PRODUCT, training, bounds, np.zeros(3), cap)
+
+    def metadata(self) -> dict:
+        return {**super().metadata(), "base_length": self.base_length,
+                "max_length": self.max_length, "range_std": list(self.range_std),
+                "range_std_fraction": self.range_std_fraction,
+                "sonar_beam_width_deg": self.sonar_beam_width_deg,
+                "wave": None if self.wave is None else
+                {"amplitude_m": self.wave[0], "frequency_hz": self.wave[1]}}  # fmt: skip
+
+
 def out_of_memory(resolution: float) -> ConfigError:
     """The one-line error for a map that ran out of memory anyway (after the estimate)."""
     return ConfigError(
@@ -228,6 +277,12 @@ def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
         mapper: Mapper = CsmMapper(**base)
     elif config.method == "bki":
         mapper = BkiMapper(length_scale=config.length_scale, **base)
+    elif config.method == "tpu":
+        mapper = TpuBkiMapper(base_length=config.base_length, max_length=config.max_length,
+                              range_std=(config.range_std_dvl, config.range_std_sonar,
+                                         config.range_std_multibeam),
+                              sonar_beam_width_deg=config.sonar_beam_width_deg,
+                              range_std_fraction=config.range_std_fraction, **base)  # fmt: skip
     else:
         mapper = AdaptiveBkiMapper(l_min=config.l_min, l_max=config.l_max,
                                    variance_bounds=config.variance_bounds, **base)  # fmt: skip

@@ -15,6 +15,7 @@ from ..trajectory import Trajectory
 from .config import MappingConfig
 from .mappers import mapper_from_config, out_of_memory
 from .samples import samples_from_config
+from .tpu import trajectory_wave
 
 
 @dataclass
@@ -39,6 +40,8 @@ def map_log(
     try:
         samples = samples_from_config(log, trajectory, config)
         mapper = mapper_from_config(config, prior=prior)
+        if config.method == "tpu" and config.wave_range_noise:
+            mapper.wave = trajectory_wave(trajectory)
         mapper.integrate(samples)
         occupancy = mapper.occupancy()
     except MemoryError:

@@ -22,6 +22,23 @@ quantized to cell centres: it moves continuously with the cells' occupancies (a 
 two cells shares its occupancy between them). Between columns, :meth:`Surface.at` interpolates
 bilinearly.
 
+**The evidence surface** (:func:`evidence_surface`, the default for a ``tpu`` map, whose hits
+carry their total propagated uncertainty: :mod:`undertow.mapping.tpu`): per column, with
+each cell's hit evidence w_k = alpha_k - alpha_0 (the kernel-weighted hits it received),
+
+    d = sum_k w_k z_k / sum_k w_k,
+    s^2 = max(sum_k w_k (z_k - d)^2 / sum_k w_k - f (1 - f) r^2, 0),  f = frac(d / r - 1/2),
+
+the mean and the spread of where the hits say the floor is. The tpu mapper places each hit
+on the cells with its depth and its vertical variance kept, plus the least variance a
+distribution on cells of size r can have with that mean, f (1 - f) r^2; the same term,
+taken at the column's mean, is removed again (exact for a column of hits at one depth; for
+hits spread over several cells it is small next to their spread). The free-space evidence
+(beta_k) decides, with alpha_k, which columns hold data: those with a cell whose mean
+occupancy exceeds the threshold, as for the first-occupied surface. It does not reweight
+the hits: a cell's mean is a ratio of the hit and free evidence it received, and weighting
+a hit's three cells by it would move the hit's depth.
+
 :func:`surface_from_points` grids a point set (a ground-truth scan, an XYZ file) into the same
 :class:`Surface` form: per cell, the shallowest point (the first surface seen from above).
 """
@@ -126,20 +143,42 @@ def _columns(cells: np.ndarray):
     return order, starts
 
 
+#: How a surface is read from the cells: the first-occupied expectation, or the hit evidence
+SURFACE_ESTIMATORS = ("first-occupied", "evidence")
+
+
+def default_estimator(occupancy: OccupancyMap) -> str:
+    """The surface estimator of a map: ``evidence`` for a ``tpu`` map (its metadata's method),
+    ``first-occupied`` for the others (the paper's mappers, as the reproduction reads them)."""
+    return "evidence" if occupancy.metadata.get("method") == "tpu" else "first-occupied"
+
+
 def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, *,
-                occupied_only: bool = False) -> Surface:  # fmt: skip
-    """The seafloor surface ``occupancy`` implies (equations in the module doc): per column the
-    expected first occupied depth d and its spread s; no data where no cell's mean exceeds
-    ``threshold``. The grid is the map's (cell i has centre (i + 1/2) res), over the bounding box
-    of the map's columns. ``occupied_only``: only the occupied cells (mean > threshold, the
-    paper's map points) enter the expectation; cells below the threshold then neither stop a
-    column nor pull its depth up."""
+                occupied_only: bool = False, estimator: str | None = None) -> Surface:  # fmt: skip
+    """The seafloor surface ``occupancy`` implies (equations in the module doc): per column a
+    depth d and its standard deviation s; no data where no cell's mean exceeds ``threshold``.
+    ``estimator``: ``first-occupied`` (the expected first occupied depth), ``evidence``
+    (:func:`evidence_surface`) or None (:func:`default_estimator` of the map). The grid is the
+    map's (cell i has centre (i + 1/2) res), over the bounding box of the map's columns.
+    ``occupied_only``: only the occupied cells (mean > threshold, the paper's map points) enter
+    the expectation; cells below the threshold then neither stop a column nor pull its depth
+    up."""
+    estimator = default_estimator(occupancy) if estimator is None else estimator
+    if estimator not in SURFACE_ESTIMATORS:
+        raise DataError(f"surface estimator {estimator!r}: expected one of {SURFACE_ESTIMATORS}")
     if occupied_only:
         occupancy = occupancy.occupied(threshold)
-    res = float(occupancy.resolution)
     if len(occupancy) == 0:
         empty = np.zeros((0, 0))
-        return Surface(0.0, 0.0, res, empty, empty, empty.astype(bool))
+        return Surface(0.0, 0.0, float(occupancy.resolution), empty, empty, empty.astype(bool))
+    if estimator == "evidence":
+        return evidence_surface(occupancy, threshold)
+    return _first_occupied(occupancy, threshold)
+
+
+def _first_occupied(occupancy: OccupancyMap, threshold: float) -> Surface:
+    """The first-occupied surface of a non-empty map (module doc)."""
+    res = float(occupancy.resolution)
     order, starts = _columns(occupancy.cells)
     cells = occupancy.cells[order]
     p = np.clip(occupancy.mean[order], 0.0, 1.0)
@@ -156,16 +195,47 @@ def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, 
     spread = np.add.reduceat(weight * (z - np.repeat(mean_z, lengths)) ** 2, starts)
     var = spread / np.where(total > 0, total, 1.0) + res * res / 12.0
     covered = np.maximum.reduceat(p, starts) > threshold
-    ij = cells[starts, :2]
+    return _grid(cells[starts, :2], covered, mean_z, var, res)
+
+
+def _grid(ij, covered, depth_by_column, var_by_column, res: float) -> Surface:
+    """The Surface over the bounding box of the columns ``ij`` (K, 2), with data where
+    ``covered``."""
     lo = ij.min(axis=0)
     nx, ny = (ij.max(axis=0) - lo + 1).tolist()
     depth = np.full((ny, nx), np.nan)
     std = np.full((ny, nx), np.nan)
     col, row = (ij - lo).T
-    depth[row[covered], col[covered]] = mean_z[covered]
-    std[row[covered], col[covered]] = np.sqrt(var[covered])
+    depth[row[covered], col[covered]] = depth_by_column[covered]
+    std[row[covered], col[covered]] = np.sqrt(var_by_column[covered])
     x0, y0 = ((lo + 0.5) * res).tolist()
     return Surface(x0, y0, res, depth, std, np.isfinite(depth))
+
+
+def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD) -> Surface:
+    """The evidence surface of ``occupancy`` (module doc): per column the mean d and standard
+    deviation s of the cells' hit evidence w_k = alpha_k - alpha_0, with the least variance of
+    a distribution on cells of size r with mean d removed; data where a cell's mean exceeds
+    ``threshold`` and the column holds evidence."""
+    res = float(occupancy.resolution)
+    if len(occupancy) == 0:
+        empty = np.zeros((0, 0))
+        return Surface(0.0, 0.0, res, empty, empty, empty.astype(bool))
+    order, starts = _columns(occupancy.cells)
+    cells = occupancy.cells[order]
+    p = np.clip(occupancy.mean[order], 0.0, 1.0)
+    w = np.maximum(occupancy.alpha[order] - occupancy.alpha0, 0.0)
+    z = (cells[:, 2] + 0.5) * res
+    lengths = np.diff(np.append(starts, len(p)))
+    total = np.add.reduceat(w, starts)
+    safe = np.where(total > 0, total, 1.0)
+    d = np.add.reduceat(w * z, starts) / safe
+    spread = np.add.reduceat(w * (z - np.repeat(d, lengths)) ** 2, starts) / safe
+    f = d / res - 0.5
+    f -= np.floor(f)
+    var = np.maximum(spread - f * (1.0 - f) * res * res, 0.0)
+    covered = (np.maximum.reduceat(p, starts) > threshold) & (total > 0)
+    return _grid(cells[starts, :2], covered, d, var, res)
 
 
 def surface_from_points(points, resolution: float, origin: tuple[float, float] | None = None,

@@ -59,12 +59,27 @@ INDEX_FILE = "tiles.json"
 DEFAULT_RETRIES = 1
 
 
+#: the tpu mapper's settings, recorded with its map
+TPU_FIELDS = (
+    "base_length",
+    "max_length",
+    "range_std_dvl",
+    "range_std_sonar",
+    "range_std_multibeam",
+    "range_std_fraction",
+    "sonar_beam_width_deg",
+)
+
+
 def kernel_support(config: MappingConfig) -> float:
     """Largest distance (m) on x or y at which a sample still adds mass to a cell: the
     adaptive kernel's l_j <= max(l_min_j, l_max_j) (``eq:lengthscale_1``), the BKI length
-    scale l, and 0 for the counting sensor model (its own cell only)."""
+    scale l, the tpu kernel's l_cap (``max_length``), and 0 for the counting sensor model
+    (its own cell only)."""
     if config.method == "adaptive":
         return float(max(max(config.l_min[:2]), max(config.l_max[:2])))
+    if config.method == "tpu":
+        return float(config.max_length)
     if config.method == "bki":
         return float(config.length_scale)
     return 0.0
@@ -152,10 +167,19 @@ def session_bounds(samples: Samples, config: MappingConfig):
 
 
 def subset(samples: Samples, index: np.ndarray) -> Samples:
-    """The samples at ``index`` (in that order), without the ray origins."""
+    """The samples at ``index`` (in that order), with the origins of their rays only (the
+    ``tpu`` mapper needs each hit's range)."""
+    ray = samples.ray[index]
+    origins = np.zeros((0, 3))
+    if len(samples.origins):
+        used = ray >= 0
+        rays, inverse = np.unique(ray[used], return_inverse=True)
+        ray = np.where(used, 0, -1)
+        ray[used] = inverse
+        origins = samples.origins[rays]
     return Samples(samples.points[index], samples.label[index], samples.sigma0[index],
-                   samples.pose_variance[index], samples.ray[index],
-                   samples.sensor[index])  # fmt: skip
+                   samples.pose_variance[index], ray, samples.sensor[index],
+                   origins)  # fmt: skip
 
 
 @dataclass
@@ -431,6 +455,8 @@ def tiled_metadata(config, tiling: Tiling, bounds, run: TileRun, collector: Tile
             "seeded_from": ""}  # fmt: skip
     if config.method == "bki":
         meta["length_scale"] = config.length_scale
+    if config.method == "tpu":
+        meta.update({k: getattr(config, k) for k in TPU_FIELDS})
     if config.method == "adaptive":
         meta.update(l_min=list(config.l_min), l_max=list(config.l_max),
                     normalization="session" if config.variance_bounds is None else "fixed",

@@ -1,0 +1,181 @@
+"""The ``tpu`` mapper's training samples: each hit's total propagated uncertainty (TPU, the
+hydrographic term: IHO S-44 6th ed. 2020; Calder and Mayer, "Automatic processing of
+high-rate, high-density multibeam echosounder data", G3 4(6) 2003, CUBE) carried into BKI.
+
+A hit m_i = (x_i, y_i, z_i) placed with a pose of position variance (s_x^2, s_y^2, s_z^2)
+and a range r_i of standard deviation s_r = s_0 + f r_i (s_0 per sensor: ``range_std_dvl``,
+``range_std_sonar``, ``range_std_multibeam``; f = ``range_std_fraction`` for the sonar and the
+multibeam, 0 for the DVL) has the per-axis uncertainty
+
+    sigma_x^2 = s_x^2 + s_b^2,   sigma_y^2 = s_y^2 + s_b^2,   sigma_v^2 = s_z^2 + s_r^2 + s_w^2
+
+(z down; beams near vertical). s_b is a wide beam's footprint: a first return may come from
+anywhere in a cone of full angle b (``sonar_beam_width_deg``, the sonar's; the DVL's and the
+multibeam's beams are narrow, s_b = 0), a disk of radius R = r tan(b / 2) whose per-axis
+standard deviation is R / 2. s_w is the waves' share (the paper's point: waves corrupt the
+acoustic measurements): the RMS vertical orbital displacement between the sensor at depth d
+and the floor at depth h of the linear wave of amplitude a and frequency f the trajectory's
+filter used, s_w = a K_s(d) / sqrt(2), K_s = sinh(k (h - d)) / sinh(k h), k from
+omega^2 = g k tanh(k h) (Dean and Dalrymple, "Water Wave Mechanics for Engineers and
+Scientists", 1991, ch. 4), h the hits' median depth.
+
+**Across the floor** (x, y) the hit's kernel is the sparse kernel of ``eq:kernel`` at the
+length scale whose standard deviation is the hit's: the kernel k(d; l) has standard
+deviation c l, c = sqrt(1/6 - 1/pi^2) = 0.2556 (second moment int d^2 k / int k, in closed
+form), so
+
+    l_j = min(max(l_0, sigma_j / c), l_cap),    j = x, y,
+
+l_0 the kernel of a perfectly placed hit (``base_length``), l_cap the largest support
+(``max_length``, which bounds the cost and the tiles' halo). The kernel is normalized to
+the mass of the base kernel, k_i = sigma_0 (l_0 / l_x)(l_0 / l_y) k(|d_x|; l_x) k(|d_y|;
+l_y), so a hit spread by its pose uncertainty carries the evidence of one hit spread over
+where it may lie (the convolution of the base kernel with the pose's density keeps its
+mass), not more evidence: the paper's adaptive kernel widens without lowering its peak,
+which adds mass where the pose is worst. Each hit is also weighted by its vertical
+precision relative to a perfectly placed one, s_r^2 / sigma_v^2 (inverse-variance
+weighting, as CUBE weights soundings), s_r'^2 / sigma_v^2 with s_r'^2 = s_r^2 + s_w^2 (the
+sensor's noise in these waves): what lowers it is the pose's vertical uncertainty.
+
+**Along the vertical** the hit's mass goes to the three cells around it with weights that
+keep its depth and its vertical variance exactly: with z_c the nearest cell centre, u =
+(z_i - z_c) / r in [-1/2, 1/2] (r the resolution) and v = |u| (1 - |u|) + sigma_v^2 / r^2
+(the least variance a distribution on the cells can have with mean u, plus the hit's),
+the cells z_c - r, z_c, z_c + r get
+
+    w_- = (u^2 + v - u) / 2,   w_0 = 1 - u^2 - v,   w_+ = (u^2 + v + u) / 2
+
+(sum 1, mean u r, variance v r^2). v is capped at 1 - u^2 (w_0 >= 0): a vertical standard
+deviation above about 0.7 r is more than three cells can hold and is cut to it.
+
+Free samples (label 0) keep the base kernel (l_0 across, r / 2 along the vertical: their own
+cell and column) and weight sigma_0: they clear the water the beam crossed.
+
+The surface that reads this map back (depth and standard deviation per column) is
+:func:`undertow.mapping.surface.evidence_surface`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..sim.waves import wavenumber
+from .samples import SENSOR_SONAR, Samples
+
+#: standard deviation of the sparse kernel k(d; l) in units of l: sqrt(1/6 - 1/pi^2)
+KERNEL_STD = math.sqrt(1.0 / 6.0 - 1.0 / math.pi**2)
+
+
+def trajectory_wave(trajectory) -> tuple[float, float] | None:
+    """(amplitude m, frequency Hz) of the waves the trajectory's filter used (its metadata's
+    ``wave_track``: the RMS amplitude and the median frequency; else ``wave_noise``), or None
+    (calm, or a trajectory that does not say)."""
+    meta = getattr(trajectory, "metadata", None) or {}
+    track = meta.get("wave_track")
+    if isinstance(track, dict) and len(track.get("amplitude_m", ())):
+        a = np.asarray(track["amplitude_m"], float)
+        f = np.asarray(track.get("frequency_hz", ()), float)
+        a, f = a[np.isfinite(a)], f[np.isfinite(f)]
+        if a.size and f.size and np.sqrt(np.mean(a * a)) > 0:
+            return float(np.sqrt(np.mean(a * a))), float(np.median(f))
+    noise = meta.get("wave_noise")
+    if isinstance(noise, dict):
+        a, f = noise.get("amplitude_m"), noise.get("frequency_hz")
+        if a is not None and f is not None and np.isfinite([a, f]).all() and a > 0 and f > 0:
+            return float(a), float(f)
+    return None
+
+
+def wave_range_std(samples: Samples, wave, resolution: float) -> np.ndarray:
+    """s_w of every hit (0 for free samples; module doc): a K_s(d) / sqrt(2) for its sensor
+    depth d and the water depth h at its end point (z, rounded to the grid's ``resolution`` for the
+    wavenumber, so a sample's value does not depend on the others: tiles map alike); zeros
+    without a wave."""
+    out = np.zeros(len(samples))
+    known = (samples.ray >= 0) & (samples.label > 0.5)  # the hits: free samples do not use it
+    if wave is None or not known.any() or not len(samples.origins):
+        return out
+    amplitude, frequency = wave
+    d = samples.origins[samples.ray[known], 2]
+    h = np.maximum(np.round(samples.points[known, 2] / resolution) * resolution, resolution)
+    depths, index = np.unique(h, return_inverse=True)
+    k = np.array([float(wavenumber(2.0 * np.pi * frequency, float(v))) for v in depths])[index]
+    d = np.clip(d, 0.0, h)
+    # K_s = sinh(k (h - d)) / sinh(k h) as a ratio of exponentials (no overflow when deep)
+    k_s = (np.exp(-k * d) - np.exp(-k * (2.0 * h - d))) / -np.expm1(-2.0 * k * h)
+    out[known] = amplitude * np.nan_to_num(k_s) / np.sqrt(2.0)
+    return out
+
+
+def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
+               sonar_beam_width_deg: float = 0.0, wave=None, resolution: float = 0.1):  # fmt: skip
+    """(sigma_x, sigma_y, sigma_v, s_r') of every sample (module doc): the horizontal standard
+    deviations (pose and footprint), the vertical one, and the range noise in these waves.
+    ``range_std``: s_0 of the DVL, the sonar and the multibeam (by ``Samples.sensor``; a
+    sample of unknown sensor takes the largest); ``wave``: (amplitude, frequency) or None."""
+    var = samples.pose_variance
+    rng = np.zeros(len(samples))
+    known = samples.ray >= 0
+    if known.any() and len(samples.origins):
+        rng[known] = np.linalg.norm(samples.points[known] - samples.origins[samples.ray[known]],
+                                    axis=1)  # fmt: skip
+    s0 = np.asarray(range_std, float)
+    fraction = np.array([0.0, range_std_fraction, range_std_fraction])
+    known_sensor = (samples.sensor >= 0) & (samples.sensor < 3)
+    sensor = np.where(known_sensor, samples.sensor, int(np.argmax(s0))).astype(np.int64)
+    s_w = wave_range_std(samples, wave, resolution)
+    s_r = np.hypot(s0[sensor] + fraction[sensor] * rng, s_w)
+    half = np.deg2rad(sonar_beam_width_deg) / 2.0
+    s_b2 = np.where(sensor == SENSOR_SONAR, (rng * np.tan(half) / 2.0) ** 2, 0.0)
+    return (np.sqrt(var[:, 0] + s_b2), np.sqrt(var[:, 1] + s_b2), np.sqrt(var[:, 2] + s_r**2),
+            s_r)  # fmt: skip
+
+
+def lattice_weights(z, sigma_v, resolution: float):
+    """(centres (n, 3), weights (n, 3)): the three cell centres around each depth z (z_c - r,
+    z_c, z_c + r) and the weights that keep its mean z and variance sigma_v^2 plus the
+    least the cells can hold (module doc; v capped at 1 - u^2)."""
+    r = float(resolution)
+    k = np.floor(np.asarray(z, float) / r)
+    zc = (k + 0.5) * r
+    u = (np.asarray(z, float) - zc) / r
+    au = np.abs(u)
+    v = np.minimum(au * (1.0 - au) + (np.asarray(sigma_v, float) / r) ** 2, 1.0 - u * u)
+    w_minus = np.maximum((u * u + v - u) / 2.0, 0.0)
+    w_plus = np.maximum((u * u + v + u) / 2.0, 0.0)
+    w_zero = np.maximum(1.0 - w_minus - w_plus, 0.0)
+    centres = zc[:, None] + r * np.array([-1.0, 0.0, 1.0])
+    return centres, np.stack([w_minus, w_zero, w_plus], axis=1)
+
+
+def tpu_training(samples: Samples, *, resolution: float, base_length: float, max_length: float,
+                 range_std, range_std_fraction: float, sonar_beam_width_deg: float = 0.0,
+                 wave=None):  # fmt: skip
+    """The samples the ``tpu`` mapper scatters with the product kernel, and their per-axis
+    length scales: (points (M, 3), label (M,), weight (M,), lengths (M, 3)). Free samples
+    first, in order, then every hit's three vertical cells (module doc)."""
+    sx, sy, sv, s_r = hit_sigmas(samples, range_std, range_std_fraction, sonar_beam_width_deg,
+                                 wave, resolution)  # fmt: skip
+    hit = samples.label > 0.5
+    lx = np.clip(sx / KERNEL_STD, base_length, max_length)
+    ly = np.clip(sy / KERNEL_STD, base_length, max_length)
+    precision = np.divide(s_r * s_r, sv * sv, out=np.ones_like(sv), where=sv > 0)
+    weight = samples.sigma0 * (base_length / lx) * (base_length / ly) * precision
+    free = ~hit
+    n_free = int(free.sum())
+    lengths_free = np.tile([base_length, base_length, resolution / 2], (n_free, 1))
+    centres, w = lattice_weights(samples.points[hit, 2], sv[hit], resolution)
+    n_hit = int(hit.sum())
+    pts_hit = np.repeat(samples.points[hit], 3, axis=0)
+    pts_hit[:, 2] = centres.reshape(-1)
+    lengths_hit = np.repeat(np.stack([lx[hit], ly[hit], np.full(n_hit, resolution / 2)], 1), 3,
+                            axis=0)  # fmt: skip
+    weight_hit = (weight[hit][:, None] * w).reshape(-1)
+    keep = weight_hit > 0
+    points = np.concatenate([samples.points[free], pts_hit[keep]])
+    label = np.concatenate([samples.label[free], np.ones(int(keep.sum()))])
+    weights = np.concatenate([samples.sigma0[free], weight_hit[keep]])
+    lengths = np.concatenate([lengths_free, lengths_hit[keep]])
+    return points, label, weights, lengths
