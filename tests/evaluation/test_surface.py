@@ -231,22 +231,31 @@ def test_calibration_counts_exactly_the_qualifying_columns():
     assert e.calibrated_columns == 0 and math.isnan(e.within_1sigma) and math.isnan(e.mean_abs_z)
 
 
-def test_hull_area_keeps_the_truth_inside_the_mapped_cells_hull():
-    """An L of covered cells (x in [0, 2], y in [0, 1] plus x in [0, 1], y in [1, 2]): the hull
-    of their squares also holds the triangle between the arms, not the far corner."""
+def test_hull_area_is_the_hull_of_the_mapped_cells_where_the_truth_is_defined():
+    """An L of covered cells (x in [0, 2], y in [0, 1] plus x in [0, 1], y in [1, 2]) on a 3 x 3 m
+    grid: the hull of their squares also holds the triangle between the arms (x + y < 3), not
+    the far corner; where the truth is undefined (y > 1.5) no column is surveyed."""
     from undertow.evaluation.surface import hull_area
 
     def l_shape(x, y):
-        return np.where((y < 1.0) | (x < 1.0), 2.0, np.nan)
+        return np.where(((y < 1.0) | (x < 1.0)) & (x < 2.0) & (y < 2.0), 2.0, np.nan)
 
-    surface = _plane_surface(l_shape, nx=20, ny=20)
-    cloud = _grid_cloud(lambda x, y: np.full(np.shape(x), 2.0), 3.0, 3.0, spacing=0.05)
-    kept = hull_area(surface, cloud)
-    x, y = cloud[:, 0], cloud[:, 1]
-    # the hull: the square [0, 2]^2 cut by the line from (2, 1) to (1, 2), x + y <= 3
-    inside = (x <= 2.0) & (y <= 2.0) & (x + y <= 3.0)
-    strict = (x < 2.0 - 1e-9) & (y < 2.0 - 1e-9) & (x + y < 3.0 - 1e-9)
-    kept_set = {tuple(p) for p in np.round(kept, 6)}
-    assert all(tuple(p) in kept_set for p in np.round(cloud[strict, :2], 6))
-    assert len(kept) <= inside.sum()
-    assert hull_area(map_surface(_map([[0, 0, 5]], [0.1])), cloud).shape == (0, 2)
+    surface = _plane_surface(l_shape, nx=30, ny=30)
+    flat = lambda x, y: np.full(np.shape(x), 2.0)  # noqa: E731
+    x, y = surface.centres()
+    for truth, defined in (
+        (flat, np.ones_like(x, bool)),
+        (lambda x, y: np.where(y < 1.5, 2.0, np.nan), y < 1.5),
+    ):
+        kept = hull_area(surface, truth)
+        expected = (x < 2.0) & (y < 2.0) & (x + y < 3.0 + 1e-9) & defined  # the edge: inside
+        got = np.zeros_like(expected)
+        got[
+            np.rint((kept[:, 1] - 0.05) / RES).astype(int),
+            np.rint((kept[:, 0] - 0.05) / RES).astype(int),
+        ] = True
+        np.testing.assert_array_equal(got, expected)
+        assert len(kept) == expected.sum()
+    cloud = _grid_cloud(flat, 3.0, 3.0, spacing=0.05)
+    assert len(hull_area(surface, cloud)) == ((x < 2.0) & (y < 2.0) & (x + y < 3.0 + 1e-9)).sum()
+    assert hull_area(map_surface(_map([[0, 0, 5]], [0.1])), flat).shape == (0, 2)

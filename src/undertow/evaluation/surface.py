@@ -27,9 +27,9 @@ those of the ground-truth cloud.
   = 0.683, within_2 = erf(sqrt 2) = 0.954 and mean_abs_z = sqrt(2 / pi) = 0.798; smaller
   shares: the std is too small (overconfident), larger: too large.
 
-:func:`hull_area` is a surveyed area when no log says where the beams fell: the points of the
-truth inside the convex hull of the map's covered cells (their squares, so that a column on the
-hull is inside it).
+:func:`hull_area` is a surveyed area when no log says where the beams fell: the map's columns
+inside the convex hull of its covered cells (of their squares, so that a column on the hull is
+inside it) where the truth is defined.
 """
 
 from __future__ import annotations
@@ -210,22 +210,23 @@ def calibration(surface: Surface, height: Heightfield, surveyed: np.ndarray) -> 
     }
 
 
-def hull_area(surface: Surface, truth_xy) -> np.ndarray:
-    """The (K, 2) points of ``truth_xy`` ((N, 2+) x-y) inside the convex hull of the squares of
-    the surface's covered cells (a surveyed area for :func:`evaluate_surface` when no log says
-    where the beams fell)."""
-    xy = np.asarray(truth_xy, dtype=float)
-    if xy.ndim != 2 or xy.shape[1] < 2:
-        raise DataError(f"area: shape {xy.shape}, expected (N, 2) x-y points")
-    xy = xy[:, :2]
+def hull_area(surface: Surface, truth: Heightfield | np.ndarray) -> np.ndarray:
+    """The (K, 2) centres of the surface's columns inside the convex hull of the squares of its
+    covered cells where the truth (a heightfield or an (N, 3) cloud, as :func:`evaluate_surface`
+    takes it) is defined: a surveyed area for :func:`evaluate_surface` when no log says where
+    the beams fell."""
     centres = surface.points()[:, :2]
-    if not len(centres) or not len(xy):
+    if not len(centres):
         return np.zeros((0, 2))
     half = surface.resolution / 2
     corners = centres[:, None, :] + half * np.array([[-1, -1], [-1, 1], [1, -1], [1, 1]])
     corners = np.unique(corners.reshape(-1, 2), axis=0)
     hull = Delaunay(corners[ConvexHull(corners).vertices])  # squares: never degenerate
-    return xy[hull.find_simplex(xy) >= 0]
+    x, y = surface.centres()
+    xy = np.stack([x.ravel(), y.ravel()], axis=1)
+    xy = xy[hull.find_simplex(xy) >= 0]
+    z = np.asarray(truth_heightfield(truth)(xy[:, 0], xy[:, 1]), dtype=float)
+    return xy[np.isfinite(z)]
 
 
 def _fraction_below(d: np.ndarray, tau: float) -> float:
