@@ -219,6 +219,13 @@ def map_score_lines(v: dict) -> list[str]:
         return "  ".join(f"{t:>4} {_num(v.get(f'{name}_{t}'), 3)}" for t in taus)
 
     threshold = "n/a" if v["threshold"] is None else f"{v['threshold']:g}"
+    calibration = (
+        f"{_pct(v['within_1sigma'])} within 1 sigma, {_pct(v['within_2sigma'])} within 2 sigma "
+        f"(a true std: 68.3 %, 95.4 %), mean |z| {_num(v['mean_abs_z'], 2)}, "
+        f"{v['calibrated_columns']} columns"
+        if v["calibrated_columns"] is not None
+        else "n/a (the map holds no depth std)"
+    )
     return [
         f"{'C2C map -> truth':<22} mean {_num(v['c2c_mean_m'], unit=' m')}, median "
         f"{_num(v['c2c_median_m'], unit=' m')}, RMSE {_num(v['c2c_rmse_m'], unit=' m')}",
@@ -231,8 +238,6 @@ def map_score_lines(v: dict) -> list[str]:
         f"{'accuracy (precision)':<22} {per_tau('precision')}",
         f"{'completeness (recall)':<22} {per_tau('recall')}",
         f"{'F-score':<22} {per_tau('fscore')}",
-        f"{'calibration':<22} {_pct(v['within_1sigma'])} within 1 sigma, "
-        f"{_pct(v['within_2sigma'])} within 2 sigma (a true std: 68.3 %, 95.4 %), "
-        f"mean |z| {_num(v['mean_abs_z'], 2)}, {_num(v['calibrated_columns'], 0)} columns",
+        f"{'calibration':<22} {calibration}",
         f"{'threshold':<22} {threshold} ({v['threshold_from']})",
     ]
