@@ -197,8 +197,7 @@ def test_evaluate_map_uses_the_threshold_the_map_was_made_with(run, tmp_path):
     assert data["occupied_cells"] == made
     assert data["threshold"] == 0.999999 and "the map" in data["threshold_from"]
     text = runner.invoke(app, ["evaluate", "map", str(out), gt]).stdout
-    assert "threshold_from: the map (mapping.occupied_threshold)" in text
-    assert "threshold: 0.999999" in text
+    assert "0.999999 (the map (mapping.occupied_threshold))" in text
     given = runner.invoke(app, ["evaluate", "map", str(out), gt, "--json", "--threshold", "0.5"])
     assert json.loads(given.stdout)["occupied_cells"] > made
     assert json.loads(given.stdout)["threshold_from"] == "--threshold"

@@ -169,3 +169,93 @@ def test_occupied_only_leaves_cells_below_the_threshold_out_of_the_column():
     occ = _map([[0, 0, 10], [0, 0, 20]], [0.4, 0.9])  # a doubtful cell 1 m above the floor
     assert map_surface(occ).depth[0, 0] == pytest.approx((0.4 * 1.05 + 0.6 * 0.9 * 2.05) / 0.94)
     assert map_surface(occ, occupied_only=True).depth[0, 0] == pytest.approx(2.05)
+
+
+# --- calibration of the depth std ----------------------------------------------------------------
+
+
+def _noisy_surface(truth, sigma, error, nx=100, ny=100, res=RES):
+    """A surface over nx x ny columns whose depth is truth + error and std sigma (arrays
+    (ny, nx) or scalars)."""
+    x0 = y0 = res / 2
+    x, y = np.meshgrid(x0 + res * np.arange(nx), y0 + res * np.arange(ny), indexing="xy")
+    depth = truth(x, y) + error
+    return Surface(x0, y0, res, depth, np.broadcast_to(sigma, depth.shape), np.isfinite(depth))
+
+
+@pytest.mark.parametrize("scale", [0.5, 1.0, 2.0])
+def test_gaussian_errors_fall_within_k_sigma_at_the_normal_shares(scale):
+    """Errors e ~ N(0, s^2) with s varying by column, the map reporting a s: |e| <= k a s
+    with probability erf(k a / sqrt 2), and E|e| / (a s) = sqrt(2 / pi) / a; within a 4-sigma
+    binomial (and normal) tolerance over 10^4 columns."""
+    plane = lambda x, y: 3.0 + 0.1 * x - 0.2 * y  # noqa: E731
+    rng = np.random.default_rng(7)
+    s = rng.uniform(0.02, 0.3, (100, 100))
+    surface = _noisy_surface(plane, scale * s, s * rng.standard_normal(s.shape))
+    e = evaluate_surface(surface, plane)
+    n = e.calibrated_columns
+    assert n == 10_000
+    for k, got in ((1, e.within_1sigma), (2, e.within_2sigma)):
+        p = math.erf(k * scale / math.sqrt(2))
+        assert got == pytest.approx(p, abs=4 * math.sqrt(p * (1 - p) / n) + 1e-12)
+    mean, spread = math.sqrt(2 / math.pi), math.sqrt(1 - 2 / math.pi)
+    assert e.mean_abs_z == pytest.approx(mean / scale, abs=4 * spread / scale / math.sqrt(n))
+    assert e.to_dict()["within_2sigma"] == e.within_2sigma
+
+
+def test_calibration_counts_exactly_the_qualifying_columns():
+    """Column errors |e| / s set to 0.5, 1 (on the 1-sigma edge: inside), 1.5 and 3 in known
+    numbers; columns with std 0 or NaN, without truth or outside the area do not enter."""
+    plane = lambda x, y: np.where(x < 3.0, 2.0, np.nan)  # noqa: E731  no truth from x = 3 m
+    nx, ny = 40, 10
+    ratio = np.tile(np.repeat([0.5, 1.0, 1.5, 3.0], 10), (ny, 1))  # 10 columns of each along x
+    sigma = np.full((ny, nx), 0.25)  # binary fractions: the 1-sigma edge is exact
+    sigma[0, 0], sigma[0, 1] = 0.0, np.nan  # two columns of ratio 0.5 that do not count
+    sign = np.where(np.arange(nx) % 2, 1.0, -1.0)
+    surface = _noisy_surface(plane, sigma, sign * ratio * 0.25, nx=nx, ny=ny)
+    e = evaluate_surface(surface, plane)
+    # x < 3 m: the first 30 columns along x (ratios 0.5, 1, 1.5), 10 rows, minus the two
+    n = 30 * ny - 2
+    assert e.calibrated_columns == n
+    assert e.within_1sigma == pytest.approx((20 * ny - 2) / n)
+    assert e.within_2sigma == 1.0
+    assert e.mean_abs_z == pytest.approx((0.5 * (10 * ny - 2) + 1.0 * 10 * ny + 1.5 * 10 * ny) / n)
+    # the surveyed area: only the ratio-1.5 columns (x in [2, 3) m)
+    xs = 0.05 + RES * np.arange(20, 30)
+    area = np.stack(np.meshgrid(xs, 0.05 + RES * np.arange(ny)), axis=-1).reshape(-1, 2)
+    e = evaluate_surface(surface, plane, area=area)
+    assert e.calibrated_columns == 10 * ny and e.within_1sigma == 0.0 and e.within_2sigma == 1.0
+    # no std anywhere: nothing to calibrate
+    flat = _noisy_surface(plane, np.nan, 0.0, nx=nx, ny=ny)
+    e = evaluate_surface(flat, plane)
+    assert e.calibrated_columns == 0 and math.isnan(e.within_1sigma) and math.isnan(e.mean_abs_z)
+
+
+def test_hull_area_is_the_hull_of_the_mapped_cells_where_the_truth_is_defined():
+    """An L of covered cells (x in [0, 2], y in [0, 1] plus x in [0, 1], y in [1, 2]) on a 3 x 3 m
+    grid: the hull of their squares also holds the triangle between the arms (x + y < 3), not
+    the far corner; where the truth is undefined (y > 1.5) no column is surveyed."""
+    from undertow.evaluation.surface import hull_area
+
+    def l_shape(x, y):
+        return np.where(((y < 1.0) | (x < 1.0)) & (x < 2.0) & (y < 2.0), 2.0, np.nan)
+
+    surface = _plane_surface(l_shape, nx=30, ny=30)
+    flat = lambda x, y: np.full(np.shape(x), 2.0)  # noqa: E731
+    x, y = surface.centres()
+    for truth, defined in (
+        (flat, np.ones_like(x, bool)),
+        (lambda x, y: np.where(y < 1.5, 2.0, np.nan), y < 1.5),
+    ):
+        kept = hull_area(surface, truth)
+        expected = (x < 2.0) & (y < 2.0) & (x + y < 3.0 + 1e-9) & defined  # the edge: inside
+        got = np.zeros_like(expected)
+        got[
+            np.rint((kept[:, 1] - 0.05) / RES).astype(int),
+            np.rint((kept[:, 0] - 0.05) / RES).astype(int),
+        ] = True
+        np.testing.assert_array_equal(got, expected)
+        assert len(kept) == expected.sum()
+    cloud = _grid_cloud(flat, 3.0, 3.0, spacing=0.05)
+    assert len(hull_area(surface, cloud)) == ((x < 2.0) & (y < 2.0) & (x + y < 3.0 + 1e-9)).sum()
+    assert hull_area(map_surface(_map([[0, 0, 5]], [0.1])), flat).shape == (0, 2)

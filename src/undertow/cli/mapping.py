@@ -124,8 +124,21 @@ def _variance_bounds(text: str | None):
 @evaluate_app.command("map")
 @user_errors
 def evaluate_map_command(
-    map_path: Annotated[Path, typer.Argument(metavar="MAP", help="map.npz, map.ply or folder.")],
-    ground_truth: Annotated[Path, typer.Argument(help="Ground-truth point cloud (PLY).")],
+    map_path: Annotated[
+        Path,
+        typer.Argument(
+            metavar="MAP",
+            help="map.npz (or its folder), map.ply, or a GeoTIFF of `undertow export`.",
+        ),
+    ],
+    ground_truth: Annotated[
+        Path,
+        typer.Argument(
+            metavar="TRUTH",
+            help="Ground truth: a PLY cloud (undertow's frame), an XYZ file (x y z per line) or "
+            "a GeoTIFF bathymetry (band 1).",
+        ),
+    ],
     threshold: Annotated[
         float | None,
         typer.Option(
@@ -134,21 +147,97 @@ def evaluate_map_command(
             "map.npz only: a map.ply holds the cells already thresholded when it was written."
         ),
     ] = None,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    origin: Annotated[
+        str | None,
+        typer.Option(
+            metavar="LAT,LON",
+            help="WGS 84 position of the map's origin, for a truth (or map) with a projected CRS; "
+            "as `undertow export --origin`.",
+        ),
+    ] = None,
+    utm: Annotated[
+        str | None,
+        typer.Option(
+            metavar="E,N,ZONE",
+            help="The map's origin as easting, northing and a UTM zone (32N) or EPSG code; as "
+            "`undertow export --utm`.",
+        ),
+    ] = None,
+    truth_z: Annotated[
+        str | None,
+        typer.Option(
+            help="depth | elevation: the sign of an XYZ or GeoTIFF truth's z (default: detected "
+            "and stated; elevation is negative down)."
+        ),
+    ] = None,
+    truth_frame: Annotated[
+        str | None,
+        typer.Option(
+            help="local | projected: an XYZ truth's columns, x y z of undertow's frame or E N z "
+            "of the --origin/--utm CRS (default: projected when the coordinates pass 100 km)."
+        ),
+    ] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print every metric as JSON.")] = False,
 ) -> None:
-    """Average cloud-to-cloud distance map -> ground truth (CloudCompare's C2C), occupied cells
-    (the paper's Table IV) and the reverse distance (coverage).
+    """Judge a map against a ground truth: cloud-to-cloud distance (CloudCompare's C2C) and
+    occupied cells (the paper's Table IV), the reverse distance, the surface's RMSE, bias and
+    coverage, accuracy, completeness and F-score at 5, 10 and 20 cm, and the depth std's
+    calibration (share of the true floor within 1 and 2 sigma).
 
     Example: `undertow evaluate map runs/a10/map runs/a10/ground_truth.ply --json`
     """
     from ..commands.mapping import evaluate_map_file
 
-    result = evaluate_map_file(map_path, ground_truth, threshold)
+    result = evaluate_map_file(map_path, ground_truth, threshold, origin=origin, utm=utm,
+                               truth_z=truth_z, truth_frame=truth_frame)  # fmt: skip
     print_warnings(result.warnings)
+    for line in result.notes:
+        err.print(f"note: {line}", highlight=False, soft_wrap=True)
     values = result.to_dict()
     if as_json:
         print_json(values)
         return
-    for key, value in values.items():
-        shown = f"{value:.4f}" if isinstance(value, float) and key != "threshold" else value
-        console.print(f"{key:>28}: {shown}", highlight=False)
+    for line in map_score_lines(values):
+        console.print(line, highlight=False, soft_wrap=True)
+
+
+def _num(value, digits: int = 4, unit: str = "") -> str:
+    if value is None or (isinstance(value, float) and value != value):
+        return "n/a"
+    return f"{value:.{digits}f}{unit}"
+
+
+def _pct(value) -> str:
+    return "n/a" if value is None or value != value else f"{100 * value:.1f} %"
+
+
+def map_score_lines(v: dict) -> list[str]:
+    """The human-readable table of `undertow evaluate map` from its flat result."""
+    taus = ("5cm", "10cm", "20cm")
+
+    def per_tau(name: str) -> str:
+        return "  ".join(f"{t:>4} {_num(v.get(f'{name}_{t}'), 3)}" for t in taus)
+
+    threshold = "n/a" if v["threshold"] is None else f"{v['threshold']:g}"
+    calibration = (
+        f"{_pct(v['within_1sigma'])} within 1 sigma, {_pct(v['within_2sigma'])} within 2 sigma "
+        f"(a true std: 68.3 %, 95.4 %), mean |z| {_num(v['mean_abs_z'], 2)}, "
+        f"{v['calibrated_columns']} columns"
+        if v["calibrated_columns"] is not None
+        else "n/a (the map holds no depth std)"
+    )
+    return [
+        f"{'C2C map -> truth':<22} mean {_num(v['c2c_mean_m'], unit=' m')}, median "
+        f"{_num(v['c2c_median_m'], unit=' m')}, RMSE {_num(v['c2c_rmse_m'], unit=' m')}",
+        f"{'occupied cells':<22} {v['occupied_cells']}",
+        f"{'truth -> map':<22} mean {_num(v['coverage_mean_m'], unit=' m')} "
+        f"({v['ground_truth_in_footprint']} truth points in the map's footprint)",
+        f"{'surface':<22} RMSE {_num(v['surface_rmse_m'], unit=' m')}, bias "
+        f"{_num(v['surface_bias_m'], unit=' m')}, coverage {_num(v['coverage'], 3)} of "
+        f"{v['surveyed_columns']} surveyed columns",
+        f"{'accuracy (precision)':<22} {per_tau('precision')}",
+        f"{'completeness (recall)':<22} {per_tau('recall')}",
+        f"{'F-score':<22} {per_tau('fscore')}",
+        f"{'calibration':<22} {calibration}",
+        f"{'threshold':<22} {threshold} ({v['threshold_from']})",
+    ]

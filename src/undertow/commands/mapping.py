@@ -13,17 +13,30 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from .._util.atomic import check_output_folder, output_folder
 from .._util.plain import to_plain
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError
 from ..evaluation.cloud import MapEvaluation, evaluate_map, map_threshold
+from ..evaluation.surface import (
+    CALIBRATION_KEYS,
+    SurfaceEvaluation,
+    cloud_spacing,
+    evaluate_surface,
+    hull_area,
+)
+from ..evaluation.truth import check_truth_options, load_truth, truth_kind
+from ..io.export.georef import from_latlon, from_projected, parse_origin, parse_utm
+from ..io.export.geotiff import SUFFIXES as GEOTIFF_SUFFIXES
+from ..io.export.geotiff_read import read_map_geotiff
 from ..io.ply import read_ply, write_map_ply
 from ..io.results import save_map
 from ..mapping.config import MappingConfig
 from ..mapping.run import MappingResult, check_prior, map_log, tiled_map_metadata
 from ..mapping.samples import samples_from_config
+from ..mapping.surface import Surface, map_surface, surface_from_points
 from ..mapping.tiled import check_tiling, map_tiled
 from ..occupancy import MAP_FILE, OccupancyMap
 from ..settings import Settings
@@ -122,46 +135,138 @@ def _write_map(out: Path, occupancy: OccupancyMap, config: MappingConfig, metada
 
 @dataclass(frozen=True)
 class MapEvaluationResult:
-    """Map metrics and the occupancy threshold used (None for a map.ply, thresholded when it
-    was written), where that threshold came from, and warnings (an empty map)."""
+    """Map metrics (C2C and cells, :class:`~undertow.evaluation.cloud.MapEvaluation`; the
+    surface's, :class:`~undertow.evaluation.surface.SurfaceEvaluation`), the occupancy threshold
+    used (None for a map.ply or GeoTIFF, thresholded when written) and where it came from,
+    ``truth_z`` (how the truth's values were read), ``notes`` (the choices made, one line each)
+    and ``warnings`` (an empty map, skipped lines)."""
 
     evaluation: MapEvaluation
     threshold: float | None
     threshold_from: str
     warnings: list[str] = field(default_factory=list)
+    surface: SurfaceEvaluation | None = None
+    notes: list[str] = field(default_factory=list)
+    truth_z: str | None = None
+    calibrated: bool = True
 
     def to_dict(self) -> dict:
-        return {**self.evaluation.to_dict(), "threshold": self.threshold,
-                "threshold_from": self.threshold_from}  # fmt: skip
+        """Every metric, flat (C2C, cells, surface, F-scores, calibration: null for a map
+        without a depth std), then the threshold and how the truth was read."""
+        surface = {} if self.surface is None else self.surface.to_dict()
+        if not self.calibrated:
+            surface.update({k: None for k in CALIBRATION_KEYS})
+        return {**self.evaluation.to_dict(), **surface, "threshold": self.threshold,
+                "threshold_from": self.threshold_from, "truth_z": self.truth_z}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class _EvaluatedMap:
+    """A map to evaluate: occupied points (C2C), its surface, frame (None: local, else the
+    GeoTIFF's CRS), grid size, threshold and where it came from, whether it has a depth std."""
+
+    points: np.ndarray
+    surface: Surface
+    frame: object | None
+    resolution: float | None
+    threshold: float | None
+    threshold_from: str
+    calibrated: bool
+
+
+def _map_to_evaluate(map_path: Path, threshold: float | None, notes: list[str]) -> _EvaluatedMap:
+    """The map.npz, map.ply or GeoTIFF ``map_path`` as :class:`_EvaluatedMap`; the surface of
+    a map.npz is ``map_surface(occupancy, threshold)``, of a map.ply its cell centres gridded
+    (no std), of a GeoTIFF its depth and std bands."""
+    suffix = map_path.suffix.lower()
+    if suffix in (".ply", *GEOTIFF_SUFFIXES) and threshold is not None:
+        raise ConfigError(
+            f"threshold applies to a map.npz; {map_path} holds the cells already "
+            "thresholded when it was written (give the map.npz, or leave the threshold out)"
+        )
+    if suffix in GEOTIFF_SUFFIXES:
+        grid = read_map_geotiff(map_path)
+        depth, std, cover = (grid.bands[k] for k in ("depth", "std", "coverage"))
+        surface = Surface(grid.x0, grid.y0, grid.resolution, depth, std, cover > 0)
+        notes.append(f"{map_path}: C2C and cells are the GeoTIFF's cells with data")
+        return _EvaluatedMap(surface.points(), surface, grid.crs, grid.resolution, None,
+                             "the GeoTIFF (thresholded when it was exported)", True)  # fmt: skip
+    if suffix == ".ply":
+        points = np.asarray(read_ply(map_path)[0], dtype=float).reshape(-1, 3)
+        notes.append(f"{map_path}: a map.ply holds no depth std: calibration null")
+        return _EvaluatedMap(points, _ply_surface(points), None, None, None,
+                             "the map.ply (thresholded when it was written)", False)  # fmt: skip
+    occupancy = OccupancyMap.load(map_path)
+    threshold, threshold_from = map_threshold(occupancy, threshold)
+    surface = map_surface(occupancy, threshold)
+    return _EvaluatedMap(occupancy.points(threshold), surface, None, occupancy.resolution,
+                         threshold, threshold_from, True)  # fmt: skip
+
+
+def _ply_surface(points: np.ndarray) -> Surface:
+    """The surface of a map.ply's cell centres: gridded at their spacing (of distinct x-y
+    columns), the shallowest per column, no std."""
+    if not len(points):
+        empty = np.zeros((0, 0))
+        return Surface(0.0, 0.0, 1.0, empty, empty, empty.astype(bool))
+    columns = np.unique(points[:, :2], axis=0)
+    spacing = cloud_spacing(np.column_stack([columns, np.zeros(len(columns))]))
+    gridded = surface_from_points(points, spacing)
+    return dataclasses.replace(gridded, std=np.full(gridded.shape, np.nan))
+
+
+def _map_georeference(origin, utm):
+    """The map's :class:`~undertow.io.export.georef.Georeference` from ``origin`` ("LAT,LON" or
+    (lat, lon)) or ``utm`` ("E,N,ZONE" or (e, n, zone)), as `undertow export` takes them."""
+    if origin is not None and utm is not None:
+        raise ConfigError("give one of --origin LAT,LON and --utm E,N,ZONE, not both")
+    if origin is not None:
+        return parse_origin(origin) if isinstance(origin, str) else from_latlon(*origin)
+    if utm is not None:
+        return parse_utm(utm) if isinstance(utm, str) else from_projected(*utm)
+    return None
 
 
 def evaluate_map_file(map_path: str | Path, ground_truth_path: str | Path,
-                      threshold: float | None = None) -> MapEvaluationResult:  # fmt: skip
-    """Cloud-to-cloud distance of a map (``map.npz``, its folder, or a ``map.ply``) to a
-    ground-truth PLY cloud (:func:`~undertow.evaluation.cloud.evaluate_map`). Occupied cells of
-    a map.npz: mean > ``threshold`` in (0, 1), by default the one the map was made with."""
+                      threshold: float | None = None, *, origin=None, utm=None,
+                      truth_z: str | None = None,
+                      truth_frame: str | None = None) -> MapEvaluationResult:  # fmt: skip
+    """A map (``map.npz``, its folder, a ``map.ply`` or an exported GeoTIFF) against a ground
+    truth (a PLY cloud, an XYZ file or a GeoTIFF bathymetry, :mod:`undertow.evaluation.truth`):
+    cloud-to-cloud distance and cells (:func:`~undertow.evaluation.cloud.evaluate_map`) and the
+    surface's metrics and calibration (:func:`~undertow.evaluation.surface.evaluate_surface`)
+    over the truth inside the hull of the map's covered columns
+    (:func:`~undertow.evaluation.surface.hull_area`). Occupied cells of a map.npz: mean >
+    ``threshold`` in (0, 1), by default the one the map was made with. ``origin``/``utm``: the
+    map's origin, for a truth (or map) with a CRS; ``truth_z`` (depth | elevation) and
+    ``truth_frame`` (local | projected, XYZ) override what is detected."""
     if threshold is not None and not 0.0 < threshold < 1.0:
         raise ConfigError(f"threshold must be in (0, 1), got {threshold}")
+    check_truth_options(truth_kind(ground_truth_path), truth_z, truth_frame)
+    georef = _map_georeference(origin, utm)
     map_path = Path(map_path)
     map_path = map_path / "map.npz" if map_path.is_dir() else map_path
     notes: list[str] = []
-    resolution, threshold_from = None, "the map.ply (thresholded when it was written)"
-    if map_path.suffix.lower() == ".ply":
-        if threshold is not None:
-            raise ConfigError(
-                f"threshold applies to a map.npz; {map_path} holds the cells already "
-                "thresholded when it was written (give the map.npz, or leave the threshold out)"
-            )
-        points = read_ply(map_path)[0]
-        if len(points) == 0:
-            notes.append(f"{map_path}: the map has no points")
-    else:
-        occupancy = OccupancyMap.load(map_path)
-        threshold, threshold_from = map_threshold(occupancy, threshold)
-        points = occupancy.points(threshold)
-        resolution = occupancy.resolution
-    gt_points = read_ply(ground_truth_path)[0]
-    if len(gt_points) == 0:
-        raise DataError(f"{ground_truth_path}: the ground-truth cloud has no points")
-    evaluation = evaluate_map(points, gt_points, resolution=resolution)
-    return MapEvaluationResult(evaluation, threshold, threshold_from, notes)
+    caught: list[str] = []
+    loaded = _map_to_evaluate(map_path, threshold, notes)
+    if len(loaded.points) == 0:
+        caught.append(f"{map_path}: the map has no points")
+    with collect_warnings(caught):
+        truth = load_truth(ground_truth_path, loaded.frame, georef, truth_z=truth_z,
+                           truth_frame=truth_frame, near=_extent(loaded.surface))  # fmt: skip
+    evaluation = evaluate_map(loaded.points, truth.cloud, resolution=loaded.resolution)
+    area = hull_area(loaded.surface, truth.reference)
+    surface = evaluate_surface(loaded.surface, truth.reference, area=area)
+    return MapEvaluationResult(evaluation, loaded.threshold, loaded.threshold_from, caught,
+                               surface, notes + truth.notes, truth.z,
+                               loaded.calibrated)  # fmt: skip
+
+
+def _extent(surface: Surface):
+    """(x_min, x_max, y_min, y_max) of the surface's covered cells, None without any."""
+    pts = surface.points()
+    if not len(pts):
+        return None
+    half = surface.resolution / 2
+    (x0, y0), (x1, y1) = pts[:, :2].min(axis=0) - half, pts[:, :2].max(axis=0) + half
+    return float(x0), float(x1), float(y0), float(y1)

@@ -19,6 +19,17 @@ those of the ground-truth cloud.
   recall R(tau) = |{g in G_A : min_m |g - m| < tau}| / |G_A| (G_A: ground truth inside A),
   F(tau) = 2 P R / (P + R). Distances are Euclidean (3-D) nearest-neighbour distances, so on a
   slope a vertical offset delta counts as about delta / sqrt(1 + |grad z|^2).
+- Calibration of the map's depth standard deviation s_ij, over the columns K of C inside A
+  where the truth is defined and s_ij is finite and > 0 (``calibrated_columns`` = |K|):
+  within_k = |{ij in K : |e_ij| <= k s_ij}| / |K| for k = 1, 2 (``within_1sigma``,
+  ``within_2sigma``) and mean_abs_z = mean over K of |e_ij| / s_ij. A depth std that means what
+  it says (the true floor N(d_ij, s_ij^2) about the map's depth) gives within_1 = erf(1 / sqrt 2)
+  = 0.683, within_2 = erf(sqrt 2) = 0.954 and mean_abs_z = sqrt(2 / pi) = 0.798; smaller
+  shares: the std is too small (overconfident), larger: too large.
+
+:func:`hull_area` is a surveyed area when no log says where the beams fell: the map's columns
+inside the convex hull of its covered cells (of their squares, so that a column on the hull is
+inside it) where the truth is defined.
 """
 
 from __future__ import annotations
@@ -27,7 +38,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
+from scipy.spatial import ConvexHull, Delaunay, cKDTree
 
 from ..errors import DataError
 from ..mapping.surface import Surface, surface_from_points
@@ -54,14 +65,24 @@ class SurfaceEvaluation:
     precision: dict = field(default_factory=dict)
     recall: dict = field(default_factory=dict)
     fscore: dict = field(default_factory=dict)
+    within_1sigma: float = float("nan")
+    within_2sigma: float = float("nan")
+    mean_abs_z: float = float("nan")
+    calibrated_columns: int = 0
 
     def to_dict(self) -> dict:
-        """Flat: surface_rmse_m, surface_bias_m, coverage, ..., fscore_5cm, precision_5cm, ..."""
+        """Flat: surface_rmse_m, surface_bias_m, coverage, ..., fscore_5cm, precision_5cm, ...,
+        within_1sigma, within_2sigma, mean_abs_z, calibrated_columns."""
         out = {k: getattr(self, k) for k in ("surface_rmse_m", "surface_bias_m", "coverage",
                                              "covered_columns", "surveyed_columns")}  # fmt: skip
         for name in ("fscore", "precision", "recall"):
             out.update({f"{name}_{k}": v for k, v in getattr(self, name).items()})
+        out.update({k: getattr(self, k) for k in CALIBRATION_KEYS})
         return out
+
+
+#: the calibration's result keys (the module doc's equations)
+CALIBRATION_KEYS = ("within_1sigma", "within_2sigma", "mean_abs_z", "calibrated_columns")
 
 
 def _truth(truth):
@@ -162,7 +183,50 @@ def evaluate_surface(surface: Surface, truth: Heightfield | np.ndarray, area=Non
         precision=precision,
         recall=recall,
         fscore=fscore,
+        **calibration(surface, height, surveyed),
     )
+
+
+def calibration(surface: Surface, height: Heightfield, surveyed: np.ndarray) -> dict:
+    """The module doc's calibration of ``surface.std`` against the heightfield ``height`` over
+    the covered columns among ``surveyed`` ((K, 2) column indices (i, j)): within_1sigma,
+    within_2sigma, mean_abs_z (NaN when no column qualifies), calibrated_columns."""
+    j, i = np.nonzero(surface.coverage)
+    inside = _in_columns(np.stack([i, j], axis=1), surveyed)
+    i, j = i[inside], j[inside]
+    x = surface.x0 + surface.resolution * i
+    y = surface.y0 + surface.resolution * j
+    error = surface.depth[j, i] - np.asarray(height(x, y), dtype=float)
+    sigma = surface.std[j, i]
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(error) & np.isfinite(sigma) & (sigma > 0)
+    z = np.abs(error[ok]) / sigma[ok]
+    nan = float("nan")
+    return {
+        "within_1sigma": float(np.mean(z <= 1.0)) if z.size else nan,
+        "within_2sigma": float(np.mean(z <= 2.0)) if z.size else nan,
+        "mean_abs_z": float(np.mean(z)) if z.size else nan,
+        "calibrated_columns": int(z.size),
+    }
+
+
+def hull_area(surface: Surface, truth: Heightfield | np.ndarray) -> np.ndarray:
+    """The (K, 2) centres of the surface's columns inside the convex hull of the squares of its
+    covered cells where the truth (a heightfield or an (N, 3) cloud, as :func:`evaluate_surface`
+    takes it) is defined: a surveyed area for :func:`evaluate_surface` when no log says where
+    the beams fell."""
+    centres = surface.points()[:, :2]
+    if not len(centres):
+        return np.zeros((0, 2))
+    half = surface.resolution / 2
+    corners = centres[:, None, :] + half * np.array([[-1, -1], [-1, 1], [1, -1], [1, 1]])
+    corners = np.unique(corners.reshape(-1, 2), axis=0)
+    hull = Delaunay(corners[ConvexHull(corners).vertices])  # squares: never degenerate
+    x, y = surface.centres()
+    xy = np.stack([x.ravel(), y.ravel()], axis=1)
+    xy = xy[hull.find_simplex(xy) >= 0]
+    z = np.asarray(truth_heightfield(truth)(xy[:, 0], xy[:, 1]), dtype=float)
+    return xy[np.isfinite(z)]
 
 
 def _fraction_below(d: np.ndarray, tau: float) -> float:
