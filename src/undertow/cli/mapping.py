@@ -24,6 +24,32 @@ from ._app import (
     user_errors,
 )
 
+TrajectoryOption = Annotated[
+    Path,
+    typer.Option(
+        help="Localization folder or trajectory.npz (with covariances), or a TUM file (t tx ty "
+        "tz qx qy qz qw, optionally + sx sy sz sroll spitch syaw std columns; see "
+        "docs/mapping.md)."
+    ),
+]
+PoseStdOption = Annotated[
+    str | None,
+    typer.Option(
+        metavar="SX,SY,SZ[,SROLL,SPITCH,SYAW]",
+        help="TUM trajectory only: constant pose standard deviations (m, rad; the file's axes), "
+        "for a file without std columns or to replace them (settings: trajectory: "
+        "{position_std_m, orientation_std_rad}).",
+    ),
+]
+TrajectoryFrameOption = Annotated[
+    str | None,
+    typer.Option(
+        metavar="ned|enu",
+        help="TUM trajectory only: ned (z down; undertow's) or enu (z up, body forward-left-up); "
+        "default: detected from the log's depth (NED when it cannot be).",
+    ),
+]
+
 
 @app.command("map")
 @user_errors
@@ -31,14 +57,7 @@ def map_command(
     log_path: Annotated[
         Path, typer.Argument(metavar="LOG", help="Bag, A50 JSON log or MAVLink .tlog.")
     ],
-    trajectory: Annotated[
-        Path,
-        typer.Option(
-            help="Localization folder or trajectory.npz (with covariances), or a TUM file (t tx "
-            "ty tz qx qy qz qw, optionally + sx sy sz sroll spitch syaw std columns; see "
-            "docs/mapping.md)."
-        ),
-    ],
+    trajectory: TrajectoryOption,
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
     method: Annotated[str | None, typer.Option(help="adaptive (default) | bki | csm")] = None,
     resolution: Annotated[float | None, typer.Option(help="Grid size, m (0.1).")] = None,
@@ -70,23 +89,8 @@ def map_command(
             "| tcp://host:8786 (a running Dask scheduler)."
         ),
     ] = None,
-    pose_std: Annotated[
-        str | None,
-        typer.Option(
-            metavar="SX,SY,SZ[,SROLL,SPITCH,SYAW]",
-            help="TUM trajectory only: constant pose standard deviations (m, rad; the file's "
-            "axes), for a file without std columns or to replace them (settings: trajectory: "
-            "{position_std_m, orientation_std_rad}).",
-        ),
-    ] = None,
-    trajectory_frame: Annotated[
-        str | None,
-        typer.Option(
-            metavar="ned|enu",
-            help="TUM trajectory only: ned (z down; undertow's) or enu (z up, body "
-            "forward-left-up); default: detected from the log's depth (NED when it cannot be).",
-        ),
-    ] = None,
+    pose_std: PoseStdOption = None,
+    trajectory_frame: TrajectoryFrameOption = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
     time: TimeOption = None,
@@ -115,15 +119,8 @@ def map_command(
                           scheduler=scheduler, pose_std=_pose_std(pose_std),
                           trajectory_frame=frame, **given)  # fmt: skip
     print_warnings(result.warnings)
-    used = result.metadata.get("trajectory", {})
-    if not quiet and str(used.get("format", "")).startswith("TUM"):
-        err.print(
-            f"trajectory: {used['file']} ({used['format']}); frame {used['frame']} "
-            f"({used['frame_source']}); covariance: {used['covariance']}",
-            highlight=False,
-            soft_wrap=True,
-        )
     if not quiet:
+        _print_trajectory(result.metadata.get("trajectory", {}))
         normalization = result.metadata["mapper"].get("normalization")
         how = f", {normalization} normalization" if normalization else ""
         tiled = result.metadata.get("tiling")
@@ -131,6 +128,17 @@ def map_command(
         err.print(
             f"wrote {out_dir}/map.npz, map.ply ({result.metadata['occupied_cells']} occupied "
             f"cells{how}), config.yaml{where}"
+        )
+
+
+def _print_trajectory(used: dict) -> None:
+    """The one line stating how a TUM trajectory was read (a trajectory.npz: nothing)."""
+    if str(used.get("format", "")).startswith("TUM"):
+        err.print(
+            f"trajectory: {used['file']} ({used['format']}); frame {used['frame']} "
+            f"({used['frame_source']}); covariance: {used['covariance']}",
+            highlight=False,
+            soft_wrap=True,
         )
 
 

@@ -98,22 +98,24 @@ def trajectory_from_poses(t, position, orientation, position_std, orientation_st
                           variant="", metadata=None) -> Trajectory:  # fmt: skip
     """A :class:`~undertow.trajectory.Trajectory` of poses with independent standard deviations
     (N, 3) or (3,) each: x[0:3] = p, x[3:6] = (roll, pitch, yaw), P[0:3, 0:3] = diag(sx^2,
-    sy^2, sz^2), P[3:6, 3:6] = diag(sroll^2, spitch^2, syaw^2) (NaN when ``orientation_std`` is
-    None), zero between position and orientation; the other states (velocities, biases) and
-    their covariances NaN: unknown."""
+    sy^2, sz^2), P[3:6, 3:6] = diag(sroll^2, spitch^2, syaw^2) and zero between position and
+    orientation (NaN, unknown, when ``orientation_std`` is None); the other states (velocities,
+    biases) and their covariances NaN: unknown."""
     t = np.asarray(t, float).reshape(-1)
     n = t.size
     x = np.full((n, len(STATE_NAMES)), np.nan)
     x[:, POSITION], x[:, ORIENTATION] = position, orientation
-    var = np.full((n, 6), np.nan)
-    var[:, :3] = np.broadcast_to(np.square(np.asarray(position_std, float)), (n, 3))
+    std = np.full((n, 6), np.nan)
+    std[:, :3] = np.broadcast_to(np.asarray(position_std, float), (n, 3))
     if orientation_std is not None:
-        var[:, 3:] = np.broadcast_to(np.square(np.asarray(orientation_std, float)), (n, 3))
-    if not np.all(np.isfinite(var[:, :3]) & (var[:, :3] >= 0)):
-        raise DataError("trajectory_from_poses: position standard deviations must be finite, >= 0")
+        std[:, 3:] = np.broadcast_to(np.asarray(orientation_std, float), (n, 3))
+    known = 3 if orientation_std is None else 6  # an unknown orientation: its block NaN
+    if not np.all(np.isfinite(std[:, :known]) & (std[:, :known] >= 0)):
+        raise DataError("trajectory_from_poses: standard deviations must be finite and >= 0")
+    var = np.square(std)
     P = np.full((n, len(STATE_NAMES), len(STATE_NAMES)), np.nan)
-    P[:, :6, :6] = 0.0
-    P[:, np.arange(6), np.arange(6)] = var
+    P[:, :known, :known] = 0.0
+    P[:, np.arange(known), np.arange(known)] = var[:, :known]
     return Trajectory(t, x, P, variant=variant, metadata=metadata or {})
 
 
@@ -244,8 +246,9 @@ def choose_frame(path: Path, requested: str, detected: str | None, reason: str):
     differs), else ``detected``, else NED with a warning naming the option."""
     if requested != "auto":
         if detected is not None and detected != requested:
-            warnings.warn(f"{path}: frame {requested} as stated, but {reason}, as in "
-                          f"{detected}: check --trajectory-frame", stacklevel=3)  # fmt: skip
+            warnings.warn(f"{path}: frame {requested} as stated, but the log's depth says "
+                          f"{detected} ({reason}): check --trajectory-frame",
+                          stacklevel=3)  # fmt: skip
         return requested, "stated"
     if detected is None:
         warnings.warn(f"{path}: frame not detected ({reason}): read as NED (z down); add "
