@@ -107,6 +107,17 @@ def test_which_standard_deviations_apply(tmp_path):
     )
 
 
+def test_poses_that_are_not_finite_are_dropped_with_a_warning(tmp_path):
+    path = tmp_path / "nan.tum"
+    path.write_text("0 0 0 0 0 0 0 1\n1 0 nan 0 0 0 0 1\n2 0 0 0 0 0 0 0\n3 1 1 1 0 0 0 1\n")
+    with pytest.warns(UserWarning, match=r"nan\.tum: 2 poses with a non-finite position or q"):
+        got = read_tum_input(path, stated=TrajectoryOptions.stated((0.1, 0.1, 0.1)))
+    np.testing.assert_array_equal(got.poses.t, [0.0, 3.0])
+    path.write_text("1 0 nan 0 0 0 0 1\n")
+    with pytest.raises(DataError, match="no pose with a finite position and quaternion"):
+        read_tum_input(path, stated=TrajectoryOptions.stated((0.1, 0.1, 0.1)))
+
+
 def _log_with_depth(t, depth, stream="pressure"):
     """A log whose pressure is the hydrostatic p = p_atm + rho g d of the given depth (the
     default references: fresh water, one atmosphere), or a depth stream of it."""

@@ -93,9 +93,9 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     if prior is not None and not isinstance(prior, OccupancyMap):
         prior = npz_file(prior, "map.npz", MAP_FILE, "prior ")
     check_prior(prior, config)
-    given = _read_trajectory(trajectory_path, settings, stated)  # before the (longer) log
     caught: list[str] = []
     with collect_warnings(caught):
+        given = _read_trajectory(trajectory_path, settings, stated)  # before the (longer) log
         log = load_log(log_path, topics, settings)
         trajectory, record = _trajectory_for_log(given, log, config)
         if tiles is not None:

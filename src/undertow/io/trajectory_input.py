@@ -182,7 +182,7 @@ def read_tum_input(path: str | Path, settings: TrajectoryOptions | None = None,
     path = Path(path)
     settings = settings or TrajectoryOptions()
     stated = stated or TrajectoryOptions()
-    poses = read_tum_poses(path)
+    poses = _finite_poses(path, read_tum_poses(path))
     if stated.position_std_m is not None:
         std = _stated(stated, "--pose-std")
         if poses.std is not None:
@@ -199,6 +199,20 @@ def read_tum_input(path: str | Path, settings: TrajectoryOptions | None = None,
         )
     frame = stated.frame if stated.frame != "auto" else settings.frame
     return TumInput(path, poses, *std, frame)
+
+
+def _finite_poses(path: Path, poses: TumPoses) -> TumPoses:
+    """The poses whose position and orientation are finite (the rest dropped with a warning;
+    none left is one line): a NaN pose would spread to every range interpolated next to it."""
+    good = np.isfinite(poses.position).all(axis=1) & np.isfinite(poses.orientation).all(axis=1)
+    if good.all():
+        return poses
+    if not good.any():
+        raise DataError(f"{path}: no pose with a finite position and quaternion")
+    warnings.warn(f"{path}: {int(np.sum(~good))} poses with a non-finite position or quaternion "
+                  "dropped", stacklevel=3)  # fmt: skip
+    std = None if poses.std is None else poses.std[good]
+    return TumPoses(poses.t[good], poses.position[good], poses.orientation[good], std)
 
 
 def _stated(options: TrajectoryOptions, where: str):

@@ -89,8 +89,8 @@ def read_tum(path) -> GroundTruth:
 
 def read_tum_poses(path) -> TumPoses:
     """The poses of a TUM file, 8 or 14 columns (see the module doc): malformed lines and
-    non-finite times skipped and counted, poses sorted by time, poses whose position or
-    quaternion is not finite (or a zero quaternion) dropped and counted."""
+    non-finite times skipped and counted, poses sorted by time (a non-finite position or
+    quaternion is kept, as NaN)."""
     path = Path(path)
     if not path.exists():
         raise ReaderError(f"{path}: no such file")
@@ -106,12 +106,9 @@ def read_tum_poses(path) -> TumPoses:
         _check_std(path, arr[:, 8:], numbers)
     with np.errstate(all="ignore"):
         arr = arr[time_order(arr[:, 0], "poses", notes)]
+        if not len(arr):
+            raise ReaderError(f"{path}: no usable pose in TUM file ({'; '.join(notes.lines())})")
         rpy = quaternion_to_rpy(arr[:, 4:8])
-    good = np.isfinite(arr[:, 1:4]).all(axis=1) & np.isfinite(rpy).all(axis=1)
-    notes.add("poses with a non-finite position or quaternion dropped", int(np.sum(~good)))
-    arr, rpy = arr[good], rpy[good]
-    if not len(arr):
-        raise ReaderError(f"{path}: no usable pose in TUM file ({'; '.join(notes.lines())})")
     notes.finish()
     std = arr[:, 8:] if width > 8 else None
     return TumPoses(t=arr[:, 0], position=arr[:, 1:4], orientation=rpy, std=std)
