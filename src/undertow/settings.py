@@ -1,5 +1,5 @@
 """One settings file for every stage: ``topics``, ``log``, ``mounting``, ``localizer``,
-``mapping``, ``live``.
+``mapping``, ``trajectory``, ``live``.
 
 Each section is the stage's own pydantic model (:class:`~undertow.io.topics.TopicMap`,
 :class:`~undertow.estimation.config.LocalizerConfig`,
@@ -11,6 +11,7 @@ no file) runs, and a file sets only what differs::
     mounting: {imu: {rotation: [3.141592653589793, 0, 0]}}   # IMU in ROS FLU, body is FRD
     localizer: {variant: proposed, dvl_velocity_std_m_s: [0.02, 0.02, 0.01]}
     mapping: {method: adaptive, resolution: 0.05}
+    trajectory: {position_std_m: [0.05, 0.05, 0.02], frame: auto}   # a TUM file to map from
     live: {dvl: tcp://192.168.194.95:16171, mavlink: "udpin:0.0.0.0:14550"}
 
 The simulator's scenarios are separate files (see :mod:`undertow.sim.scenario`).
@@ -27,6 +28,7 @@ from .errors import ConfigError
 from .estimation.config import LocalizerConfig
 from .io.read_options import LogOptions
 from .io.topics import TopicMap
+from .io.trajectory_input import TrajectoryOptions
 from .log import Log
 from .mapping.config import MappingConfig
 
@@ -91,6 +93,8 @@ class Settings(BaseModel):
     mounting: dict = Field(default_factory=dict)
     localizer: LocalizerConfig = Field(default_factory=LocalizerConfig)
     mapping: MappingConfig = Field(default_factory=MappingConfig)
+    #: how a trajectory made elsewhere (TUM) is read for mapping: its pose std, its frame
+    trajectory: TrajectoryOptions = Field(default_factory=TrajectoryOptions)
     live: LiveSettings = Field(default_factory=LiveSettings)
 
     @classmethod

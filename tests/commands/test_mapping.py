@@ -103,10 +103,10 @@ def test_a_trajectory_of_another_time_span_is_an_error_and_a_partial_one_warns(r
 
 def test_wrong_kinds_of_input_files_say_what_was_expected(run, tmp_path):
     tum, ply = run / "run" / "ground_truth.tum", run / "run" / "ground_truth.ply"
-    line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(tum)))
+    line = _one_error_line(_map(run, tmp_path / "m", "--trajectory", str(ply)))
     assert line == (
-        f"error: {tum}: a TUM trajectory, expected a trajectory.npz written by `undertow "
-        "localize` (or its folder)"
+        f"error: {ply}: a PLY point cloud, expected a trajectory.npz written by `undertow "
+        "localize` (or its folder), or a TUM file (t tx ty tz qx qy qz qw)"
     )
     settings = tmp_path / "settings.yaml"
     settings.write_text("mapping: {method: csm}\n")

@@ -228,6 +228,7 @@ def test_ros2_metadata_yaml(tmp_path, small_ros2_bag, data):
 
 TUM_LINE = st.one_of(
     st.lists(st.floats(), min_size=8, max_size=8).map(lambda v: " ".join(map(repr, v))),
+    st.lists(st.floats(), min_size=14, max_size=14).map(lambda v: " ".join(map(repr, v))),
     st.text(max_size=30),
     st.lists(st.integers(), min_size=1, max_size=9).map(lambda v: " ".join(map(str, v))),
 )
@@ -240,17 +241,21 @@ def test_tum_lines(tmp_path, lines):
     text = "\n".join(lines) + "\n"
     path.write_text(text, encoding="utf-8", errors="replace")
     poses = outcome(read_tum, path)
-    usable = 0
+    usable, width, bad_std = 0, None, False  # the first data line's count: 14 (with std) or 8
     for line in path.read_text(encoding="utf-8").splitlines():
         text = line.strip()
         fields = text.replace(",", " ").split()
-        if not text or text.startswith("#") or len(fields) != 8:
+        if not text or text.startswith("#"):
             continue
+        width = width or (14 if len(fields) == 14 else 8)
         try:
-            usable += math.isfinite(float(fields[0])) and all(float(f) or True for f in fields)
+            values = [float(f) for f in fields] if len(fields) == width else None
         except ValueError:
-            continue
-    assert (poses is None) == (usable == 0)
+            values = None
+        if values is not None:
+            usable += math.isfinite(values[0])
+            bad_std |= not all(math.isfinite(v) and v >= 0 for v in values[8:])
+    assert (poses is None) == (usable == 0 or bad_std)  # a bad std is one error line
     if poses is not None:  # every well-formed pose with a finite time, in time order
         assert len(poses) == usable and np.all(np.diff(poses.t) >= 0)
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from undertow.errors import ReaderError
+from undertow.errors import DataError, ReaderError
 from undertow.io import read_ply, read_tum, write_ply, write_tum
+from undertow.io.tum import read_tum_poses
 from undertow.log import GroundTruth
 from undertow.rotations import rpy_to_quaternion
 
@@ -40,6 +41,43 @@ def test_tum_malformed_line_skipped_and_counted(tmp_path):
     path.write_text("1 2 3\n")
     with pytest.raises(ReaderError, match=r"bad\.tum: no usable pose"):
         read_tum(path)
+
+
+def test_extended_tum_round_trip_with_standard_deviations(tmp_path):
+    rng = np.random.default_rng(5)
+    t, pos = np.arange(12.0) + 0.5, rng.normal(0, 3, (12, 3))
+    rpy = np.column_stack([rng.uniform(-1, 1, (12, 2)), rng.uniform(-3, 3, 12)])
+    std = rng.uniform(0, 0.3, (12, 6))
+    path = write_tum(tmp_path / "traj.tum", t, pos, rpy, std)
+    assert path.read_text().splitlines()[0] == "# t tx ty tz qx qy qz qw sx sy sz sroll spitch syaw"
+    rows = np.loadtxt(path)  # 14 plain columns
+    np.testing.assert_array_equal(rows[:, 8:], std)
+    poses = read_tum_poses(path)
+    np.testing.assert_array_equal(poses.std, std)
+    np.testing.assert_array_equal(poses.position, pos)
+    np.testing.assert_allclose(poses.orientation, rpy, atol=1e-12)
+    assert read_tum_poses(write_tum(tmp_path / "plain.tum", t, pos, rpy)).std is None
+    np.testing.assert_array_equal(read_tum(path).t, t)  # ground truth from it: the poses
+
+
+def test_extended_tum_bad_lines_and_bad_standard_deviations(tmp_path):
+    path = tmp_path / "ext.tum"
+    good = "0 0 0 0 0 0 0 1 0.1 0.1 0.1 0 0 0\n"
+    path.write_text(good + "1 0 0 0 0 0 0 1\n2 0 0 nan 0 0 0 1 0.1 0.1 0.1 0 0 0\n" + good)
+    with pytest.warns(UserWarning) as caught:
+        poses = read_tum_poses(path)
+    text = [str(w.message) for w in caught]
+    assert any("line 2: 8 fields, expected 14 (t tx ty tz qx qy qz qw sx sy sz sroll" in x
+               for x in text)  # fmt: skip
+    assert len(poses) == 3 and np.isnan(poses.position[poses.t == 2, 2]).all()  # kept, as NaN
+    for value in ("-0.1", "nan", "inf"):
+        path.write_text(good + f"1 0 0 0 0 0 0 1 0.1 {value} 0.1 0 0 0\n")
+        with pytest.raises(DataError) as error:
+            read_tum_poses(path)
+        assert str(error.value) == (
+            f"{path}: line 2: standard deviations sx sy sz sroll spitch syaw must be finite and "
+            f">= 0, got 0.1 {float(value):g} 0.1 0 0 0"
+        )
 
 
 @pytest.mark.parametrize("binary", [True, False])

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -23,6 +24,32 @@ from ._app import (
     user_errors,
 )
 
+TrajectoryOption = Annotated[
+    Path,
+    typer.Option(
+        help="Localization folder or trajectory.npz (with covariances), or a TUM file (t tx ty "
+        "tz qx qy qz qw, optionally + sx sy sz sroll spitch syaw std columns; see "
+        "docs/mapping.md)."
+    ),
+]
+PoseStdOption = Annotated[
+    str | None,
+    typer.Option(
+        metavar="SX,SY,SZ[,SROLL,SPITCH,SYAW]",
+        help="TUM trajectory only: constant pose standard deviations (m, rad; the file's axes), "
+        "for a file without std columns or to replace them (settings: trajectory: "
+        "{position_std_m, orientation_std_rad}).",
+    ),
+]
+TrajectoryFrameOption = Annotated[
+    str | None,
+    typer.Option(
+        metavar="ned|enu",
+        help="TUM trajectory only: ned (z down; undertow's) or enu (z up, body forward-left-up); "
+        "default: detected from the log's depth (NED when it cannot be).",
+    ),
+]
+
 
 @app.command("map")
 @user_errors
@@ -30,9 +57,7 @@ def map_command(
     log_path: Annotated[
         Path, typer.Argument(metavar="LOG", help="Bag, A50 JSON log or MAVLink .tlog.")
     ],
-    trajectory: Annotated[
-        Path, typer.Option(help="Localization folder or trajectory.npz (with covariances).")
-    ],
+    trajectory: TrajectoryOption,
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
     method: Annotated[str | None, typer.Option(help="adaptive (default) | bki | csm")] = None,
     resolution: Annotated[float | None, typer.Option(help="Grid size, m (0.1).")] = None,
@@ -64,6 +89,8 @@ def map_command(
             "| tcp://host:8786 (a running Dask scheduler)."
         ),
     ] = None,
+    pose_std: PoseStdOption = None,
+    trajectory_frame: TrajectoryFrameOption = None,
     config: ConfigOption = None,
     topics: TopicsOption = None,
     time: TimeOption = None,
@@ -76,21 +103,24 @@ def map_command(
     (occupied cell centres with mean and variance) and config.yaml.
 
     Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --method adaptive
-    --out runs/a10/map`
+    --out runs/a10/map`; from a TUM file: `--trajectory est.tum --pose-std 0.05,0.05,0.02`
     """
     from ..commands.mapping import map_file
 
     options = {"method": method, "resolution": resolution, "length_scale": length_scale,
                "variance_bounds": _variance_bounds(variance_bounds)}  # fmt: skip
     given = {k: v for k, v in options.items() if v is not None}  # options win over the file
+    frame = _trajectory_frame(trajectory_frame)
     with progress_bar(quiet) as progress:
         progress.add_task(f"mapping ({method})" if method else "mapping", total=None)
         result = map_file(log_path, trajectory, settings_with_time(config, time), topics=topics,
                           prior=prior,
                           out_dir=out_dir, overwrite=overwrite, tiles=tiles,
-                          scheduler=scheduler, **given)  # fmt: skip
+                          scheduler=scheduler, pose_std=_pose_std(pose_std),
+                          trajectory_frame=frame, **given)  # fmt: skip
     print_warnings(result.warnings)
     if not quiet:
+        _print_trajectory(result.metadata.get("trajectory", {}))
         normalization = result.metadata["mapper"].get("normalization")
         how = f", {normalization} normalization" if normalization else ""
         tiled = result.metadata.get("tiling")
@@ -98,6 +128,17 @@ def map_command(
         err.print(
             f"wrote {out_dir}/map.npz, map.ply ({result.metadata['occupied_cells']} occupied "
             f"cells{how}), config.yaml{where}"
+        )
+
+
+def _print_trajectory(used: dict) -> None:
+    """The one line stating how a TUM trajectory was read (a trajectory.npz: nothing)."""
+    if str(used.get("format", "")).startswith("TUM"):
+        err.print(
+            f"trajectory: {used['file']} ({used['format']}); frame {used['frame']} "
+            f"({used['frame_source']}); covariance: {used['covariance']}",
+            highlight=False,
+            soft_wrap=True,
         )
 
 
@@ -119,6 +160,31 @@ def _variance_bounds(text: str | None):
             f"min_x,min_y,min_z,max_x,max_y,max_z (m^2), got {text!r}"
         )
     return (tuple(values[:3]), tuple(values[3:]))
+
+
+def _pose_std(text: str | None):
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (3, 6):
+        raise UndertowError(
+            "--pose-std: expected 3 or 6 comma-separated numbers SX,SY,SZ[,SROLL,SPITCH,SYAW] "
+            f"(m, rad), got {text!r}"
+        )
+    if not all(math.isfinite(v) and v >= 0 for v in values):
+        raise UndertowError(
+            f"--pose-std: standard deviations must be finite and >= 0, got {text!r}"
+        )
+    return tuple(values)
+
+
+def _trajectory_frame(text: str | None) -> str | None:
+    if text is not None and text not in ("ned", "enu", "auto"):
+        raise UndertowError(f"--trajectory-frame: expected ned or enu (or auto), got {text!r}")
+    return text
 
 
 @evaluate_app.command("map")

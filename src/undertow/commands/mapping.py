@@ -9,6 +9,7 @@ a result object with the warnings and facts the command prints out.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +34,13 @@ from ..io.export.geotiff import SUFFIXES as GEOTIFF_SUFFIXES
 from ..io.export.geotiff_read import read_map_geotiff
 from ..io.ply import read_ply, write_map_ply
 from ..io.results import save_map
+from ..io.trajectory_input import (
+    TrajectoryOptions,
+    TumInput,
+    is_tum_file,
+    read_tum_input,
+    tum_trajectory,
+)
 from ..mapping.config import MappingConfig
 from ..mapping.run import MappingResult, check_prior, map_log, tiled_map_metadata
 from ..mapping.samples import samples_from_config
@@ -45,7 +53,10 @@ from .common import as_settings, collect_warnings, load_log, npz_file
 
 #: options that only one mapping method uses: giving one for another method is an error
 METHOD_OPTIONS = {"length_scale": "bki", "variance_bounds": "adaptive"}
-_TRAJECTORY_NPZ = "a trajectory.npz written by `undertow localize` (or its folder)"
+_TRAJECTORY_NPZ = (
+    "a trajectory.npz written by `undertow localize` (or its folder), or a TUM file (t tx ty tz "
+    "qx qy qz qw)"
+)
 
 
 def mapping_config(settings: Settings, overrides: dict) -> MappingConfig:
@@ -62,9 +73,15 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
              settings: Settings | str | Path | None = None, *, topics: str | Path | None = None,
              prior: OccupancyMap | str | Path | None = None, out_dir: str | Path | None = None,
              overwrite: bool = False, tiles: float | None = None, scheduler: str | None = None,
+             pose_std=None, trajectory_frame: str | None = None,
              **overrides) -> MappingResult:  # fmt: skip
     """Occupancy map of the seafloor from a log's DVL beams and sonar ranges along a trajectory
-    (a ``trajectory.npz`` with covariances, or its localization folder).
+    (a ``trajectory.npz`` with covariances, or its localization folder; or a TUM file, told by
+    its content, with its pose standard deviations as columns or stated: ``pose_std`` (3 or 6
+    values, m and rad) or the settings' ``trajectory`` section, and its frame detected from the
+    log's depth or stated, ``trajectory_frame`` "ned" or "enu";
+    :mod:`undertow.io.trajectory_input`). ``result.metadata["trajectory"]`` records the file,
+    format, frame and covariance used.
 
     ``settings``: a :class:`~undertow.settings.Settings`, a settings YAML path or None
     (defaults); ``overrides`` are :class:`~undertow.mapping.config.MappingConfig` fields
@@ -85,27 +102,64 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
         given_prior = None if isinstance(prior, OccupancyMap) else prior
         inputs = [log_path, trajectory_path, given_prior, settings_path, topics]
         check_output_folder(out_dir, overwrite, inputs=inputs)
-    trajectory_file = npz_file(trajectory_path, "trajectory.npz", _TRAJECTORY_NPZ)
+    stated = TrajectoryOptions.stated(pose_std, trajectory_frame)
     if prior is not None and not isinstance(prior, OccupancyMap):
         prior = npz_file(prior, "map.npz", MAP_FILE, "prior ")
     check_prior(prior, config)
-    trajectory = Trajectory.load_npz(trajectory_file)  # read before the (longer) log
     caught: list[str] = []
     with collect_warnings(caught):
+        given = _read_trajectory(trajectory_path, settings, stated)  # before the (longer) log
         log = load_log(log_path, topics, settings)
+        trajectory, record = _trajectory_for_log(given, log, config)
         if tiles is not None:
             return _map_tiled_file(log, trajectory, config, tiles, scheduler, out_dir,
-                                   overwrite, caught)  # fmt: skip
+                                   overwrite, caught, record)  # fmt: skip
         result = map_log(log, trajectory, config, prior=prior)
     result.warnings = caught
+    result.metadata["trajectory"] = record
     if out_dir is not None:
         save_map(result.map, config.model_dump(mode="json"), result.metadata, out_dir, overwrite,
                  threshold=config.occupied_threshold)  # fmt: skip
     return result
 
 
+def _read_trajectory(path, settings: Settings, stated: TrajectoryOptions | None):
+    """A TUM file (by its content) as a :class:`TumInput` (finished against the log), else a
+    trajectory.npz or its folder as ``(Trajectory, its file)``; ``stated`` options (pose std,
+    frame) with a trajectory.npz are an error: it carries its own covariance, in NED."""
+    if is_tum_file(path):
+        return read_tum_input(path, settings.trajectory, stated)
+    file = npz_file(path, "trajectory.npz", _TRAJECTORY_NPZ)
+    if stated is not None:
+        raise ConfigError(
+            f"pose_std and trajectory_frame (--pose-std, --trajectory-frame) apply to a TUM "
+            f"trajectory; {file} carries its own covariance, in undertow's NED frame"
+        )
+    return Trajectory.load_npz(file), file
+
+
+def _trajectory_for_log(given, log, config: MappingConfig) -> tuple[Trajectory, dict]:
+    """The trajectory to map ``log`` with and what config.yaml records of it (file, format,
+    frame, covariance); a constant pose std under the adaptive kernel's session
+    normalization is a warning: every sample gets the same kernel (l_min)."""
+    if not isinstance(given, TumInput):
+        trajectory, file = given
+        return trajectory, {"file": str(file), "format": "trajectory.npz (undertow localize)",
+                            "frame": "ned", "frame_source": "undertow's own",
+                            "covariance": "the trajectory's own (P)"}  # fmt: skip
+    if given.constant and config.method == "adaptive" and config.variance_bounds is None:
+        warnings.warn(
+            f"{given.path}: a constant pose std gives every sample the same adaptive kernel "
+            "(l_min) under session normalization; --variance-bounds places it between fixed "
+            "bounds",
+            stacklevel=2,
+        )
+    return tum_trajectory(given, log)
+
+
 def _map_tiled_file(log, trajectory, config: MappingConfig, tiles: float, scheduler,
-                    out_dir, overwrite: bool, caught: list[str]) -> MappingResult:  # fmt: skip
+                    out_dir, overwrite: bool, caught: list[str],
+                    record: dict) -> MappingResult:  # fmt: skip
     """:func:`map_file` with ``tiles``: samples, tiles on Dask, merged map; with ``out_dir``
     the tiles are written to ``out_dir/tiles`` as they finish, then the merged map."""
     with collect_warnings(caught):
@@ -114,6 +168,7 @@ def _map_tiled_file(log, trajectory, config: MappingConfig, tiles: float, schedu
             tile_dir = None if out is None else out / "tiles"
             tiled = map_tiled(samples, config, tiles, scheduler=scheduler, tile_dir=tile_dir)
             metadata = tiled_map_metadata(tiled, samples, log, trajectory, config)
+            metadata["trajectory"] = record
             if out is not None:
                 _write_map(out, tiled.map, config, metadata)
     occupancy = dataclasses.replace(
