@@ -68,8 +68,8 @@ def _same_map(a: OccupancyMap, b: OccupancyMap, tol: float) -> None:
 
 def test_a_tum_file_with_the_same_diagonal_maps_as_the_npz(run, tmp_path):
     root, log = run
-    npz = map_file(log, root / "est.npz")
-    tum = map_file(log, root / "est.tum", out_dir=tmp_path / "m")
+    npz = map_file(log, root / "est.npz", method="adaptive")
+    tum = map_file(log, root / "est.tum", out_dir=tmp_path / "m", method="adaptive")
     # positions and std round-trip exactly through the text, the angles through a quaternion
     _same_map(tum.map, npz.map, tol=1e-12)
     np.testing.assert_allclose(tum.metadata["mapper"]["variance_bounds"],
@@ -138,9 +138,9 @@ def test_a_stated_std_on_the_command_line_and_the_line_that_states_the_choices(r
 
 def test_a_constant_std_under_session_normalization_is_warned_of(run):
     root, log = run
-    result = map_file(log, root / "plain.tum", pose_std=(0.02, 0.02, 0.01))
+    result = map_file(log, root / "plain.tum", pose_std=(0.02, 0.02, 0.01), method="adaptive")
     assert len(result.warnings) == 1 and "the same adaptive kernel (l_min)" in result.warnings[0]
-    fixed = map_file(log, root / "plain.tum", pose_std=(0.02, 0.02, 0.01),
+    fixed = map_file(log, root / "plain.tum", pose_std=(0.02, 0.02, 0.01), method="adaptive",
                      variance_bounds=((0, 0, 0), (1e-3, 1e-3, 1e-3)))  # fmt: skip
     assert fixed.warnings == []
 

@@ -46,6 +46,10 @@ def test_invalid_field_names_file_and_field(tmp_path):
     f.write_text("dvl:\n  rat_hz: 3\n")
     with pytest.raises(ConfigError, match=r"field dvl\.rat_hz"):
         load_scenario(f)
+    # a list where the DVL's model name goes (found by the fuzz campaign: was a TypeError)
+    f.write_text("dvl:\n  model: [1]\n")
+    with pytest.raises(ConfigError, match=r"field dvl\.model"):
+        load_scenario(f)
 
 
 def test_to_yaml_dict_round_trips():

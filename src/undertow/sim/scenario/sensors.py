@@ -84,7 +84,8 @@ class DvlModel(_Model):
     @classmethod
     def _preset(cls, data):
         """Geometry fields not given take the preset's values."""
-        if isinstance(data, dict) and data.get("model") in DVL_PRESETS:
+        model = data.get("model") if isinstance(data, dict) else None
+        if isinstance(model, str) and model in DVL_PRESETS:  # a list or a dict is not a name
             preset = DVL_PRESETS[data["model"]]
             data = {"beam_tilt_deg": preset.tilt_deg,
                     "beam_azimuths_deg": preset.azimuths_deg, **data}  # fmt: skip
