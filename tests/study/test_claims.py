@@ -22,6 +22,7 @@ from undertow.study.claims import (
     TABLE1_CLAIMS,
     evaluate_seed,
 )
+from undertow.study.maps import SCENARIO_MAP_RUNS
 from undertow.study.pipeline import (
     FIELD_VARIANTS,
     MAP_RUNS,
@@ -41,6 +42,8 @@ SURFACE_KEYS = (
     "surface_bias_m",
     "coverage",
     *(f"{m}_{t}" for m in ("fscore", "precision", "recall") for t in ("5cm", "10cm", "20cm")),
+    "within_1sigma",
+    "within_2sigma",
 )
 
 
@@ -69,7 +72,8 @@ def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS, maps=MAP_SCENA
         return {"duration_s": draw(600), "wave": {"amplitude_m": draw(0.1), "frequency_hz": draw()},
                 "floor": {"depth_std_m": draw(0.1), "rms_slope": draw(0.1)},
                 "localization": {v: trajectory() for v in ("baseline", "proposed")},
-                "mapping": {f"{m}/{v}": evaluation() for m, v in MAP_RUNS}}  # fmt: skip
+                "mapping": {f"{m}/{v}": evaluation() for m, v in SCENARIO_MAP_RUNS},
+                "normal": {"within_1sigma": 0.6827, "within_2sigma": 0.9545}}  # fmt: skip
 
     def table1_row():
         return {"amplitude_m": draw(0.1), "frequency_hz": draw(),  "depth_std_m": draw(0.01),
@@ -191,6 +195,15 @@ REFERENCE_MAPS = {
         M["adaptive/proposed"]["occupied_cells"] < M["bki/proposed"]["occupied_cells"]),
     "adaptive_proposed_denser_than_csm_baseline:occupied_cells": lambda M: (
         M["adaptive/proposed"]["occupied_cells"] > M["csm/baseline"]["occupied_cells"]),
+    "tpu_beats_csm:surface_rmse_m": lambda M: (
+        M["tpu/proposed"]["surface_rmse_m"] < M["csm/proposed"]["surface_rmse_m"]),
+    "tpu_most_accurate:fscore_10cm": lambda M: all(
+        M["tpu/proposed"]["fscore_10cm"] > M[o]["fscore_10cm"]
+        for o in ("csm/proposed", "bki/proposed", "adaptive/proposed", "csm/baseline")),
+    "tpu_depth_std_calibrated:within_1sigma": lambda M: (
+        abs(M["tpu/proposed"]["within_1sigma"] - 0.6827) < 0.07 + 1e-12),
+    "tpu_depth_std_calibrated:within_2sigma": lambda M: (
+        abs(M["tpu/proposed"]["within_2sigma"] - 0.9545) < 0.03 + 1e-12),
 }  # fmt: skip
 REFERENCE_TABLE1 = {
     "shorter_waves_more_dvl_noise": lambda t: (

@@ -28,7 +28,9 @@ Filter = Literal[
 Axis = Literal[
     "x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_m_s", "vy_m_s", "vz_m_s"
 ]  # fmt: skip
-MapRun = Literal["csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed"]
+MapRun = Literal[
+    "csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed", "tpu/proposed"
+]  # fmt: skip
 #: The F-score's threshold the claims read (the middle of the benchmark's thresholds).
 TAU = TAUS[len(TAUS) // 2]
 TAU_TEXT = f"{TAU * 100:g} cm"
@@ -40,6 +42,8 @@ MAP_METRIC_LABELS = {
     "occupied_cells": "occupied cells",
     "surface_rmse_m": "surface RMSE",
     FSCORE: f"F-score ({TAU_TEXT})",
+    "within_1sigma": "share of the true floor within 1 sigma",
+    "within_2sigma": "share of the true floor within 2 sigma",
 }
 MapMetric = str
 AXIS_NAMES = {"x_m": "x", "y_m": "y", "z_m": "z", "roll_rad": "roll", "pitch_rad": "pitch",
@@ -114,7 +118,8 @@ def map_metric(run: MapRun, metric: MapMetric, scenario: bool = False) -> Quanti
         raise ValueError(f"{metric!r} is not one of {tuple(MAP_METRIC_LABELS)}")
     where = ("map_scenarios", CONDITION, "mapping") if scenario else ("mapping", CONDITION)
     path = (*where, checked(run, MapRun), metric)
-    unit = {"occupied_cells": "cells", FSCORE: ""}.get(metric, "m")
+    unit = {"occupied_cells": "cells", FSCORE: "", "within_1sigma": "",
+            "within_2sigma": ""}.get(metric, "m")  # fmt: skip
     return Quantity(f"{MAP_METRIC_LABELS[metric]} of {run}", path, unit)
 
 

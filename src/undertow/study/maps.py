@@ -16,6 +16,8 @@ with the baseline and proposed filters, then mapped with the four Table IV runs.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .._util.plain import to_plain
@@ -31,6 +33,8 @@ from ..sim import load_scenario, simulate
 from ..trajectory import STATE_NAMES, Trajectory
 
 MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("adaptive", "proposed"))
+#: The mapping scenarios add the default mapper (tpu) beside the paper's four maps.
+SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"))
 #: The map threshold the paper evaluates at.
 THRESHOLD = 0.5
 #: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
@@ -106,15 +110,15 @@ def floor_relief(truth, area: np.ndarray, resolution: float) -> dict:
 
 
 def evaluate_runs(name: str, sim, trajectories: dict, bki_length_scale: float, art,
-                  area: np.ndarray | None = None) -> dict:  # fmt: skip
-    """Map ``sim``'s log with the four Table IV runs (trajectories by filter variant) and
-    evaluate each map over ``area`` (default: :func:`surveyed_area`); the maps go to
-    ``art.maps[(name, "method/variant")]``."""
+                  area: np.ndarray | None = None, runs=MAP_RUNS) -> dict:  # fmt: skip
+    """Map ``sim``'s log with the Table IV ``runs`` (method, filter variant; trajectories by
+    variant) and evaluate each map over ``area`` (default: :func:`surveyed_area`); the maps
+    go to ``art.maps[(name, "method/variant")]``."""
     log = sim.log
     truth, cloud = floor_truth(sim), sim.floor_cloud
     area = surveyed_area(log) if area is None else area
     out = {}
-    for method, variant in MAP_RUNS:
+    for method, variant in runs:
         cfg = MappingConfig(method=method, length_scale=bki_length_scale)
         result = map_log(log, trajectories[variant], cfg)
         key = f"{method}/{variant}"
@@ -138,13 +142,16 @@ def map_scenario(name: str, seed: int, calibration, profile, bki_length_scale: f
         art.trajectories[(name, variant)] = trajectories[variant] = traj
         localization[variant] = trajectory_metrics(traj, sim.log.ground_truth)
     area = surveyed_area(sim.log)
-    mapping = evaluate_runs(name, sim, trajectories, bki_length_scale, art, area)
+    mapping = evaluate_runs(name, sim, trajectories, bki_length_scale, art, area,
+                            SCENARIO_MAP_RUNS)  # fmt: skip
     return {
         "duration_s": float(sim.log.ground_truth.t[-1] - sim.log.ground_truth.t[0]),
         "wave": {"amplitude_m": measured.amplitude_m, "frequency_hz": measured.frequency_hz},
         "floor": floor_relief(floor_truth(sim), area, paper_resolution()),
         "localization": localization,
         "mapping": mapping,
+        # what a depth std that means what it says covers: erf(k / sqrt 2) of a normal error
+        "normal": {f"within_{k}sigma": math.erf(k / math.sqrt(2)) for k in (1, 2)},
     }
 
 

@@ -117,24 +117,26 @@ def map_scenario_figures(figdir: Path, tables: dict, art: Artifacts,
     across the floor along one pass."""
     from ..mapping.surface import map_surface
     from ..report import figures_map
-    from .maps import MAP_RUNS, THRESHOLD, floor_truth
+    from .maps import SCENARIO_MAP_RUNS, THRESHOLD, floor_truth
 
     out = []
     for name in tables.get("map_scenario_names") or []:
         sim = art.simulations[name]
-        maps = {f"{m}/{v}": art.maps[(name, f"{m}/{v}")] for m, v in MAP_RUNS}
+        maps = {f"{m}/{v}": art.maps[(name, f"{m}/{v}")] for m, v in SCENARIO_MAP_RUNS}
         surfaces = {key: map_surface(occ, THRESHOLD) for key, occ in maps.items()}
         top = figures_map.plot_surface_error(
             figdir / f"surface_error_{name}.png", surfaces, floor_truth(sim),
             title=f"{name}: map surfaces coloured by depth error (top view)",
         )  # fmt: skip
-        out.append((f"{name}: each Table IV map's implied seafloor (expected first occupied "
-                    "depth per column), coloured by its error against the true floor; red too "
+        out.append((f"{name}: each Table IV map's implied seafloor (the paper's maps: the "
+                    "expected first occupied depth per column; tpu: its evidence), coloured "
+                    "by its error against the true floor; red too "
                     "deep, blue too shallow.", top))  # fmt: skip
         lateral, x_range = _busiest_row(maps["csm/proposed"], SLICE_LENGTH_M)
         half = 0.5 * maps["adaptive/proposed"].resolution
         bki_label = f"BKI (l = {settings.bki_length_scale:g} m)"
-        slice_maps = {"adaptive BKI": maps["adaptive/proposed"], bki_label: maps["bki/proposed"],
+        slice_maps = {"tpu (default)": maps["tpu/proposed"],
+                      "adaptive BKI": maps["adaptive/proposed"], bki_label: maps["bki/proposed"],
                       "CSM, baseline filter": maps["csm/baseline"]}  # fmt: skip
         path = figures_map.plot_map_slice(figdir / f"map_slice_{name}.png", slice_maps,
                                           sim.floor_cloud, (lateral - half, lateral + half),

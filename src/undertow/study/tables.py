@@ -181,7 +181,11 @@ SURFACE_COLUMNS = (
     ("fscore_5cm", "F 5 cm", 3),
     ("fscore_10cm", "F 10 cm", 3),
     ("fscore_20cm", "F 20 cm", 3),
+    ("within_1sigma", "within 1 sigma", 3),
+    ("within_2sigma", "within 2 sigma", 3),
 )
+#: How the tables name each mapper.
+MAPPER_NAMES = {"csm": "CSM", "bki": "BKI", "adaptive": "Adaptive BKI", "tpu": "tpu (default)"}
 
 
 def table4_markdown(t: dict, condition: str) -> str:
@@ -191,17 +195,20 @@ def table4_markdown(t: dict, condition: str) -> str:
 
 
 def mapping_markdown(runs: dict) -> str:
-    """Table IV rows from the aggregated metrics of the four maps (``runs[method/variant]``)."""
+    """Table IV rows from the aggregated metrics of the maps (``runs[method/variant]``): the
+    paper's four, then the default mapper where it ran (no paper value: "-")."""
     rows = []
-    for method, variant in MAP_RUNS:
+    for method, variant in (*MAP_RUNS, ("tpu", "proposed")):
         key = f"{method}/{variant}"
-        sim, ref = runs[key], paper.TABLE_IV[key]
+        if key not in runs:
+            continue
+        sim, ref = runs[key], paper.TABLE_IV.get(key, {})
         rows.append(
             [
-                method.upper() if method != "adaptive" else "Adaptive BKI",
+                MAPPER_NAMES[method],
                 variant,
-                _num(ref["c2c_mean_m"]), cell(sim["c2c_mean_m"], 4),
-                str(ref["occupied_cells"]), cell(sim["occupied_cells"], 0),
+                _num(ref.get("c2c_mean_m")), cell(sim["c2c_mean_m"], 4),
+                str(ref.get("occupied_cells", "-")), cell(sim["occupied_cells"], 0),
                 cell(sim["coverage_mean_m"], 4),
                 *(cell(sim.get(k), d) for k, _, d in SURFACE_COLUMNS),
             ]
