@@ -59,7 +59,13 @@ def map_command(
     ],
     trajectory: TrajectoryOption,
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
-    method: Annotated[str | None, typer.Option(help="adaptive (default) | bki | csm")] = None,
+    method: Annotated[
+        str | None,
+        typer.Option(
+            help="tpu (default: each hit's total propagated uncertainty) | adaptive "
+            "(the paper's) | bki | csm"
+        ),
+    ] = None,
     resolution: Annotated[float | None, typer.Option(help="Grid size, m (0.1).")] = None,
     length_scale: Annotated[
         float | None, typer.Option(help="bki only: isotropic length scale, m (0.15).")
@@ -102,8 +108,9 @@ def map_command(
     """Occupancy map of the seafloor from DVL beams and sonar ranges; writes map.npz, map.ply
     (occupied cell centres with mean and variance) and config.yaml.
 
-    Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --method adaptive
-    --out runs/a10/map`; from a TUM file: `--trajectory est.tum --pose-std 0.05,0.05,0.02`
+    Example: `undertow map runs/a10/log --trajectory runs/a10/proposed --out runs/a10/map`
+    (the default tpu mapper; `--method adaptive` for the paper's); from a TUM file:
+    `--trajectory est.tum --pose-std 0.05,0.05,0.02`
     """
     from ..commands.mapping import map_file
 
