@@ -311,8 +311,19 @@ def _calibration_facts(m: Measured) -> str:
     return (
         f"{run}: {v['within_1sigma']:.1%} of the true floor within 1 sigma, "
         f"{v['within_2sigma']:.1%} within 2 sigma (a normal error: {one:.1%}, {two:.1%})"
-        f"{shape}; {_map_facts(m, [run])}"
+        f"{shape}; the map's std carries the pose covariance the filter gave it: "
+        f"{_pose_calibration(m)}; {_map_facts(m, [run])}"
     )  # fmt: skip
+
+
+def _pose_calibration(m: Measured) -> str:
+    """The proposed filter's RMSE against its own mean std in x and y."""
+    parts = []
+    for axis in ("x_m", "y_m"):
+        error = m[_scenario_rmse("proposed", axis)]
+        std = m[scenario_quantity("std", "localization", "proposed", "mean_std", axis)]
+        parts.append(f"{AXIS_NAMES[axis]} RMSE {error:.4f} m against a mean std of {std:.4f} m")
+    return ", ".join(parts)
 
 
 def _calibration_claim(key: str) -> Claim:
