@@ -41,6 +41,11 @@ PoseStdOption = Annotated[
         "{position_std_m, orientation_std_rad}).",
     ),
 ]
+MethodOption = Annotated[
+    str | None,
+    typer.Option(help="tpu (default: each hit's total propagated uncertainty) | adaptive "
+                 "(the paper's) | bki | csm"),
+]  # fmt: skip
 TrajectoryFrameOption = Annotated[
     str | None,
     typer.Option(
