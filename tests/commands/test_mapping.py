@@ -53,7 +53,7 @@ def _one_error_line(result):
 
 @pytest.mark.slow
 def test_config_records_the_normalization_and_variance_bounds_fix_it(run, tmp_path):
-    r = _map(run, tmp_path / "session", "--trajectory", str(run / "est"))
+    r = _map(run, tmp_path / "session", "--trajectory", str(run / "est"), "--method", "adaptive")
     assert r.exit_code == 0, r.output
     doc = yaml.safe_load((tmp_path / "session" / "config.yaml").read_text())
     assert doc["mapping"]["variance_bounds"] is None

@@ -64,13 +64,7 @@ def map_command(
     ],
     trajectory: TrajectoryOption,
     out_dir: Annotated[Path, typer.Option("--out", help="Output directory.")],
-    method: Annotated[
-        str | None,
-        typer.Option(
-            help="tpu (default: each hit's total propagated uncertainty) | adaptive "
-            "(the paper's) | bki | csm"
-        ),
-    ] = None,
+    method: MethodOption = None,
     resolution: Annotated[float | None, typer.Option(help="Grid size, m (0.1).")] = None,
     length_scale: Annotated[
         float | None, typer.Option(help="bki only: isotropic length scale, m (0.15).")
