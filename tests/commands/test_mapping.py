@@ -64,7 +64,8 @@ def test_config_records_the_normalization_and_variance_bounds_fix_it(run, tmp_pa
     np.testing.assert_allclose(mapper["variance_bounds"][1], [1.1e-3] * 3, rtol=0.02)
 
     bounds = "0,0,0,0.002,0.002,0.002"
-    r = _map(run, tmp_path / "fixed", "--trajectory", str(run / "est"), "--variance-bounds", bounds)
+    r = _map(run, tmp_path / "fixed", "--trajectory", str(run / "est"), "--variance-bounds", bounds,
+             "--method", "adaptive")  # fmt: skip
     assert r.exit_code == 0, r.output
     doc = yaml.safe_load((tmp_path / "fixed" / "config.yaml").read_text())
     assert doc["mapping"]["variance_bounds"] == [[0.0] * 3, [0.002] * 3]
