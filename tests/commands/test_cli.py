@@ -79,8 +79,10 @@ def test_simulate_localize_evaluate_map_end_to_end(tmp_path):
         app, ["evaluate", "map", str(run / "map"), str(run / "ground_truth.ply"), "--json"]
     )
     assert r.exit_code == 0, r.output
-    # occupied cell centres lie on a 0.1 m grid: at best 0.05 m from a floor at a cell boundary
-    assert json.loads(r.stdout)["c2c_mean_m"] < 0.1
+    # the default (tpu) map's surface: the calm run's flat floor within a few cm, its std
+    # covering most of it
+    scores = json.loads(r.stdout)
+    assert scores["surface_rmse_m"] < 0.05 and scores["within_2sigma"] > 0.5
 
 
 @pytest.mark.realdata
