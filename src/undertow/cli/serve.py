@@ -93,6 +93,30 @@ def _run(session, quiet: bool, manifest: Path | None) -> dict:
     return summary
 
 
+AutopilotFlag = Annotated[
+    bool,
+    typer.Option(
+        "--autopilot",
+        help="Run a virtual ArduSub autopilot on the MAVLink link that consumes external "
+        "navigation (ODOMETRY, VISION_POSITION_*) as EKF3 does and reports back.",
+    ),
+]
+AutopilotParams = Annotated[
+    Path | None,
+    typer.Option(help="ArduPilot parameter file (NAME VALUE lines) preset on the autopilot."),
+]
+AutopilotOrigin = Annotated[
+    str | None, typer.Option(help="LAT,LON[,ALT] - an EKF origin already set on the autopilot.")
+]
+AutopilotCovariance = Annotated[
+    str,
+    typer.Option(
+        help="How the firmware reduces a pose covariance: cbrt (ArduSub 4.x) or sqrt "
+        "(ArduPilot master since PR 32084)."
+    ),
+]
+
+
 @app.command("serve")
 @user_errors
 def serve_command(
@@ -148,29 +172,10 @@ def serve_command(
     manifest: Annotated[
         Path | None, typer.Option(help="Write every message served here (JSON lines).")
     ] = None,
-    autopilot: Annotated[
-        bool,
-        typer.Option(
-            "--autopilot",
-            help="Run a virtual ArduSub autopilot on the MAVLink link that consumes external "
-            "navigation (ODOMETRY, VISION_POSITION_*) as EKF3 does and reports back.",
-        ),
-    ] = False,
-    autopilot_params: Annotated[
-        Path | None,
-        typer.Option(help="ArduPilot parameter file (NAME VALUE lines) preset on the autopilot."),
-    ] = None,
-    autopilot_origin: Annotated[
-        str | None,
-        typer.Option(help="LAT,LON[,ALT] - an EKF origin already set on the autopilot."),
-    ] = None,
-    autopilot_covariance: Annotated[
-        str,
-        typer.Option(
-            help="How the firmware reduces a pose covariance: cbrt (ArduSub 4.x) or sqrt "
-            "(ArduPilot master since PR 32084)."
-        ),
-    ] = "cbrt",
+    autopilot: AutopilotFlag = False,
+    autopilot_params: AutopilotParams = None,
+    autopilot_origin: AutopilotOrigin = None,
+    autopilot_covariance: AutopilotCovariance = "cbrt",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No endpoints on stderr.")] = False,
 ) -> None:
@@ -186,16 +191,11 @@ def serve_command(
 
     faults = Faults.from_options(drop_dvl or (), corrupt, duplicate, reorder, clock_jump or ())
     mavlink_to = None if mavlink.lower() in ("off", "none", "") else mavlink
-    options = dict(
-        duration=duration,
-        distance_sensor=distance_sensor,
-        wait_for_clients=wait_clients,
-        autopilot=autopilot,
-        autopilot_params=autopilot_params,
-        autopilot_origin=autopilot_origin,
-        autopilot_covariance=autopilot_covariance,
-    )
+    options = dict(duration=duration, distance_sensor=distance_sensor)
+    options.update(wait_for_clients=wait_clients, autopilot=autopilot)
+    options.update(autopilot_params=autopilot_params, autopilot_origin=autopilot_origin)
     session = serve(
-        source, rate, loop, host, dvl_port, ping_port, mavlink_to, faults, seed, **options
-    )
+        source, rate, loop, host, dvl_port, ping_port, mavlink_to, faults, seed, **options,
+        autopilot_covariance=autopilot_covariance,
+    )  # fmt: skip
     _print_summary(_run(session, quiet, manifest), as_json)

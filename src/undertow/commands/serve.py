@@ -250,11 +250,10 @@ def serve(
     ``epoch``: the sensor clock's epoch (default: wall start - t0, module
     :mod:`undertow.sim.robot.player`); ``distance_sensor``: also send the sonar as MAVLink
     DISTANCE_SENSOR; ``wait_for_clients``: wait up to that many seconds for an A50 client and a
-    Ping request before playing. ``autopilot``: run the virtual autopilot on the MAVLink link,
-    with ``autopilot_params`` (a mapping or an ArduPilot parameter file) preset as if set and
-    rebooted, ``autopilot_origin`` (LAT,LON[,ALT] text or a tuple: an EKF origin already on
-    the vehicle) and ``autopilot_covariance`` (the firmware's covariance reduction, ``cbrt`` or
-    ``sqrt``: :mod:`undertow.sim.robot.autopilot_rules`)."""
+    Ping request before playing. ``autopilot``: the virtual autopilot on the MAVLink link, with
+    ``autopilot_params`` (a mapping or an ArduPilot parameter file), ``autopilot_origin``
+    (LAT,LON[,ALT] or a tuple) and ``autopilot_covariance`` (``cbrt`` or ``sqrt``; see
+    :mod:`undertow.sim.robot.autopilot`)."""
     if not isinstance(host, str) or not host.strip():
         raise ConfigError(f"--host: expected an address to bind, got {host!r}")
     if not (isinstance(rate, int | float) and math.isfinite(rate) and rate > 0):
@@ -266,26 +265,11 @@ def serve(
     log = load_source(source, duration, topics)
     manifest = Manifest()
     rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(3)]
-    has = {n for n, s in log.streams().items() if len(s)}
-    a50 = (
-        A50Server(host, dvl_port)
-        if dvl_port is not None and has & {"dvl", "dead_reckoning"}
-        else None
-    )
-    ping = (
-        Ping1DServer(log, manifest, faults, rngs[1], host, ping_port)
-        if ping_port is not None and "sonar" in has
-        else None
-    )
-    sender = None
-    if autopilot and not mavlink:
-        raise ConfigError("--autopilot: the virtual autopilot needs the MAVLink link (--mavlink)")
-    wanted = has & {"imu", "pressure"} | ({"sonar"} if distance_sensor else set())
-    if mavlink and (wanted or autopilot):
-        sender = MavlinkSender(log, manifest, faults, rngs[2], mavlink, distance_sensor)
-    link = None
-    if autopilot:
-        link = _autopilot(sender, autopilot_params, autopilot_origin, autopilot_covariance)
+    ports = (dvl_port, ping_port, mavlink)
+    args = (log, manifest, faults, rngs, host, ports, distance_sensor, autopilot)
+    a50, ping, sender = _servers(*args)
+    ap = (autopilot_params, autopilot_origin, autopilot_covariance)
+    link = _autopilot(sender, *ap) if autopilot else None
     sinks = [s for s in (ping, sender) if s is not None]
     if a50 is not None:
         sinks.insert(0, A50Reports(a50, log, manifest, faults, rngs[0]))
@@ -309,6 +293,30 @@ def serve(
     )
 
 
+def _servers(log, manifest, faults, rngs, host, ports, distance_sensor, autopilot):
+    """The A50, Ping1D and MAVLink servers of ``log`` (None for one not asked or without
+    streams; the MAVLink sender also when the autopilot needs the link)."""
+    dvl_port, ping_port, mavlink = ports
+    has = {n for n, s in log.streams().items() if len(s)}
+    a50 = (
+        A50Server(host, dvl_port)
+        if dvl_port is not None and has & {"dvl", "dead_reckoning"}
+        else None
+    )
+    ping = (
+        Ping1DServer(log, manifest, faults, rngs[1], host, ping_port)
+        if ping_port is not None and "sonar" in has
+        else None
+    )
+    wanted = has & {"imu", "pressure"} | ({"sonar"} if distance_sensor else set())
+    sender = (
+        MavlinkSender(log, manifest, faults, rngs[2], mavlink, distance_sensor)
+        if mavlink and (wanted or autopilot)
+        else None
+    )
+    return a50, ping, sender
+
+
 def parse_origin(text) -> tuple[float, ...] | None:
     """``LAT,LON[,ALT]`` (deg, deg, m) as a tuple; a tuple passes; None stays None."""
     if text is None or isinstance(text, tuple | list):
@@ -323,8 +331,10 @@ def parse_origin(text) -> tuple[float, ...] | None:
     return values
 
 
-def _autopilot(sender: MavlinkSender, params, origin, covariance: str) -> AutopilotLink:
+def _autopilot(sender: MavlinkSender | None, params, origin, covariance: str) -> AutopilotLink:
     """The virtual autopilot on ``sender``'s link (its attitude and baro depth from the log)."""
+    if sender is None:
+        raise ConfigError("--autopilot: the virtual autopilot needs the MAVLink link (--mavlink)")
     if params is not None and not isinstance(params, dict):
         params = load_param_file(params)
     ap = VirtualAutopilot(
