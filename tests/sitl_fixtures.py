@@ -178,14 +178,15 @@ class Sitl:
 
         deadline = time.monotonic() + retry_s
         while True:
-            try:
+            try:  # one attempt per connection object: pymavlink's own TCP retries reuse a
+                # socket whose connect was refused, which then fails forever on Linux
                 return mavutil.mavlink_connection(
-                    address, source_system=255, source_component=190, autoreconnect=True
+                    address, source_system=255, source_component=190, retries=0
                 )
             except OSError:
                 if time.monotonic() > deadline:
                     raise
-                time.sleep(0.1)
+                time.sleep(0.2)
 
     def stop(self) -> None:
         self._stop.set()
