@@ -207,7 +207,11 @@ class Sitl:
                 self.process.wait(5)
 
     def __enter__(self) -> Sitl:
-        return self.start()
+        try:
+            return self.start()
+        except BaseException:
+            self.stop()  # never leave the process behind
+            raise
 
     def __exit__(self, *exc) -> None:
         self.stop()
