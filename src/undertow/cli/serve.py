@@ -24,10 +24,19 @@ def _print_start(session, quiet: bool) -> None:
         highlight=False,
         soft_wrap=True,
     )
-    rows = (("A50 DVL (TCP JSON)", e.dvl), ("Ping1D (UDP)", e.sonar), ("MAVLink (UDP)", e.mavlink))
+    rows = (("A50 DVL (TCP JSON)", e.dvl), ("Ping1D (UDP)", e.sonar), ("MAVLink", e.mavlink))
     for name, value in rows:
         if value:
             err.print(f"  {name:<20} {value}", highlight=False, soft_wrap=True)
+    if session.autopilot is not None:
+        ap = session.autopilot.autopilot
+        origin = "origin preset" if ap.origin_preset else "no origin"
+        err.print(
+            f"  {'virtual autopilot':<20} EKF3 external-navigation rules on the MAVLink link "
+            f"({ap.covariance} covariance, {origin})",
+            highlight=False,
+            soft_wrap=True,
+        )
     if session.faults.any:
         err.print(f"  faults: {session.faults.to_dict()}", highlight=False, soft_wrap=True)
     err.print("  undertow live " + " ".join(e.live_options()), highlight=False, soft_wrap=True)
@@ -55,6 +64,15 @@ def _print_summary(summary: dict, as_json: bool) -> None:
         highlight=False,
         soft_wrap=True,
     )
+    ap = summary.get("autopilot")
+    if ap:
+        counts = ", ".join(f"{k} {v}" for k, v in ap["counts"].items()) or "nothing received"
+        err.print(
+            f"virtual autopilot: aiding {ap['aiding']}, EKF flags {ap['flags']}, origin "
+            f"{ap['origin'] or 'not set'}; {counts}",
+            highlight=False,
+            soft_wrap=True,
+        )
 
 
 def _run(session, quiet: bool, manifest: Path | None) -> dict:
@@ -73,6 +91,30 @@ def _run(session, quiet: bool, manifest: Path | None) -> dict:
         if manifest is not None:
             session.manifest.write(manifest)
     return summary
+
+
+AutopilotFlag = Annotated[
+    bool,
+    typer.Option(
+        "--autopilot",
+        help="Run a virtual ArduSub autopilot on the MAVLink link that consumes external "
+        "navigation (ODOMETRY, VISION_POSITION_*) as EKF3 does and reports back.",
+    ),
+]
+AutopilotParams = Annotated[
+    Path | None,
+    typer.Option(help="ArduPilot parameter file (NAME VALUE lines) preset on the autopilot."),
+]
+AutopilotOrigin = Annotated[
+    str | None, typer.Option(help="LAT,LON[,ALT] - an EKF origin already set on the autopilot.")
+]
+AutopilotCovariance = Annotated[
+    str,
+    typer.Option(
+        help="How the firmware reduces a pose covariance: cbrt (ArduSub 4.x) or sqrt "
+        "(ArduPilot master since PR 32084)."
+    ),
+]
 
 
 @app.command("serve")
@@ -130,6 +172,10 @@ def serve_command(
     manifest: Annotated[
         Path | None, typer.Option(help="Write every message served here (JSON lines).")
     ] = None,
+    autopilot: AutopilotFlag = False,
+    autopilot_params: AutopilotParams = None,
+    autopilot_origin: AutopilotOrigin = None,
+    autopilot_covariance: AutopilotCovariance = "cbrt",
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No endpoints on stderr.")] = False,
 ) -> None:
@@ -137,17 +183,19 @@ def serve_command(
     (TCP JSON), a Ping1D (UDP, Ping protocol) and an ArduSub autopilot (MAVLink), with optional
     faults; prints the endpoints, and what was served when the log ends or on Ctrl-C.
 
-    Example: `undertow serve calm --rate 10 --drop-dvl 5:2 --corrupt 0.01`
+    Example: `undertow serve calm --rate 10 --drop-dvl 5:2 --corrupt 0.01`; with a virtual
+    autopilot: `undertow serve calm --autopilot --autopilot-params ext_nav.parm`
     """
     from ..commands.serve import serve
     from ..sim.robot import Faults
 
     faults = Faults.from_options(drop_dvl or (), corrupt, duplicate, reorder, clock_jump or ())
     mavlink_to = None if mavlink.lower() in ("off", "none", "") else mavlink
-    options = dict(
-        duration=duration, distance_sensor=distance_sensor, wait_for_clients=wait_clients
-    )
+    options = dict(duration=duration, distance_sensor=distance_sensor)
+    options.update(wait_for_clients=wait_clients, autopilot=autopilot)
+    options.update(autopilot_params=autopilot_params, autopilot_origin=autopilot_origin)
     session = serve(
-        source, rate, loop, host, dvl_port, ping_port, mavlink_to, faults, seed, **options
-    )
+        source, rate, loop, host, dvl_port, ping_port, mavlink_to, faults, seed, **options,
+        autopilot_covariance=autopilot_covariance,
+    )  # fmt: skip
     _print_summary(_run(session, quiet, manifest), as_json)

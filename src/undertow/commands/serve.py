@@ -4,7 +4,9 @@
 name or a scenario YAML file), then :meth:`ServeSession.start` serves it on this machine, in
 real time x ``rate``: the DVL and its dead reckoning as a Water Linked A50 (TCP JSON,
 ``dvl_port``), the sonar as a Ping1D (UDP, ``ping_port``), IMU and pressure as an ArduSub
-autopilot (MAVLink to ``mavlink``), with optional :class:`~undertow.sim.robot.player.Faults`.
+autopilot (MAVLink to ``mavlink``), with optional :class:`~undertow.sim.robot.player.Faults`;
+with ``autopilot`` the MAVLink link also carries a virtual ArduSub autopilot that consumes
+external navigation as EKF3 does (:mod:`undertow.sim.robot.autopilot`).
 Sensor clocks and timing: :mod:`undertow.sim.robot.player`. Everything binds 127.0.0.1 unless
 another ``host`` is given. Every message served is in :attr:`ServeSession.manifest`::
 
@@ -31,6 +33,8 @@ from ..log import Log
 from ..sim import list_scenarios, load_scenario, simulate
 from ..sim.robot import Faults, Manifest, Player
 from ..sim.robot.a50 import A50Reports, A50Server
+from ..sim.robot.autopilot import VirtualAutopilot, load_param_file
+from ..sim.robot.autopilot_link import AutopilotLink, log_attitude, log_depth
 from ..sim.robot.decode import served_log
 from ..sim.robot.mavlink import DEFAULT_ADDRESS, MavlinkSender
 from ..sim.robot.ping1d import Ping1DServer
@@ -90,7 +94,7 @@ class Endpoints:
 
 def _listen_address(address: str) -> str | None:
     kind, _, rest = address.partition(":")
-    return f"udpin:{rest}" if kind == "udpout" else None
+    return {"udpout": f"udpin:{rest}", "tcpin": f"tcp:{rest}"}.get(kind)
 
 
 @dataclass(eq=False)
@@ -107,6 +111,7 @@ class ServeSession:
     a50: A50Server | None = None
     ping: Ping1DServer | None = None
     mavlink: MavlinkSender | None = None
+    autopilot: AutopilotLink | None = None
     endpoints: Endpoints = field(default_factory=Endpoints)
     _open: bool = False
 
@@ -132,6 +137,8 @@ class ServeSession:
 
     def start(self) -> ServeSession:
         self.open()
+        if self.autopilot is not None and self.autopilot._thread is None:
+            self.autopilot.start()
         self.player.start()
         return self
 
@@ -141,6 +148,8 @@ class ServeSession:
         done = self.player.done.wait(timeout)
         if self.player.error is not None:
             raise self.player.error
+        if self.autopilot is not None and self.autopilot.error is not None:
+            raise self.autopilot.error
         return done
 
     @property
@@ -155,6 +164,8 @@ class ServeSession:
     def stop(self) -> dict:
         """Stop playing, close the servers; the :meth:`summary`."""
         self.player.stop()
+        if self.autopilot is not None:
+            self.autopilot.stop()
         self.close()
         return self.summary()
 
@@ -198,6 +209,7 @@ class ServeSession:
             "a50_commands": list(self.a50.commands) if self.a50 else [],
             "a50_connections": self.a50.connections if self.a50 else 0,
             "ping_requests": self.ping.requests if self.ping else 0,
+            "autopilot": self.autopilot.autopilot.summary() if self.autopilot else None,
             **self.manifest.summary(),
         }
 
@@ -226,6 +238,10 @@ def serve(
     distance_sensor: bool = False,
     wait_for_clients: float | None = None,
     topics=None,
+    autopilot: bool = False,
+    autopilot_params=None,
+    autopilot_origin=None,
+    autopilot_covariance: str = "cbrt",
 ) -> ServeSession:
     """A :class:`ServeSession` of ``source`` (see :func:`load_source`), not started.
 
@@ -234,7 +250,10 @@ def serve(
     ``epoch``: the sensor clock's epoch (default: wall start - t0, module
     :mod:`undertow.sim.robot.player`); ``distance_sensor``: also send the sonar as MAVLink
     DISTANCE_SENSOR; ``wait_for_clients``: wait up to that many seconds for an A50 client and a
-    Ping request before playing."""
+    Ping request before playing. ``autopilot``: the virtual autopilot on the MAVLink link, with
+    ``autopilot_params`` (a mapping or an ArduPilot parameter file), ``autopilot_origin``
+    (LAT,LON[,ALT] or a tuple) and ``autopilot_covariance`` (``cbrt`` or ``sqrt``; see
+    :mod:`undertow.sim.robot.autopilot`)."""
     if not isinstance(host, str) or not host.strip():
         raise ConfigError(f"--host: expected an address to bind, got {host!r}")
     if not (isinstance(rate, int | float) and math.isfinite(rate) and rate > 0):
@@ -246,20 +265,11 @@ def serve(
     log = load_source(source, duration, topics)
     manifest = Manifest()
     rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(3)]
-    has = {n for n, s in log.streams().items() if len(s)}
-    a50 = (
-        A50Server(host, dvl_port)
-        if dvl_port is not None and has & {"dvl", "dead_reckoning"}
-        else None
-    )
-    ping = (
-        Ping1DServer(log, manifest, faults, rngs[1], host, ping_port)
-        if ping_port is not None and "sonar" in has
-        else None
-    )
-    sender = None
-    if mavlink and has & {"imu", "pressure"} | ({"sonar"} if distance_sensor else set()):
-        sender = MavlinkSender(log, manifest, faults, rngs[2], mavlink, distance_sensor)
+    ports = (dvl_port, ping_port, mavlink)
+    args = (log, manifest, faults, rngs, host, ports, distance_sensor, autopilot)
+    a50, ping, sender = _servers(*args)
+    ap = (autopilot_params, autopilot_origin, autopilot_covariance)
+    link = _autopilot(sender, *ap) if autopilot else None
     sinks = [s for s in (ping, sender) if s is not None]
     if a50 is not None:
         sinks.insert(0, A50Reports(a50, log, manifest, faults, rngs[0]))
@@ -278,4 +288,60 @@ def serve(
         on_drop=a50.set_down if a50 else None,
         wait_for_clients=wait_for_clients,
     )
-    return ServeSession(log, player, manifest, faults, float(rate), bool(loop), a50, ping, sender)
+    return ServeSession(
+        log, player, manifest, faults, float(rate), bool(loop), a50, ping, sender, link
+    )
+
+
+def _servers(log, manifest, faults, rngs, host, ports, distance_sensor, autopilot):
+    """The A50, Ping1D and MAVLink servers of ``log`` (None for one not asked or without
+    streams; the MAVLink sender also when the autopilot needs the link)."""
+    dvl_port, ping_port, mavlink = ports
+    has = {n for n, s in log.streams().items() if len(s)}
+    a50 = (
+        A50Server(host, dvl_port)
+        if dvl_port is not None and has & {"dvl", "dead_reckoning"}
+        else None
+    )
+    ping = (
+        Ping1DServer(log, manifest, faults, rngs[1], host, ping_port)
+        if ping_port is not None and "sonar" in has
+        else None
+    )
+    wanted = has & {"imu", "pressure"} | ({"sonar"} if distance_sensor else set())
+    sender = (
+        MavlinkSender(log, manifest, faults, rngs[2], mavlink, distance_sensor)
+        if mavlink and (wanted or autopilot)
+        else None
+    )
+    return a50, ping, sender
+
+
+def parse_origin(text) -> tuple[float, ...] | None:
+    """``LAT,LON[,ALT]`` (deg, deg, m) as a tuple; a tuple passes; None stays None."""
+    if text is None or isinstance(text, tuple | list):
+        return None if text is None else tuple(float(v) for v in text)
+    parts = str(text).split(",")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        values = ()
+    if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
+        raise ConfigError(f"--autopilot-origin: expected LAT,LON[,ALT] in degrees, got {text!r}")
+    return values
+
+
+def _autopilot(sender: MavlinkSender | None, params, origin, covariance: str) -> AutopilotLink:
+    """The virtual autopilot on ``sender``'s link (its attitude and baro depth from the log)."""
+    if sender is None:
+        raise ConfigError("--autopilot: the virtual autopilot needs the MAVLink link (--mavlink)")
+    if params is not None and not isinstance(params, dict):
+        params = load_param_file(params)
+    ap = VirtualAutopilot(
+        params,
+        parse_origin(origin),
+        covariance=covariance,
+        attitude=log_attitude(sender),
+        depth=log_depth(sender),
+    )
+    return AutopilotLink(ap, sender)

@@ -7,6 +7,10 @@ dive or a simulated run), so the live stage can be run without the robot.
   message definitions), answering each distance request with the log's newest range;
 - :class:`~undertow.sim.robot.mavlink.MavlinkSender`: an ArduSub autopilot's ATTITUDE,
   SCALED_IMU2, SCALED_PRESSURE2 (and DISTANCE_SENSOR) sent with pymavlink;
+- :class:`~undertow.sim.robot.autopilot.VirtualAutopilot` (on that link by
+  :class:`~undertow.sim.robot.autopilot_link.AutopilotLink`): an autopilot that consumes
+  external navigation with ArduSub 4.x EKF3's rules (:mod:`~undertow.sim.robot.autopilot_rules`,
+  :mod:`~undertow.sim.robot.autopilot_nav`) and reports what it uses;
 - :class:`~undertow.sim.robot.player.Player`: plays the log in real time x rate with
   :class:`~undertow.sim.robot.player.Faults`, listing every message in a
   :class:`~undertow.sim.robot.player.Manifest`; :func:`~undertow.sim.robot.decode.served_log`

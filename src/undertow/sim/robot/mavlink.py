@@ -25,6 +25,7 @@ starts (:class:`~undertow.sim.robot.player.PlayClock`).
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import numpy as np
@@ -91,6 +92,8 @@ class MavlinkSender:
         self.distance_sensor = bool(distance_sensor)
         self.heartbeat_hz = float(heartbeat_hz)
         self.mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+        #: one packer and socket for the player and the virtual autopilot (its replies)
+        self.lock = threading.Lock()
         imu = log.imu
         self.rpy = _attitude_rpy(log) if imu is not None and len(imu) else None
         self.conn = None
@@ -187,12 +190,13 @@ class MavlinkSender:
 
     def emit(self, key: str, index: int, at: float) -> None:
         name, stream, msg, boot = self.message(key, index, at)
-        packet = bytes(msg.pack(self.mav))
-        self.mav.seq = (self.mav.seq + 1) % 256
-        fault, out = "", packet
-        if self.faults.corrupt and self.rng.random() < self.faults.corrupt:
-            fault, out = "corrupt", corrupt_packet(packet, self.rng)
-        self.conn.write(out)
+        with self.lock:
+            packet = bytes(msg.pack(self.mav))
+            self.mav.seq = (self.mav.seq + 1) % 256
+            fault, out = "", packet
+            if self.faults.corrupt and self.rng.random() < self.faults.corrupt:
+                fault, out = "corrupt", corrupt_packet(packet, self.rng)
+            self.conn.write(out)
         sensor = math.nan if boot is None else boot * 1e-3
         self.manifest.add(
             Served(
@@ -208,4 +212,15 @@ class MavlinkSender:
                 -1,
                 packet,
             )
+        )
+
+    def send(self, msg, at: float) -> None:
+        """Send one more message (the virtual autopilot's replies) on the same link and
+        sequence, listed in the manifest with no stream; never corrupted."""
+        with self.lock:
+            packet = bytes(msg.pack(self.mav))
+            self.mav.seq = (self.mav.seq + 1) % 256
+            self.conn.write(packet)
+        self.manifest.add(
+            Served("mavlink", msg.get_type(), "", -1, at, at, math.nan, time.time(), "", -1, packet)
         )
