@@ -36,6 +36,9 @@ def _publish_all(view: LiveView) -> None:
     occupancy = OccupancyMap(cells, [5.0, 9.0, 1.0], [1.0, 1.0, 4.0], 0.1, 1.0, 1.0)
     view.publish_map(T, occupancy, color_by="variance")
     view.publish_wave(T, 0.05, 0.75)
+    view.publish_autopilot_pose(T, [1.0, 2.0, 0.5], (0.0, 0.1, 1.5))
+    view.publish_autopilot_ekf(T, {"flags": 25, "names": ["attitude", "pos_horiz_rel"],
+                                   "pos_horiz_variance": float("nan"), "sending": True})  # fmt: skip
 
 
 async def _session(view: LiveView) -> tuple[dict, dict]:
@@ -90,6 +93,8 @@ def test_client_sees_every_channel_and_one_message_on_each():
         assert got[topic][0][0] == 1_700_000_123_250_000_000  # log time = the estimate's t
     wave = json.loads(got["/undertow/wave"][0][1])
     assert wave == {"t": T, "amplitude_m": 0.05, "frequency_hz": 0.75}
+    ekf = json.loads(got["/autopilot/ekf"][0][1])  # NaN as null (strict JSON)
+    assert ekf["flags"] == 25 and ekf["pos_horiz_variance"] is None and ekf["sending"]
     view.close()  # idempotent
 
 
