@@ -60,8 +60,13 @@ class FakeAutopilot:
             self.tcp_server.bind(("127.0.0.1", 0))
             self.tcp_server.listen(1)
             self.tcp_server.settimeout(0.05)
-        self.ekf_streaming = False
+        self.ekf_streaming = False  # EKF_STATUS_REPORT and LOCAL_POSITION_NED asked for
         self.heartbeat_hz = float(heartbeat_hz)
+        self.telemetry = m.MAVLink(None)  # reads the relayed telemetry: the autopilot's clock
+        self.telemetry.robust_parsing = True
+        self.boot_ms = None
+        self.nav: tuple[float, tuple] | None = None  # (receive time, x y z) of the last fix
+        self._next_report = 0.0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -116,6 +121,9 @@ class FakeAutopilot:
             self._relay()
             self._read_tcp()
             now = time.monotonic()
+            if self.ekf_streaming and now >= self._next_report:
+                self._next_report = now + 0.5
+                self._report(now)
             if self.heartbeat_hz and now >= next_beat:
                 next_beat = now + 1.0 / self.heartbeat_hz
                 self.send(m.MAVLink_heartbeat_message(12, 3, 0, 0, 4, 3))
@@ -137,6 +145,9 @@ class FakeAutopilot:
         if self.undertow is not None and addr[1] == self.undertow[1] and self.transport == "udp":
             return self._take(data)
         self.write(data)  # the robot's telemetry, on to undertow
+        for msg in self.telemetry.parse_buffer(data) or ():
+            if msg.get_type() == "ATTITUDE":
+                self.boot_ms = msg.time_boot_ms
 
     def _read_tcp(self) -> None:
         if self.tcp is None:
@@ -155,6 +166,8 @@ class FakeAutopilot:
                 continue
             with self.lock:
                 self.received.append((now, msg))
+            if msg.get_type() in ("ODOMETRY", "VISION_POSITION_ESTIMATE"):
+                self.nav = (now, (msg.x, msg.y, msg.z))
             self._answer(msg)
 
     def _answer(self, msg) -> None:
@@ -187,8 +200,15 @@ class FakeAutopilot:
         self.send(m.MAVLink_command_ack_message(msg.command, 0))
         if msg.command == m.MAV_CMD_REQUEST_MESSAGE and int(msg.param1) == 49 and self.origin:
             self.send(m.MAVLink_gps_global_origin_message(*self.origin))
-        if msg.command == m.MAV_CMD_SET_MESSAGE_INTERVAL and int(msg.param1) == 193:
+        if msg.command == m.MAV_CMD_SET_MESSAGE_INTERVAL and int(msg.param1) in (32, 193):
             self.ekf_streaming = True
 
-    def send_ekf_status(self, flags: int) -> None:
+    def _report(self, now: float) -> None:
+        """What a fusing EKF would say: position flags while fixes came in the last second
+        (attitude, velocities, horizontal relative and absolute, vertical), else attitude and
+        constant-position mode; LOCAL_POSITION_NED the last fix, at the autopilot's time."""
+        fusing = self.nav is not None and now - self.nav[0] < 1.0
+        flags = 0x3F if fusing else 0x01 | 0x20 | 0x80
         self.send(m.MAVLink_ekf_status_report_message(flags, 0.1, 0.2, 0.1, 0.05, 0.0))
+        if self.nav is not None and self.boot_ms is not None:
+            self.send(m.MAVLink_local_position_ned_message(self.boot_ms, *self.nav[1], 0, 0, 0))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import struct
 import subprocess
 import sys
@@ -37,8 +38,8 @@ def _publish_all(view: LiveView) -> None:
     view.publish_map(T, occupancy, color_by="variance")
     view.publish_wave(T, 0.05, 0.75)
     view.publish_autopilot_pose(T, [1.0, 2.0, 0.5], (0.0, 0.1, 1.5))
-    view.publish_autopilot_ekf(T, {"flags": 25, "names": ["attitude", "pos_horiz_rel"],
-                                   "pos_horiz_variance": float("nan"), "sending": True})  # fmt: skip
+    ekf = {"flags": 25, "names": ["attitude", "pos_horiz_rel"], "pos_horiz_variance": math.nan}
+    view.publish_autopilot_ekf(T, {**ekf, "sending": True})
 
 
 async def _session(view: LiveView) -> tuple[dict, dict]:

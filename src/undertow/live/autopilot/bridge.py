@@ -40,6 +40,9 @@ from .vehicle import OBSERVED, Vehicle
 MAX_TRANSITION_NOTES = 20
 #: a velocity-delta interval longer than this (s) is not one: the next message starts anew
 MAX_DELTA_S = 1.0
+#: the shortest velocity-delta interval (s): EKF3 drops a delta shorter than its own time step
+#: (``delTime < dtEkfAvg`` in writeBodyFrameOdom, AP_NavEKF3_Measurements.cpp; about 12 ms)
+MIN_DELTA_S = 0.02
 
 
 class AutopilotBridge:
@@ -164,7 +167,8 @@ class AutopilotBridge:
                              f"(reset_counter {counter})")  # fmt: skip
         self.sending, self.reason = True, ""
         self._record("sent", t, {**info, "reset_counter": counter, "reset": reset,
-                                 "state_t": t, "age_ms": (now - t) * 1e3})  # fmt: skip
+                                 "state_t": t, "age_ms": (now - t) * 1e3,
+                                 "sent_at": now, "slot": self.schedule.last_slot})  # fmt: skip
 
     def _precondition(self) -> str:
         v = self.vehicle
@@ -194,8 +198,11 @@ class AutopilotBridge:
         return self._delta(usec, t, x, P)
 
     def _delta(self, usec, t, x, P):
-        start, self._delta_from = self._delta_from, (t, x)
-        if start is None or not 0 < t - start[0] <= MAX_DELTA_S:
+        start = self._delta_from
+        if start is not None and 0 < t - start[0] < MIN_DELTA_S:
+            return None, "velocity-delta: interval too short"  # (the start is kept)
+        self._delta_from = (t, x)
+        if start is None or not MIN_DELTA_S <= t - start[0] <= MAX_DELTA_S:
             return None, "velocity-delta: starting an interval"
         vmin, vmax = self._verr()
         self.gate.max_velocity_std_m_s = vmax

@@ -94,7 +94,7 @@ def vision_position_estimate(time_usec: int, x, P, *, yaw_offset_rad: float = 0.
 def rotation_vector(R) -> np.ndarray:
     """Log(R): the axis-angle vector a (|a| = angle in [0, pi]) with Exp(a) = R, the inverse of
     Rodrigues' formula (a = th / (2 sin th) (R32 - R23, R13 - R31, R21 - R12), th = arccos((tr R
-    - 1) / 2); near pi from the symmetric part)."""
+    - 1) / 2); near pi from the symmetric part, (R + R^T) / 2 = cos th I + (1 - cos th) n n^T)."""
     R = np.asarray(R, dtype=float)
     c = min(max((np.trace(R) - 1.0) / 2.0, -1.0), 1.0)
     th = math.acos(c)
@@ -103,11 +103,11 @@ def rotation_vector(R) -> np.ndarray:
         return 0.5 * w  # (th / sin th -> 1)
     if math.pi - th > 1e-4:
         return th / (2.0 * math.sin(th)) * w
-    # near pi: R = 2 n n^T - I (+ O(pi - th)); n from the largest diagonal of (R + I) / 2
-    B = (R + np.eye(3)) / 2.0
+    # near pi, from the symmetric part: (R + R^T) / 2 = cos th I + (1 - cos th) n n^T
+    B = ((R + R.T) / 2.0 - c * np.eye(3)) / (1.0 - c)
     k = int(np.argmax(np.diag(B)))
     n = B[:, k] / math.sqrt(max(B[k, k], 1e-300))
-    n = n if float(np.dot(n, w)) >= 0 else -n
+    n = n if float(np.dot(n, w)) >= 0 else -n  # (w = 2 sin th n fixes the sign)
     return th * n / np.linalg.norm(n)
 
 

@@ -1,9 +1,10 @@
 """Reading what comes over the link besides the sensor streams: which component is the
 autopilot, who else sends external navigation to it, and what its EKF says.
 
-- The autopilot is the first component whose HEARTBEAT has ``autopilot`` other than
-  MAV_AUTOPILOT_INVALID (8: "no valid autopilot, e.g. a GCS or other MAVLink component",
-  common.xml); its system and component ids are the target of undertow's requests.
+- The autopilot is the first MAV_COMP_ID_AUTOPILOT1 (component 1, ArduPilot's own) whose
+  HEARTBEAT has ``autopilot`` other than MAV_AUTOPILOT_INVALID (8: "no valid autopilot, e.g. a
+  GCS or other MAVLink component", common.xml); its system and component ids are the target of
+  undertow's requests.
 - Another source: a message of :data:`NAV_MESSAGES` (what ArduPilot's GCS_Common.cpp feeds to
   its visual-odometry library) whose sender (system id, component id) is not undertow's. EKF3
   fuses every one of them, two sources fighting over the position; :class:`OtherSources` names
@@ -20,6 +21,7 @@ from __future__ import annotations
 import math
 
 MAV_AUTOPILOT_INVALID = 8
+MAV_COMP_ID_AUTOPILOT1 = 1
 #: the external-navigation messages ArduPilot fuses (GCS_Common.cpp)
 NAV_MESSAGES = (
     "VISION_POSITION_DELTA",
@@ -49,10 +51,14 @@ EKF_FLAGS = {
 WATER_LINKED_SENDER = (255, 0)
 
 
-def is_autopilot(heartbeat) -> bool:
-    """Whether a HEARTBEAT comes from an autopilot (module docstring)."""
+def is_autopilot(heartbeat, compid: int) -> bool:
+    """Whether a HEARTBEAT sent by component ``compid`` is an autopilot's (module docstring)."""
     value = getattr(heartbeat, "autopilot", MAV_AUTOPILOT_INVALID)
-    return isinstance(value, int) and value != MAV_AUTOPILOT_INVALID
+    return (
+        compid == MAV_COMP_ID_AUTOPILOT1
+        and isinstance(value, int)
+        and (value != MAV_AUTOPILOT_INVALID)
+    )
 
 
 def ekf_flag_names(flags) -> list[str]:

@@ -107,7 +107,7 @@ class Vehicle:
         return handler(msg, arrival) if handler is not None else None
 
     def _heartbeat(self, msg, sender, arrival) -> None:
-        if self.target is None and is_autopilot(msg) and sender != self.own:
+        if self.target is None and is_autopilot(msg, sender[1]) and sender != self.own:
             self.target = sender
             self.streams.found(arrival)
             self._param_phase, self._param_next = "reading", arrival
