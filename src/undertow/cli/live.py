@@ -107,7 +107,8 @@ def live_command(
 def _open_view(settings):
     from ..live.view import LiveView
 
-    view = LiveView(host=settings.live.view_host, port=settings.live.view_port)
+    live = settings.live
+    view = LiveView(host=live.view_host, port=live.view_port, autopilot=live.autopilot)
     err.print(f"live view: ws://{settings.live.view_host}:{view.port} (Foxglove: open connection)")
     return view
 

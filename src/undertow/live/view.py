@@ -29,7 +29,9 @@ Topics (:data:`TOPICS`, topic -> schema name):
   cloud) to red (highest);
 - ``/undertow/wave`` (JSON, schema ``undertow.Wave``): ``{"t": s, "amplitude_m": a,
   "frequency_hz": f}``;
-- ``/autopilot/pose`` (``foxglove.PoseInFrame``, ``undertow live --autopilot``): where the
+With ``autopilot`` (``undertow live --autopilot``; :data:`AUTOPILOT_TOPICS`):
+
+- ``/autopilot/pose`` (``foxglove.PoseInFrame``): where the
   autopilot's EKF puts the vehicle (its LOCAL_POSITION_NED and ATTITUDE turned into ``world``,
   :mod:`undertow.live.autopilot`), next to undertow's pose;
 - ``/autopilot/ekf`` (JSON, schema ``undertow.AutopilotEkf``): its EKF_STATUS_REPORT decoded
@@ -68,6 +70,9 @@ TOPICS: dict[str, str] = {
     RAYS["sonar"]: "foxglove.SceneUpdate",
     MAP: "foxglove.PointCloud",
     WAVE: "undertow.Wave",
+}
+#: the channels added for ``undertow live --autopilot`` (module docstring)
+AUTOPILOT_TOPICS: dict[str, str] = {
     AUTOPILOT_POSE: "foxglove.PoseInFrame",
     AUTOPILOT_EKF: "undertow.AutopilotEkf",
 }
@@ -192,7 +197,8 @@ class LiveView:
     subscribed to costs nothing: its message is not even built (a caller may also skip work,
     e.g. building the occupancy map, when :meth:`subscribed` says no one looks)."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, name: str = "undertow"):
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, name: str = "undertow",
+                 autopilot: bool = False):  # fmt: skip
         foxglove, ch, self._m = _foxglove()
         self._listener = _Listener()
         self._context = foxglove.Context()
@@ -217,13 +223,14 @@ class LiveView:
                                        data=json.dumps(WAVE_SCHEMA).encode()),
             ),
             **{topic: ch.SceneUpdateChannel(topic, context=ctx) for topic in RAYS.values()},
-            AUTOPILOT_POSE: ch.PoseInFrameChannel(AUTOPILOT_POSE, context=ctx),
-            AUTOPILOT_EKF: foxglove.Channel(
+        }  # fmt: skip
+        if autopilot:
+            self._channels[AUTOPILOT_POSE] = ch.PoseInFrameChannel(AUTOPILOT_POSE, context=ctx)
+            self._channels[AUTOPILOT_EKF] = foxglove.Channel(
                 AUTOPILOT_EKF, message_encoding="json", context=ctx,
                 schema=foxglove.Schema(name="undertow.AutopilotEkf", encoding="jsonschema",
                                        data=json.dumps(EKF_SCHEMA).encode()),
-            ),
-        }  # fmt: skip
+            )  # fmt: skip
         self._closed = False
 
     @property

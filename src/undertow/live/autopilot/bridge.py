@@ -32,7 +32,7 @@ from . import covariance as cov
 from . import messages
 from .frame import HeadingOffset
 from .gate import SendGate
-from .schedule import MIN_SPACING_S, SendSchedule
+from .schedule import SPACING_S, Rhythm, SendSchedule
 from .stats import SendStats
 from .vehicle import OBSERVED, Vehicle
 
@@ -61,7 +61,8 @@ class AutopilotBridge:
         self.inflation = live.autopilot_covariance_inflation
         offset = live.autopilot_yaw_offset_deg
         self.heading = HeadingOffset(None if offset is None else math.radians(offset))
-        self.schedule = SendSchedule(live.autopilot_rate_hz, MIN_SPACING_S[self.mode])
+        self.schedule = SendSchedule(live.autopilot_rate_hz, *SPACING_S[self.mode])
+        self.rhythm = Rhythm()  # when the next DVL report comes
         self.gate = SendGate(mode=self.mode, max_position_std_m=live.autopilot_max_position_std_m,
                              dvl_timeout_s=live.autopilot_dvl_timeout_s,
                              settle_s=live.autopilot_settle_s, jump_m=live.autopilot_jump_m,
@@ -83,7 +84,8 @@ class AutopilotBridge:
         self.reason = "waiting for the autopilot's HEARTBEAT"
         self.sending = False
         self._transitions = 0
-        self._held_slot = None
+        self._held_period = None
+        self._retry_at = -math.inf  # after a hold or nothing new: the next try (session s)
 
     # -- hooks ------------------------------------------------------------------------------
     def _queue(self, msg, arrival: float) -> None:  # the decoding thread: only queue
@@ -92,6 +94,7 @@ class AutopilotBridge:
     def note_dvl(self, record) -> None:
         """A DVL record (any link): its validity feeds the DVL-lost rule."""
         self.gate.note_dvl(record.t, bool(record.data.get("valid", True)))
+        self.rhythm.arrived(record.arrival)
 
     def offer(self, states, arrivals=()) -> None:
         """A preview's states (a Trajectory; its last row is the newest state) and the
@@ -107,7 +110,8 @@ class AutopilotBridge:
             self._arrivals.extend(arrivals)
             self._fresh = True
         now = self.clock()
-        if self.schedule.due(now, self._fresh):
+        due = self.schedule.due(now, self._fresh, self._newest[0], self.rhythm.next())
+        if self._may_try(now) and due:
             self._send(now)
 
     def tick(self, preview=None) -> None:
@@ -120,26 +124,36 @@ class AutopilotBridge:
                 self._show(changed)
         now = self.clock()
         self.vehicle.housekeeping(now)
-        if self._fresh and self.schedule.due(now, True):  # a DVL state that waited for a slot
-            return self._send(now)
-        if not self.schedule.due(now, False):
+        fresh, dvl_next = self._fresh, self.rhythm.next()
+        if not (self._may_try(now) and self.schedule.due(now, fresh, None, dvl_next)):
             return
-        if preview is not None:
-            preview()  # (offers its states, which may send)
-        if self.schedule.due(self.clock(), False):
-            self._send(self.clock())
+        newest = self._newest
+        stale = newest is None or newest[0] - self.schedule.last_state < self.schedule.min_state
+        if (stale or not fresh) and preview is not None:
+            preview()  # the newest state over the records buffered since (offered: may send)
+        now, newest = self.clock(), self._newest
+        if newest is not None and self.schedule.due(now, self._fresh, newest[0], dvl_next):
+            self._send(now)
+        elif self.schedule.due(now, self._fresh, None, dvl_next):  # nothing new: not at once
+            self._retry_at = now + self.schedule.period / 2
 
     def wait_s(self) -> float:
-        """Wall seconds the loop may wait for data before the next fallback moment."""
-        if self.schedule.t0 is None:
+        """Wall seconds the loop may wait for data before the next message may go."""
+        if not self.schedule.started or self._newest is None:
             return self._wall(self.schedule.period)
         now = self.clock()
-        return self._wall(max(self.schedule.next_due(now, self._fresh) - now, 0.0))
+        at = max(self.schedule.next_due(now, self._fresh, self.rhythm.next()), self._retry_at)
+        return self._wall(max(at - now, 0.0))
+
+    def _may_try(self, now: float) -> bool:
+        """Not within the back-off after a hold (a fresh DVL state may always try)."""
+        return self._newest is not None and (self._fresh or now >= self._retry_at)
 
     # -- sending ----------------------------------------------------------------------------
     def _send(self, now: float) -> None:
         newest = self._newest
         if newest is None or (self._sent_t is not None and newest[0] <= self._sent_t):
+            self._retry_at = now + self.schedule.period / 2  # nothing new: try again later
             return
         t, x, P = newest
         reason = self._precondition()
@@ -151,12 +165,13 @@ class AutopilotBridge:
         counter, reset = self.gate.prepare(t, x)
         msg, info = self._build(t, x, P, counter)
         if msg is None:  # (velocity-delta: this state starts the interval of the next message)
+            self._retry_at = now + MIN_DELTA_S
             return None
         if not self.link.send(msg):
             self.gate.hold()
             return self._hold("the link has no connection or peer yet")
         self.gate.sent(t, x, reset)
-        self.schedule.sent(now)
+        self.schedule.sent(now, t)
         self._sent_t = t
         wall = self.perf()
         self.stats.on_send(wall, now - t, self._arrivals)
@@ -168,7 +183,7 @@ class AutopilotBridge:
         self.sending, self.reason = True, ""
         self._record("sent", t, {**info, "reset_counter": counter, "reset": reset,
                                  "state_t": t, "age_ms": (now - t) * 1e3,
-                                 "sent_at": now, "slot": self.schedule.last_slot})  # fmt: skip
+                                 "sent_at": now, "tokens": self.schedule.tokens})  # fmt: skip
 
     def _precondition(self) -> str:
         v = self.vehicle
@@ -223,9 +238,11 @@ class AutopilotBridge:
         return {"pos_err_m": pos, "ang_err_rad": ang}
 
     def _hold(self, reason: str) -> None:
-        slot = self.schedule.slot(self.clock())
-        if slot != self._held_slot:  # (counted once per slot held)
-            self._held_slot = slot
+        now = self.clock()
+        self._retry_at = now + self.schedule.period / 2  # (a fresh DVL state may still try)
+        period = int(now // self.schedule.period)
+        if period != self._held_period:  # (counted once per period held)
+            self._held_period = period
             self.stats.on_hold(reason)
         self._arrivals, self._fresh = [], False  # carried by no message
         self._delta_from = None  # (a held time is no velocity-delta interval)
@@ -310,7 +327,7 @@ class AutopilotBridge:
             "rate_hz": self.live.autopilot_rate_hz,
             "covariance_inflation": self.inflation,
             **self.stats.summary(),
-            "missed_slots": self.schedule.missed,
+            "missed_periods": self.schedule.missed,
             "reset_counter": {
                 "start": self.reset_counter_start,
                 "end": self.gate.reset_counter,
