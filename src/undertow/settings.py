@@ -92,8 +92,9 @@ class LiveSettings(BaseModel):
         description="variance factor on what is sent (covariance intersection, weight 1/2)",
     )  # fmt: skip
     autopilot_max_position_std_m: float = Field(
-        2.0, gt=0, allow_inf_nan=False, description="stop sending above this horizontal std"
-    )
+        5.0, gt=0, allow_inf_nan=False,
+        description="stop sending above this horizontal std (EKF3's GPS accuracy check: 5 m)",
+    )  # fmt: skip
     autopilot_dvl_timeout_s: float = Field(
         1.0, gt=0, allow_inf_nan=False, description="stop after this long without a valid DVL"
     )

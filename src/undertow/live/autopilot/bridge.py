@@ -169,7 +169,7 @@ class AutopilotBridge:
             return None
         if not self.link.send(msg):
             self.gate.hold()
-            return self._hold("the link has no connection or peer yet")
+            return self._hold("the link is not connected (or has heard no peer yet)")
         self.gate.sent(t, x, reset)
         self.schedule.sent(now, t)
         self._sent_t = t

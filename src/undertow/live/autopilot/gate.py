@@ -7,7 +7,10 @@ undertow **stops sending** (every mode) while
   caller says so) less than ``settle_s`` of filter time ago;
 - no valid DVL velocity came for ``dvl_timeout_s`` (session s; default 1 s, two reports at the
   A50's slowest rate of 2 Hz): the horizontal position is then inertial only;
-- (position modes) the horizontal std sqrt(k (Pxx + Pyy)) is above ``max_position_std_m``;
+- (position modes) the horizontal std sqrt(k (Pxx + Pyy)) is above ``max_position_std_m``
+  (default 5 m: the horizontal accuracy above which EKF3 refuses to start on a GPS,
+  ``calcGpsGoodToAlign`` in AP_NavEKF3_VehicleStatus.cpp at EK3_CHECK_SCALE 100 %; an
+  estimate EKF3 would not take from a GPS it does not get from undertow);
 - (velocity-delta) the horizontal velocity std is above EK3_VIS_VERR_MAX: EKF3 would take
   confidence 0 as an error of VIS_VERR_MAX, less than the truth.
 
@@ -52,7 +55,7 @@ class SendGate:
     """The rules of the module docstring. Times are session seconds: ``now`` the clock, ``t``
     the state's time."""
 
-    def __init__(self, *, mode: str = "odometry", max_position_std_m: float = 2.0,
+    def __init__(self, *, mode: str = "odometry", max_position_std_m: float = 5.0,
                  dvl_timeout_s: float = 1.0, settle_s: float = 2.0, jump_m: float = 0.5,
                  inflation: float = 1.0, reset_counter: int | None = None) -> None:  # fmt: skip
         self.mode = mode
