@@ -115,8 +115,8 @@ class AutopilotBridge:
             self._send(now)
 
     def tick(self, preview=None) -> None:
-        """Every loop turn: take what the vehicle said, send what is due to it, and the slot's
-        fallback message (after a fresh ``preview()`` of the buffered records)."""
+        """Every loop turn: take what the vehicle said, send what is due to it, and the message
+        a full token bucket calls for (after a fresh ``preview()`` of the buffered records)."""
         while self._inbox:
             msg, arrival = self._inbox.popleft()
             changed = self.vehicle.take(msg, arrival)
