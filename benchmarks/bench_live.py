@@ -29,6 +29,12 @@ Figures:
 - ``latency_ms``: wall time from a DVL report's arrival (its bytes received by the link's thread)
   to its pose being published (the preview on the committed filter), median and p99. Target:
   p99 < 10 ms.
+- ``autopilot`` (``undertow live --autopilot``, ODOMETRY at 10 Hz, at real time: serve plays
+  the first AUTOPILOT_S of the run at rate 1, its MAVLink relayed by a stand-in autopilot that
+  decodes what undertow sends): ``latency_ms``, from a DVL report's arrival to the send of the
+  first message carrying it (target: p99 < 20 ms); ``interval_ms``, the spacing of the messages
+  as sent (mean, std, p99 of |interval - 100 ms|: the rate's jitter) and ``received``, the same
+  at the stand-in (after the loopback); ``state_age_ms``, how old the state is when it leaves.
 
     .venv/bin/python benchmarks/bench_live.py [--rate 20] [--scenario wave-a0.10-f1.00]
         [--commit-every S]  (the results are the same at any commit interval: a longer one
@@ -51,6 +57,7 @@ from pathlib import Path
 
 RATE = 20.0
 SCENARIO = "wave-a0.10-f1.00"
+AUTOPILOT_S = 30.0  # sensor (= wall) seconds of the real-time autopilot run
 HERE = Path(__file__).resolve().parent
 UNDERTOW = Path(sys.executable).with_name("undertow")
 
@@ -205,6 +212,90 @@ def run_once(rate: float, scenario: str, view: bool, commit_every_s: float | Non
     }
 
 
+class _Relay:
+    """The stand-in autopilot: serve's MAVLink (to ``port``) on to undertow's ``target`` port;
+    what undertow sends back decoded (pymavlink) with its receive time."""
+
+    def __init__(self, target: int) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega
+
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.port, self.target = self.sock.getsockname()[1], ("127.0.0.1", target)
+        self.parser = ardupilotmega.MAVLink(None)
+        self.got: list[tuple[float, str]] = []
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self.stop.is_set():
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except OSError:
+                continue
+            if addr[1] != self.target[1]:
+                self.sock.sendto(data, self.target)
+                continue
+            now = time.perf_counter()
+            self.got += [(now, m.get_type()) for m in self.parser.parse_buffer(data) or ()]
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(2.0)
+        self.sock.close()
+
+
+def run_autopilot(scenario: str, pin: tuple[int, int] | None = None,
+                  seconds: float = AUTOPILOT_S) -> dict:  # fmt: skip
+    """The real-time --autopilot run (module docstring)."""
+    import numpy as np
+
+    from undertow.live.pipeline import LiveSession
+    from undertow.settings import LiveSettings, Settings
+
+    _pin({pin[0]} if pin else None)
+    dvl, ping, mav = _free_port(), _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_DGRAM)
+    relay = _Relay(mav)
+    server = subprocess.Popen(
+        [str(UNDERTOW), "serve", scenario, "--rate", "1", "--duration", str(seconds),
+         "--dvl-port", str(dvl), "--ping-port", str(ping),
+         "--mavlink", f"udpout:127.0.0.1:{relay.port}", "--wait-clients", "30", "-q"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    if pin:
+        os.sched_setaffinity(server.pid, {pin[1]})
+    live = LiveSettings(dvl=f"tcp://127.0.0.1:{dvl}", sonar=f"udp://127.0.0.1:{ping}",
+                        mavlink=f"udpin:127.0.0.1:{mav}", idle_stop_s=2.0,
+                        autopilot=True)  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        session = LiveSession(Settings(live=live), Path(tmp) / "out").start()
+        if not session.wait_connected(timeout=30.0):
+            raise RuntimeError("bench_live: a link did not connect to serve within 30 s")
+        result = session.run()
+    server.wait(timeout=60)
+    relay.close()
+    _pin(None)
+    a = result.summary["autopilot"]
+    got = np.array([t for t, name in relay.got if name == "ODOMETRY"])
+    iv = np.diff(got) * 1e3
+    received = ({"n": int(iv.size), "mean_ms": float(iv.mean()), "std_ms": float(iv.std()),
+                 "p99_abs_deviation_ms": float(np.percentile(np.abs(iv - 100.0), 99))}
+                if iv.size else {"n": 0})  # fmt: skip
+    return {
+        "cores": {"pipeline": pin[0], "serve": pin[1]} if pin else "any",
+        "seconds": seconds,
+        "sent": a["sent"],
+        "latency_ms": a["latency"],
+        "interval_ms": a["interval"],
+        "received": received,
+        "state_age_ms": a["state_age"],
+        "holds": a["holds"],
+        "missed_periods": a["missed_periods"],
+    }
+
+
 def main(rate: float = RATE, scenario: str = SCENARIO, commit_every_s: float | None = None) -> dict:
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # one core (before numba is imported)
     from undertow.commands.serve import load_source
@@ -224,7 +315,9 @@ def main(rate: float = RATE, scenario: str = SCENARIO, commit_every_s: float | N
             "view_off": run_once(rate, scenario, False, commit_every_s, served),
             "view_on": run_once(rate, scenario, True, commit_every_s, served),
         }
-    out["targets"] = {"realtime_factor": ">= 50 on one core", "latency_p99_ms": "< 10"}
+    out["autopilot"] = run_autopilot(scenario, pin)
+    out["targets"] = {"realtime_factor": ">= 50 on one core", "latency_p99_ms": "< 10",
+                      "autopilot_latency_p99_ms": "< 20 at real time"}  # fmt: skip
     return out
 
 
@@ -237,5 +330,10 @@ if __name__ == "__main__":
     parser.add_argument("--scenario", default=SCENARIO)
     parser.add_argument("--commit-every", type=float, default=None,
                         help="live.commit_every_s (default: the settings' default)")  # fmt: skip
+    parser.add_argument("--autopilot-only", action="store_true",
+                        help="only the real-time --autopilot run")  # fmt: skip
     args = parser.parse_args()
+    if args.autopilot_only:
+        print(json.dumps({"autopilot": run_autopilot(args.scenario, cores())}, indent=2))
+        sys.exit(0)
     print(json.dumps(main(args.rate, args.scenario, args.commit_every), indent=2))

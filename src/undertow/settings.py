@@ -20,8 +20,9 @@ The simulator's scenarios are separate files (see :mod:`undertow.sim.scenario`).
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from ._util.validate import read_yaml, validate
 from .errors import ConfigError
@@ -36,6 +37,10 @@ from .mapping.config import MappingConfig
 #: live, where no session is known in advance: no stretch at zero variance, the longest length
 #: scale from a 1 m horizontal and 0.1 m vertical position standard deviation on
 LIVE_VARIANCE_BOUNDS = ((0.0, 0.0, 0.0), (1.0, 1.0, 0.01))
+#: the lowest rate the autopilot link sends at: ArduPilot asks external navigation for 4 Hz or
+#: more and EKF3 declares its position stale after 3 s without one; 5 Hz keeps a margin
+MIN_AUTOPILOT_RATE_HZ = 5.0
+AUTOPILOT_MODES = ("odometry", "vision-position", "velocity-delta")
 
 
 class LiveSettings(BaseModel):
@@ -78,6 +83,68 @@ class LiveSettings(BaseModel):
         None, gt=0, description="stop once no record came for this long (wall s), after data"
     )
     duration_s: float | None = Field(None, gt=0, description="stop after this long (wall s)")
+    # -- the estimate sent to the autopilot (docs/live.md, "Sending to the autopilot")
+    autopilot: bool = Field(False, description="send the estimate to the autopilot (--mavlink)")
+    autopilot_mode: Literal["odometry", "vision-position", "velocity-delta"] = "odometry"
+    autopilot_rate_hz: float = Field(10.0, allow_inf_nan=False, description="messages per s")
+    autopilot_covariance_inflation: float = Field(
+        2.0, ge=1.0, allow_inf_nan=False,
+        description="variance factor on what is sent (covariance intersection, weight 1/2)",
+    )  # fmt: skip
+    autopilot_max_position_std_m: float = Field(
+        5.0, gt=0, allow_inf_nan=False,
+        description="stop sending above this horizontal std (EKF3's GPS accuracy check: 5 m)",
+    )  # fmt: skip
+    autopilot_dvl_timeout_s: float = Field(
+        1.0, gt=0, allow_inf_nan=False, description="stop after this long without a valid DVL"
+    )
+    autopilot_settle_s: float = Field(
+        2.0, ge=0, allow_inf_nan=False, description="filter seconds before sending after a start"
+    )
+    autopilot_jump_m: float = Field(
+        0.5, gt=0, allow_inf_nan=False, description="a step the velocity does not explain"
+    )
+    autopilot_yaw_offset_deg: float | None = Field(
+        None, allow_inf_nan=False, description="autopilot heading minus undertow's (None: found)"
+    )
+    autopilot_origin: tuple[float, float] | tuple[float, float, float] | None = Field(
+        None, description="EKF origin LAT,LON[,ALT] (deg, deg, m) sent once if none is set"
+    )
+    autopilot_set_params: bool = Field(False, description="set the parameters (PARAM_SET)")
+    autopilot_component_id: int = Field(197, ge=1, le=255, description="our MAVLink compid")
+
+    @field_validator("autopilot_rate_hz")
+    @classmethod
+    def _rate_floor(cls, rate: float) -> float:
+        if not rate >= MIN_AUTOPILOT_RATE_HZ:
+            raise ValueError(
+                f"{rate:g} Hz is below {MIN_AUTOPILOT_RATE_HZ:g} Hz, the least "
+                "EKF3's external navigation is fed at (ArduPilot: 4 Hz or more)"
+            )
+        return rate
+
+    @field_validator("autopilot_origin", mode="before")
+    @classmethod
+    def _origin(cls, value):
+        if isinstance(value, str):
+            value = [v for v in value.replace(" ", "").split(",") if v]
+        if value is None:
+            return None
+        try:
+            values = [float(v) for v in value]
+        except (TypeError, ValueError):
+            raise ValueError("expected LAT,LON[,ALT] in degrees and metres") from None
+        if len(values) not in (2, 3) or not all(abs(v) < float("inf") for v in values):
+            raise ValueError("expected LAT,LON[,ALT] in degrees and metres")
+        if not (-90 <= values[0] <= 90 and -180 <= values[1] <= 180):
+            raise ValueError(f"latitude {values[0]} / longitude {values[1]} out of range")
+        return tuple(values)
+
+    @model_validator(mode="after")
+    def _autopilot_needs_mavlink(self):
+        if self.autopilot and not self.mavlink:
+            raise ValueError("autopilot: sending to the autopilot needs its link (--mavlink)")
+        return self
 
 
 class Settings(BaseModel):

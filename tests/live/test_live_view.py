@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import struct
 import subprocess
 import sys
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError
-from undertow.live.view import TOPICS, LiveView
+from undertow.live.view import AUTOPILOT_TOPICS, TOPICS, LiveView
 from undertow.occupancy import OccupancyMap
 
 #: opens sockets on 127.0.0.1 (servers it starts)
@@ -36,19 +37,22 @@ def _publish_all(view: LiveView) -> None:
     occupancy = OccupancyMap(cells, [5.0, 9.0, 1.0], [1.0, 1.0, 4.0], 0.1, 1.0, 1.0)
     view.publish_map(T, occupancy, color_by="variance")
     view.publish_wave(T, 0.05, 0.75)
+    view.publish_autopilot_pose(T, [1.0, 2.0, 0.5], (0.0, 0.1, 1.5))
+    ekf = {"flags": 25, "names": ["attitude", "pos_horiz_rel"], "pos_horiz_variance": math.nan}
+    view.publish_autopilot_ekf(T, {**ekf, "sending": True})
 
 
-async def _session(view: LiveView) -> tuple[dict, dict]:
+async def _session(view: LiveView, topics: dict = TOPICS) -> tuple[dict, dict]:
     websockets = pytest.importorskip("websockets")
     url = f"ws://127.0.0.1:{view.port}"
     async with websockets.connect(url, subprotocols=[SUBPROTOCOL]) as ws:
         assert ws.subprotocol == SUBPROTOCOL
         channels: dict[str, dict] = {}
-        while not set(TOPICS) <= set(channels):
+        while not set(topics) <= set(channels):
             msg = json.loads(await asyncio.wait_for(ws.recv(), 5.0))
             if msg["op"] == "advertise":
                 channels.update({c["topic"]: c for c in msg["channels"]})
-        subs = {k: channels[topic]["id"] for k, topic in enumerate(sorted(TOPICS))}
+        subs = {k: channels[topic]["id"] for k, topic in enumerate(sorted(topics))}
         await ws.send(
             json.dumps(
                 {
@@ -58,11 +62,11 @@ async def _session(view: LiveView) -> tuple[dict, dict]:
             )
         )
         deadline = time.monotonic() + 5.0
-        while not all(view.subscribed(t) for t in TOPICS) and time.monotonic() < deadline:
+        while not all(view.subscribed(t) for t in topics) and time.monotonic() < deadline:
             await asyncio.sleep(0.01)
         _publish_all(view)
-        got: dict[str, list] = {topic: [] for topic in TOPICS}
-        topic_of = {k: sorted(TOPICS)[k] for k in subs}
+        got: dict[str, list] = {topic: [] for topic in topics}
+        topic_of = {k: sorted(topics)[k] for k in subs}
         try:
             while True:  # everything published arrives; wait a little more for extras
                 timeout = 5.0 if any(not v for v in got.values()) else 0.3
@@ -78,19 +82,34 @@ async def _session(view: LiveView) -> tuple[dict, dict]:
 def test_client_sees_every_channel_and_one_message_on_each():
     pytest.importorskip("foxglove")
     pytest.importorskip("websockets")
-    view = LiveView("127.0.0.1", 0)
+    topics = {**TOPICS, **AUTOPILOT_TOPICS}
+    view = LiveView("127.0.0.1", 0, autopilot=True)
     try:
         assert view.port > 0 and view.url == f"ws://127.0.0.1:{view.port}"
-        channels, got = asyncio.run(_session(view))
+        channels, got = asyncio.run(_session(view, topics))
     finally:
         view.close()
-    for topic, schema in TOPICS.items():
+    assert set(channels) == set(topics)
+    for topic, schema in topics.items():
         assert channels[topic]["schemaName"] == schema, topic
         assert len(got[topic]) == 1, f"{topic}: {len(got[topic])} messages"
         assert got[topic][0][0] == 1_700_000_123_250_000_000  # log time = the estimate's t
     wave = json.loads(got["/undertow/wave"][0][1])
     assert wave == {"t": T, "amplitude_m": 0.05, "frequency_hz": 0.75}
+    ekf = json.loads(got["/autopilot/ekf"][0][1])  # NaN as null (strict JSON)
+    assert ekf["flags"] == 25 and ekf["pos_horiz_variance"] is None and ekf["sending"]
     view.close()  # idempotent
+
+
+def test_the_autopilot_channels_only_with_autopilot():
+    pytest.importorskip("foxglove")
+    pytest.importorskip("websockets")
+    view = LiveView("127.0.0.1", 0)
+    try:
+        channels, got = asyncio.run(_session(view))
+    finally:
+        view.close()
+    assert set(channels) == set(TOPICS) and all(len(v) == 1 for v in got.values())
 
 
 def test_misuse_is_one_line():

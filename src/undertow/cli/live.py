@@ -10,6 +10,23 @@ import typer
 
 from ._app import ConfigOption, OverwriteOption, app, err, user_errors
 
+# the options of `--autopilot` (docs/live.md, "Sending to the autopilot")
+AutopilotFlag = Annotated[
+    bool, typer.Option("--autopilot", help="Send the estimate to the autopilot (--mavlink).")
+]
+AutopilotMode = Annotated[
+    str | None, typer.Option(help="odometry (ODOMETRY, default), vision-position, velocity-delta.")
+]
+AutopilotRate = Annotated[
+    float | None, typer.Option(help="Messages per second to the autopilot (10, >= 5).")
+]
+OriginOption = Annotated[
+    str | None, typer.Option(help="EKF origin LAT,LON[,ALT], sent once if none is set.")
+]
+SetParamsFlag = Annotated[
+    bool, typer.Option("--set-params", help="Set the autopilot parameters it needs.")
+]
+
 
 @app.command("live")
 @user_errors
@@ -49,6 +66,11 @@ def live_command(
     idle_stop: Annotated[
         float | None, typer.Option(help="Stop once no data came for this many seconds.")
     ] = None,
+    autopilot: AutopilotFlag = False,
+    autopilot_mode: AutopilotMode = None,
+    autopilot_rate: AutopilotRate = None,
+    origin: OriginOption = None,
+    set_params: SetParamsFlag = False,
     config: ConfigOption = None,
     overwrite: OverwriteOption = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No status line.")] = False,
@@ -58,7 +80,8 @@ def live_command(
     --duration, --idle-stop) write localization/ and map/ next to the recording.
 
     Example: `undertow live --dvl tcp://192.168.194.95 --sonar udp://192.168.2.2:9090
-    --mavlink udpin:0.0.0.0:14550 --wave auto --out dive1`
+    --mavlink udpin:0.0.0.0:14550 --wave auto --out dive1`; add `--autopilot` to let the
+    vehicle navigate on the estimate (docs/live.md).
     """
     from ..commands.live import live_settings
     from ..live.pipeline import LiveSession
@@ -67,6 +90,9 @@ def live_command(
         config, variant=variant, dvl=dvl, sonar=sonar, mavlink=mavlink, wave=wave,
         time_scale=time_scale, view_port=view_port, duration_s=duration, idle_stop_s=idle_stop,
         reorder_s=reorder, view=True if view else None, map=False if no_map else None,
+        autopilot=True if autopilot else None, autopilot_mode=autopilot_mode,
+        autopilot_rate_hz=autopilot_rate, autopilot_origin=origin,
+        autopilot_set_params=True if set_params else None,
     )  # fmt: skip
     live_view = _open_view(settings) if settings.live.view else None
     session = LiveSession(settings, out_dir, calibration=calibration, overwrite=overwrite,
@@ -81,7 +107,8 @@ def live_command(
 def _open_view(settings):
     from ..live.view import LiveView
 
-    view = LiveView(host=settings.live.view_host, port=settings.live.view_port)
+    live = settings.live
+    view = LiveView(host=live.view_host, port=live.view_port, autopilot=live.autopilot)
     err.print(f"live view: ws://{settings.live.view_host}:{view.port} (Foxglove: open connection)")
     return view
 

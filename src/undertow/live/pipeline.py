@@ -9,7 +9,8 @@ this loop each turn):
           -> OnlineLocalizer (committed states, recorded) -> OnlineMapper (every MAP_EVERY_S:
              the pings the trajectory covers)
           -> OnlineSeaState (--wave auto: a new condition for the filter every update)
-    each DVL report -> a preview pose (before the commit of the same step): the committed
+    each DVL report -> a preview pose (before the commit of the same step; with --autopilot also
+                       sent to the autopilot, :mod:`undertow.live.autopilot`): the committed
                        filter run on a copy over the records still in the buffer, or an
                        earlier preview's state advanced by the buffered records after it
                        (:mod:`.preview`: same states when the depth-rate check agrees),
@@ -60,10 +61,12 @@ from ..records import Record, concat_logs, records_to_log
 from ..robot import Mounting
 from ..seastate.online import OnlineSeaState
 from ..settings import LIVE_VARIANCE_BOUNDS, Settings
+from .autopilot import open_bridge
 from .preview import PreviewCheckpoints
 from .recorder import Recorder
 from .reorder import ReorderBuffer
 from .sensors import expected_streams, open_links
+from .view import newest_ranges
 from .warmup import warm_up
 
 #: wall seconds between status updates (status line, /undertow/status, the view's map)
@@ -177,6 +180,7 @@ class LiveSession:
         self._next_commit = -math.inf
         self.status_callback = None  # called with the status dict every STATUS_PERIOD_S
         self.notes: list[str] = []
+        self.autopilot = open_bridge(self)  # live.autopilot: the estimate to the autopilot
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self) -> LiveSession:
@@ -253,7 +257,8 @@ class LiveSession:
         """Take what arrived (waiting at most ``timeout`` s for the first), preview the DVL
         reports that came, release what the horizon passed, report status when due."""
         self._loop_thread = threading.get_ident()
-        self._wake.wait(timeout)
+        autopilot = self.autopilot  # (it wakes the loop for its next message)
+        self._wake.wait(timeout if autopilot is None else min(timeout, autopilot.wait_s()))
         self._wake.clear()
         # the horizon from the clock read before the queue is emptied: a record stamped before
         # it is in this batch, so the loop falling behind never makes a record late
@@ -269,6 +274,8 @@ class LiveSession:
         if time.perf_counter() >= self._next_status:
             self._next_status = time.perf_counter() + STATUS_PERIOD_S
             self._status()
+        if self.autopilot is not None:  # what the vehicle said; the slot's fallback message
+            self.autopilot.tick(self._preview)
 
     def _take(self, wall: float, record: Record) -> None:
         if self._first_wall is None:
@@ -277,6 +284,8 @@ class LiveSession:
         record = self.recorder.write_record(record)
         counts = self.stats.records
         counts[record.stream] = counts.get(record.stream, 0) + 1
+        if record.stream == "dvl" and self.autopilot is not None:
+            self.autopilot.note_dvl(record)
         if not self.buffer.add(record):
             self.stats.late += 1
             self.recorder.write_late(record)
@@ -387,7 +396,7 @@ class LiveSession:
             trajectory = self.localizer.latest()
         pos, rpy = trajectory.position[-1:], trajectory.orientation[-1:]
         t = float(trajectory.t[-1])
-        for kind, units, ranges, mount in _ranges(chunk):
+        for kind, units, ranges, mount in newest_ranges(chunk):
             if ranges.size == 0 or not self.view.subscribed(f"/undertow/rays/{kind}"):
                 continue
             var = np.zeros((1, 3))
@@ -427,6 +436,8 @@ class LiveSession:
             self.view.publish_pose(float(states.t[-1]), states.x[-1], states.P[-1])
         done = time.perf_counter()
         self.stats.latency_s.extend(done - a for a in arrivals)
+        if self.autopilot is not None:  # sent at once when its slot is free
+            self.autopilot.offer(states, arrivals)
 
     def status(self) -> dict:
         """Rates, link counters, filter health and map size now."""
@@ -443,6 +454,7 @@ class LiveSession:
             "states": self.stats.states,
             "pings_mapped": self.stats.pings,
             "links": links,
+            **({} if self.autopilot is None else {"autopilot": self.autopilot.status()}),
         }  # fmt: skip
 
     def _status(self) -> None:
@@ -519,6 +531,7 @@ class LiveSession:
             "link_info": {n: link.info for n, link in self.links.items()},
             "wave": self.sea.to_dict() if self.sea is not None else None,
             "notes": list(self.notes),
+            **({} if self.autopilot is None else {"autopilot": self.autopilot.summary()}),
         })  # fmt: skip
 
 
@@ -551,24 +564,6 @@ def _filter_params(settings: Settings, calibration) -> dict:
         calibration = Calibration.from_yaml(calibration)
     config = LocalizerConfig(**params)
     return {**calibration_fields(calibration, config), **params}
-
-
-def _ranges(chunk):
-    """(kind, units (n, 3) in the sensor frame, ranges (n,), mount) of the valid beams of a
-    chunk's newest DVL report and of its newest sonar range."""
-    out = []
-    if chunk.dvl is not None and len(chunk.dvl):
-        d = chunk.dvl
-        r, u = d.beam_range[-1], d.beam_unit[-1]
-        ok = d.beam_valid[-1] & np.isfinite(r) & np.all(np.isfinite(u), axis=1)
-        out.append(("dvl", u[ok], r[ok], chunk.mounting.dvl))
-    if chunk.sonar is not None and len(chunk.sonar):
-        r = chunk.sonar.range[-1:]
-        ok = np.isfinite(r)
-        unit = np.zeros((int(ok.sum()), 3))
-        unit[:, 2] = 1.0  # the sonar frame's +z axis
-        out.append(("sonar", unit, r[ok], chunk.mounting.sonar))
-    return out
 
 
 def _live_mapping(settings: Settings):

@@ -257,8 +257,9 @@ class Recorder:
             self._write_all(messages)
 
     # -- estimates ----------------------------------------------------------------------------
-    def write_pose(self, t: float, x, P) -> None:
-        """(x, P) of the 18-state filter on ``/undertow/pose`` (module docstring)."""
+    def write_pose(self, t: float, x, P, topic: str = POSE_TOPIC) -> None:
+        """(x, P) of the 18-state filter on ``/undertow/pose`` (module docstring), or another
+        pose in that layout on ``topic`` (the autopilot's, :mod:`undertow.live.autopilot`)."""
         x = np.asarray(x, dtype=np.float64).reshape(-1)
         P = np.asarray(P, dtype=np.float64)
         if x.size < 6 or P.shape[0] < 6 or P.ndim != 2:
@@ -277,8 +278,8 @@ class Recorder:
             # the message's fields after the header: position, quaternion (as pose_cov makes
             # it), covariance: 43 float64
             values = (*x[0:3].tolist(), *rpy_to_quaternion(x[3:6]).tolist(), *cov.tolist())
-            message = self._templated((POSE_TOPIC,), msgtype, t, values, build)
-            self._write_all([(POSE_TOPIC, *message)])
+            message = self._templated((topic,), msgtype, t, values, build)
+            self._write_all([(topic, *message)])
 
     def write_wave(self, t: float, amplitude_m: float, frequency_hz: float) -> None:
         """The wave estimate on ``/undertow/wave``: vector (a m, f Hz, 0)."""
@@ -291,16 +292,16 @@ class Recorder:
             msg = b.T[msgtype](header=h, vector=b.vec((amplitude_m, frequency_hz, 0.0)))
             self._write_all([(WAVE_TOPIC, ns, msgtype, msg)])
 
-    def write_status(self, t: float, status: dict) -> None:
-        """``status`` as one JSON object (``std_msgs/String``) on ``/undertow/status``; NaN and
-        infinities become null (strict JSON)."""
+    def write_status(self, t: float, status: dict, topic: str = STATUS_TOPIC) -> None:
+        """``status`` as one JSON object (``std_msgs/String``) on ``/undertow/status`` (or
+        ``topic``); NaN and infinities become null (strict JSON)."""
         text = json.dumps(json_safe(status), default=str, allow_nan=False)
         with self._lock:
             self._check_open()
             t = self._time(t, "status")
             _, ns = self._b.header(t, "")
             msg = self._b.T[_STRING_TYPE](data=text)
-            self._write_all([(STATUS_TOPIC, ns, _STRING_TYPE, msg)])
+            self._write_all([(topic, ns, _STRING_TYPE, msg)])
 
     # -- finishing ----------------------------------------------------------------------------
     def flush(self) -> None:

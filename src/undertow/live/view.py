@@ -28,7 +28,14 @@ Topics (:data:`TOPICS`, topic -> schema name):
   coloured by the cell's mean E[theta] or variance V[theta] (eq:mean_var) from blue (lowest of the
   cloud) to red (highest);
 - ``/undertow/wave`` (JSON, schema ``undertow.Wave``): ``{"t": s, "amplitude_m": a,
-  "frequency_hz": f}``.
+  "frequency_hz": f}``;
+With ``autopilot`` (``undertow live --autopilot``; :data:`AUTOPILOT_TOPICS`):
+
+- ``/autopilot/pose`` (``foxglove.PoseInFrame``): where the
+  autopilot's EKF puts the vehicle (its LOCAL_POSITION_NED and ATTITUDE turned into ``world``,
+  :mod:`undertow.live.autopilot`), next to undertow's pose;
+- ``/autopilot/ekf`` (JSON, schema ``undertow.AutopilotEkf``): its EKF_STATUS_REPORT decoded
+  (flag names, whether it has a horizontal position, test ratios) and whether undertow sends.
 """
 
 from __future__ import annotations
@@ -50,6 +57,8 @@ PATH = "/undertow/path"
 RAYS = {"dvl": "/undertow/rays/dvl", "sonar": "/undertow/rays/sonar"}
 MAP = "/undertow/map"
 WAVE = "/undertow/wave"
+AUTOPILOT_POSE = "/autopilot/pose"
+AUTOPILOT_EKF = "/autopilot/ekf"
 
 #: topic -> schema name of every channel the view advertises (module docstring)
 TOPICS: dict[str, str] = {
@@ -62,6 +71,11 @@ TOPICS: dict[str, str] = {
     MAP: "foxglove.PointCloud",
     WAVE: "undertow.Wave",
 }
+#: the channels added for ``undertow live --autopilot`` (module docstring)
+AUTOPILOT_TOPICS: dict[str, str] = {
+    AUTOPILOT_POSE: "foxglove.PoseInFrame",
+    AUTOPILOT_EKF: "undertow.AutopilotEkf",
+}
 WAVE_SCHEMA = {
     "type": "object",
     "title": "undertow.Wave",
@@ -69,6 +83,17 @@ WAVE_SCHEMA = {
         "t": {"type": "number", "description": "time (s)"},
         "amplitude_m": {"type": "number", "description": "wave amplitude a (m)"},
         "frequency_hz": {"type": "number", "description": "wave frequency f (Hz)"},
+    },
+}
+EKF_SCHEMA = {
+    "type": "object",
+    "title": "undertow.AutopilotEkf",
+    "properties": {
+        "flags": {"type": "integer", "description": "EKF_STATUS_REPORT flags"},
+        "names": {"type": "array", "items": {"type": "string"}, "description": "flags set"},
+        "horizontal_position": {"type": "boolean", "description": "EKF3 has a position"},
+        "sending": {"type": "boolean", "description": "undertow sends to the autopilot"},
+        "reason": {"type": "string", "description": "why undertow does not send"},
     },
 }
 RAY_COLORS = {"dvl": (0.2, 0.9, 0.3, 1.0), "sonar": (1.0, 0.6, 0.1, 1.0)}
@@ -131,6 +156,24 @@ def ellipsoid_axes(cov) -> tuple[list[float], tuple[float, float, float, float]]
     )
 
 
+def newest_ranges(chunk):
+    """(kind, units (n, 3) in the sensor frame, ranges (n,), mount) of the valid beams of a
+    chunk's newest DVL report and of its newest sonar range (the rays the session shows)."""
+    out = []
+    if chunk.dvl is not None and len(chunk.dvl):
+        d = chunk.dvl
+        r, u = d.beam_range[-1], d.beam_unit[-1]
+        ok = d.beam_valid[-1] & np.isfinite(r) & np.all(np.isfinite(u), axis=1)
+        out.append(("dvl", u[ok], r[ok], chunk.mounting.dvl))
+    if chunk.sonar is not None and len(chunk.sonar):
+        r = chunk.sonar.range[-1:]
+        ok = np.isfinite(r)
+        unit = np.zeros((int(ok.sum()), 3))
+        unit[:, 2] = 1.0  # the sonar frame's +z axis
+        out.append(("sonar", unit, r[ok], chunk.mounting.sonar))
+    return out
+
+
 class _Listener:
     """Keeps the topics some client is subscribed to (callbacks from the server's thread)."""
 
@@ -154,7 +197,8 @@ class LiveView:
     subscribed to costs nothing: its message is not even built (a caller may also skip work,
     e.g. building the occupancy map, when :meth:`subscribed` says no one looks)."""
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, name: str = "undertow"):
+    def __init__(self, host: str = "127.0.0.1", port: int = 8765, *, name: str = "undertow",
+                 autopilot: bool = False):  # fmt: skip
         foxglove, ch, self._m = _foxglove()
         self._listener = _Listener()
         self._context = foxglove.Context()
@@ -180,6 +224,13 @@ class LiveView:
             ),
             **{topic: ch.SceneUpdateChannel(topic, context=ctx) for topic in RAYS.values()},
         }  # fmt: skip
+        if autopilot:
+            self._channels[AUTOPILOT_POSE] = ch.PoseInFrameChannel(AUTOPILOT_POSE, context=ctx)
+            self._channels[AUTOPILOT_EKF] = foxglove.Channel(
+                AUTOPILOT_EKF, message_encoding="json", context=ctx,
+                schema=foxglove.Schema(name="undertow.AutopilotEkf", encoding="jsonschema",
+                                       data=json.dumps(EKF_SCHEMA).encode()),
+            )  # fmt: skip
         self._closed = False
 
     @property
@@ -330,6 +381,27 @@ class LiveView:
 
         msg = {"t": float(t), "amplitude_m": num(amplitude_m), "frequency_hz": num(frequency_hz)}
         self._log(WAVE, json.dumps(msg), ns)
+
+    def publish_autopilot_pose(self, t: float, position, rpy) -> None:
+        """The autopilot's pose in ``world`` (module docstring)."""
+        if not self.subscribed(AUTOPILOT_POSE):
+            return
+        m = self._m
+        stamp, ns = _stamp(m, t)
+        q = rpy_to_quaternion_scalar(*(float(a) for a in rpy))
+        p = [float(v) for v in position]
+        pose = m.Pose(position=m.Vector3(x=p[0], y=p[1], z=p[2]),
+                      orientation=m.Quaternion(x=q[0], y=q[1], z=q[2], w=q[3]))  # fmt: skip
+        self._log(AUTOPILOT_POSE, m.PoseInFrame(timestamp=stamp, frame_id="world", pose=pose), ns)
+
+    def publish_autopilot_ekf(self, t: float, report: dict) -> None:
+        """The autopilot's EKF status as JSON (module docstring; NaN as null)."""
+        if not self.subscribed(AUTOPILOT_EKF):
+            return
+        _, ns = _stamp(self._m, t)
+        clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                 for k, v in report.items()}  # fmt: skip
+        self._log(AUTOPILOT_EKF, json.dumps(clean, default=str), ns)
 
     def close(self) -> None:
         """Stop the server (idempotent)."""

@@ -33,6 +33,15 @@ watches for silence. Each datagram then costs no thread wake-up (and no GIL hand
 larger part of its cost otherwise; in exchange no DVL message wakes the loop, which reads it at
 its next turn. Datagrams the kernel dropped because the receive buffer was full are counted as
 overflow (``SO_RXQ_OVFL``: the kernel tells them with the next datagram it keeps).
+
+Sending (:meth:`MavlinkLink.send`, used by :mod:`undertow.live.autopilot`): a message is packed
+as MAVLink 2 by an encoder of the link's own (system ``source_system``, component
+``source_component``, its own sequence numbers), whatever version the connection parses, and
+written on the connection: to the address the last datagram came from for ``udpin`` (pymavlink's
+own UDP server sends to the clients its reads saw, which the link's reads bypass), else through
+pymavlink's ``write`` (``udpout``, ``tcp``, serial). :meth:`MavlinkLink.observe` hands the
+messages a consumer names (decoded, with their arrival times) to its callback, from the thread
+that decodes them; those messages pass the kernel filter.
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ import importlib
 import math
 import socket
 import sys
+import threading
 import time
 
 from ...errors import ConfigError
@@ -74,6 +84,7 @@ class MavlinkLink(Link):
         wake=None,
         kernel_filter: bool = False,
         polled: bool = False,
+        source_component: int = 0,
     ) -> None:
         if time_source not in TIME_SOURCES:
             raise ConfigError(f"mavlink time_source: '{time_source}' is not one of {TIME_SOURCES}")
@@ -100,6 +111,57 @@ class MavlinkLink(Link):
         self._polling = None  # (conn, stamped.Reader) that pump() reads (polled, connected)
         self._last_read = 0.0  # time.monotonic() of pump()'s last datagram
         self._frames: _SingleFrames | None = None
+        self.source_component = int(source_component)
+        self._observed: set[str] = set()
+        self._observer = None
+        self._peer = None  # (host, port) of the last datagram (udpin: where sends go)
+        self._encoder = None
+        self._send_lock = threading.Lock()
+        self.sent_counts: dict[str, int] = {}
+        self.unsent = 0
+
+    @property
+    def message_types(self) -> tuple[str, ...]:
+        """The messages decoded: the mapper's and the observed ones."""
+        return (
+            *self.mapper.message_types,
+            *sorted(self._observed - set(self.mapper.message_types)),
+        )
+
+    def observe(self, names, callback) -> None:
+        """Hand every message named in ``names`` to ``callback(msg, arrival)`` (before the link
+        connects: the kernel filter and the decoder are built with them)."""
+        self._observed |= set(names)
+        self._observer = callback
+
+    def send(self, msg) -> bool:
+        """Pack ``msg`` (a pymavlink MAVLink 2 message) and write it (module docstring); False
+        when there is no connection or no peer yet (counted in ``unsent``)."""
+        conn = self._conn
+        with self._send_lock:
+            if self._encoder is None:
+                from pymavlink.dialects.v20 import ardupilotmega
+
+                compid = self.source_component
+                self._encoder = ardupilotmega.MAVLink(None, srcSystem=255, srcComponent=compid)
+            try:
+                buf = msg.pack(self._encoder)
+                self._encoder.seq = (self._encoder.seq + 1) % 256
+                sock = getattr(conn, "port", None)
+                if conn is None:
+                    raise OSError("not connected")
+                if getattr(conn, "udp_server", False) and isinstance(sock, socket.socket):
+                    if self._peer is None:
+                        raise OSError("no datagram received yet")
+                    sock.sendto(buf, self._peer)
+                else:
+                    conn.write(buf)
+            except (OSError, ValueError, AttributeError):
+                self.unsent += 1
+                return False
+        name = msg.get_type()
+        self.sent_counts[name] = self.sent_counts.get(name, 0) + 1
+        return True
 
     def load(self) -> None:
         from pymavlink import mavutil
@@ -160,7 +222,7 @@ class MavlinkLink(Link):
         last = time.monotonic()
         while not self.stopping:
             try:
-                data = sock.recv(65535)
+                data, self._peer = sock.recvfrom(65535)
             except TimeoutError:
                 if time.monotonic() - last > self.idle_timeout_s:
                     raise OSError(f"no MAVLink for {self.idle_timeout_s} s") from None
@@ -200,6 +262,7 @@ class MavlinkLink(Link):
         conn, reader = polling
         while (got := reader.read()) is not None:
             self._last_read = time.monotonic()
+            self._peer = reader.address
             self.counters.overflow += reader.dropped  # (told with this datagram)
             reader.dropped = 0
             self._decode(conn, got[1], got[0])
@@ -207,7 +270,7 @@ class MavlinkLink(Link):
     def _attach_filter(self, conn, sock) -> bool:
         """The kernel drops the single frames of messages no stream uses (:mod:`.mavlink_filter`);
         HEARTBEAT kept: the sign of a live autopilot (``idle_timeout_s``)."""
-        names = (*self.mapper.message_types, "HEARTBEAT")
+        names = (*self.message_types, "HEARTBEAT")
         keep_v2 = {i for i in (_message_id(conn.mav, n) for n in names) if i is not None}
         keep_v1 = {i for i in (_message_id(conn.mav, n, version=1) for n in names)
                    if i is not None}  # fmt: skip
@@ -228,7 +291,7 @@ class MavlinkLink(Link):
             conn.auto_mavlink_version(data)
         frames = self._frames
         if frames is None or frames.mav is not conn.mav:  # (a new connection or version)
-            frames = self._frames = _SingleFrames(conn.mav, self.mapper.message_types)
+            frames = self._frames = _SingleFrames(conn.mav, self.message_types)
         done = frames.check(data)
         if done is None:
             for msg in conn.mav.parse_buffer(data) or ():
@@ -245,6 +308,8 @@ class MavlinkLink(Link):
             self.counters.malformed += 1
             return
         self.message_counts[name] = self.message_counts.get(name, 0) + 1
+        if name in self._observed:
+            self._observer(msg, arrival)
         before = self.mapper.malformed
         records = self.mapper.records(msg, arrival, arrival)
         self.counters.malformed += self.mapper.malformed - before

@@ -47,12 +47,13 @@ class Reader:
         self._at = float if at is None and now is time.time else at
         self._drops = 0  # the socket's count so far
         self.dropped = 0
+        self.address = None  # the sender of the last datagram read
 
     def read(self) -> tuple[bytes, float] | None:
         """(datagram, receive time) of the next waiting datagram; None when none waits (or the
         socket was closed meanwhile)."""
         try:
-            data, ancillary, _, _ = self.sock.recvmsg(65535, 256)
+            data, ancillary, _, self.address = self.sock.recvmsg(65535, 256)
         except OSError:  # BlockingIOError: nothing waiting; or closed by a reconnect
             return None
         wall = None
