@@ -33,14 +33,20 @@ def test_layout_is_the_row_major_upper_triangle():
     np.testing.assert_array_equal(cov.from_upper_triangle(cov.upper_triangle(C)), C)
 
 
-def test_ardupilot_reduction_is_the_trace_of_each_block():
+def test_ardupilot_reductions_of_each_block():
     sx, sy, sz, sr, sp, sw = 0.3, 0.4, 0.05, 0.01, 0.02, 0.1
     P = np.diag([sx, sy, sz, sr, sp, sw, *([1.0] * 12)]) ** 2
     c = cov.upper_triangle(cov.pose_covariance(P, 0.7, 2.0))
-    pos, ang = cov.ardupilot_errors(c)
+    pos, ang = cov.ardupilot_errors(c, "sqrt")
     assert pos == pytest.approx(math.sqrt(2.0 * (sx**2 + sy**2 + sz**2)))
     assert ang == pytest.approx(math.sqrt(2.0 * (sr**2 + sp**2 + sw**2)))
+    # ArduSub 4.x: the cube root of the squared variances (of the axes as sent: no turn here)
+    pos, ang = cov.ardupilot_errors(cov.upper_triangle(cov.pose_covariance(P, 0.0, 2.0)))
+    assert pos == pytest.approx(math.cbrt(4.0 * (sx**4 + sy**4 + sz**4)))
+    assert ang == pytest.approx(math.cbrt(4.0 * (sr**4 + sp**4 + sw**4)))
     assert cov.ardupilot_errors([math.nan] + [1.0] * 20) == (0.0, 0.0)
+    with pytest.raises(ValueError, match="cube"):
+        cov.ardupilot_errors(c, "cube")
     # the clamps: [VISO_POS_M_NSE, 100] and [VISO_YAW_M_NSE, 1.5]
     assert cov.clamped_errors([0.0] * 21, 0.2, 0.3) == (0.2, 0.3)
     assert cov.clamped_errors([1e6] * 21, 0.2, 0.3) == (100.0, 1.5)

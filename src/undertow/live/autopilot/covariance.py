@@ -24,16 +24,19 @@ ODOMETRY's child frame is the body), times k.
 
 What ArduPilot does with it (:func:`ardupilot_errors`; ArduPilot's
 libraries/GCS_MAVLink/GCS_Common.cpp, ``handle_odometry`` and
-``handle_common_vision_position_estimate_data``): when c[0] is not NaN,
+``handle_common_vision_position_estimate_data``): when c[0] is not NaN, in every ArduSub 4.x
+release (and the SITL build the tests run, whose dataflash VISP.PErr shows it)
 
-    posErr = sqrt(c0 + c6 + c11),   angErr = sqrt(c15 + c18 + c20),
+    posErr = cbrt(c0^2 + c6^2 + c11^2),   angErr = cbrt(c15^2 + c18^2 + c20^2),
 
-(else both 0), clamped to [VISO_POS_M_NSE, 100] m and [VISO_YAW_M_NSE, 1.5] rad
+and since ArduPilot PR 32084 (February 2026, master) posErr = sqrt(c0 + c6 + c11), angErr =
+sqrt(c15 + c18 + c20) (else both 0), clamped to [VISO_POS_M_NSE, 100] m and [VISO_YAW_M_NSE, 1.5] rad
 (libraries/AP_VisualOdom/AP_VisualOdom_MAV.cpp, ``handle_pose_estimate``); EKF3 then takes
 posErr as the standard deviation of each position axis (AP_NavEKF3_Measurements.cpp,
-``writeExtNavData``) and the yaw error as at least 5 degrees. The trace of the position block as
-one axis's variance is a further inflation by (sx^2 + sy^2 + sz^2) / sx^2, about 2 for a
-horizontal error circle over a well-known depth. The velocity covariance of ODOMETRY is not read:
+``writeExtNavData``) and the yaw error as at least 5 degrees. Either reduction takes one
+number for the three axes: for a round horizontal error s over a well-known depth (sx = sy = s,
+sz small) the square root gives sqrt(2) s, the cube root 2^(1/3) s^(4/3) (not a length: below
+0.5 m it reports less than s, above more). The velocity covariance of ODOMETRY is not read:
 EKF3 takes VISO_VEL_M_NSE (GCS_Common.cpp passes 0 as the velocity error).
 
 VISION_POSITION_DELTA carries a ``confidence`` c (%) instead; EKF3 maps it linearly onto a
@@ -94,11 +97,21 @@ def velocity_covariance(P, inflation: float = 1.0) -> np.ndarray:
     return 0.5 * (V + V.T)
 
 
-def ardupilot_errors(c) -> tuple[float, float]:
-    """(posErr m, angErr rad) as ArduPilot reduces 21 terms, before its clamps: sqrt(c0 + c6 +
-    c11) and sqrt(c15 + c18 + c20), both 0 when c[0] is NaN (GCS_Common.cpp)."""
+#: ArduPilot's reductions of the 21 terms: ``cbrt`` (ArduSub 4.x), ``sqrt`` (master since PR 32084)
+REDUCTIONS = ("cbrt", "sqrt")
+
+
+def ardupilot_errors(c, rule: str = "cbrt") -> tuple[float, float]:
+    """(posErr m, angErr rad) as ArduPilot reduces 21 terms, before its clamps (module doc;
+    GCS_Common.cpp): ``cbrt`` cbrt(c0^2 + c6^2 + c11^2), cbrt(c15^2 + c18^2 + c20^2) (ArduSub
+    4.x), ``sqrt`` sqrt(c0 + c6 + c11), sqrt(c15 + c18 + c20); both 0 when c[0] is NaN."""
+    if rule not in REDUCTIONS:
+        raise ValueError(f"covariance reduction {rule!r}: expected one of {REDUCTIONS}")
     if math.isnan(c[0]):
         return 0.0, 0.0
+    if rule == "cbrt":
+        return (math.cbrt(c[0] ** 2 + c[6] ** 2 + c[11] ** 2),
+                math.cbrt(c[15] ** 2 + c[18] ** 2 + c[20] ** 2))  # fmt: skip
     return math.sqrt(c[0] + c[6] + c[11]), math.sqrt(c[15] + c[18] + c[20])
 
 
