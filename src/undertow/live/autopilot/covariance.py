@@ -30,14 +30,14 @@ release (and the SITL build the tests run, whose dataflash VISP.PErr shows it)
     posErr = cbrt(c0^2 + c6^2 + c11^2),   angErr = cbrt(c15^2 + c18^2 + c20^2),
 
 and since ArduPilot PR 32084 (February 2026, master) posErr = sqrt(c0 + c6 + c11), angErr =
-sqrt(c15 + c18 + c20) (else both 0), clamped to [VISO_POS_M_NSE, 100] m and [VISO_YAW_M_NSE, 1.5] rad
-(libraries/AP_VisualOdom/AP_VisualOdom_MAV.cpp, ``handle_pose_estimate``); EKF3 then takes
-posErr as the standard deviation of each position axis (AP_NavEKF3_Measurements.cpp,
-``writeExtNavData``) and the yaw error as at least 5 degrees. Either reduction takes one
-number for the three axes: for a round horizontal error s over a well-known depth (sx = sy = s,
-sz small) the square root gives sqrt(2) s, the cube root 2^(1/3) s^(4/3) (not a length: below
-0.5 m it reports less than s, above more). The velocity covariance of ODOMETRY is not read:
-EKF3 takes VISO_VEL_M_NSE (GCS_Common.cpp passes 0 as the velocity error).
+sqrt(c15 + c18 + c20) (else both 0), clamped to [VISO_POS_M_NSE, 100] m and [VISO_YAW_M_NSE,
+1.5] rad (libraries/AP_VisualOdom/AP_VisualOdom_MAV.cpp, ``handle_pose_estimate``); EKF3 then
+takes posErr as the standard deviation of each position axis (AP_NavEKF3_Measurements.cpp,
+``writeExtNavData``) and the yaw error as at least 5 degrees. Either reduction takes one number
+for the three axes: for a round horizontal error s over a well-known depth (sx = sy = s, sz
+small) the square root gives sqrt(2) s, the cube root 2^(1/3) s^(4/3) (not a length: below 0.5 m
+it reports less than s, above more). The velocity covariance of ODOMETRY is not read: EKF3 takes
+VISO_VEL_M_NSE (GCS_Common.cpp passes 0 as the velocity error).
 
 VISION_POSITION_DELTA carries a ``confidence`` c (%) instead; EKF3 maps it linearly onto a
 velocity error (AP_NavEKF3_Measurements.cpp, ``writeBodyFrameOdom``),
