@@ -29,9 +29,18 @@ def pack_key(cx, cy, cz):
 
 @njit(cache=True, inline="always")
 def home_slot(key, mask):
-    """The first slot probed for ``key`` in a table of mask + 1 slots (multiplicative hash)."""
-    h = np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)
-    h ^= h >> np.uint64(29)
+    """The first slot probed for ``key`` in a table of mask + 1 slots: the low bits of
+    MurmurHash3's 64-bit finalizer of the key (Appleby, public domain), in which every bit of
+    the key moves every bit of the hash. (A multiplication alone leaves the low bits depending
+    on the key's low bits only, i.e. on z: a multibeam survey's chunks crowded into a few
+    hundred home slots, probing 12 slots on average.) Only where chunks sit in the table
+    depends on it, not their order or the map."""
+    h = np.uint64(key)
+    h ^= h >> np.uint64(33)
+    h *= np.uint64(0xFF51AFD7ED558CCD)
+    h ^= h >> np.uint64(33)
+    h *= np.uint64(0xC4CEB9FE1A85EC53)
+    h ^= h >> np.uint64(33)
     return np.int64(h & np.uint64(mask))
 
 
@@ -93,6 +102,20 @@ def lookup(cx, cy, cz, table_keys, table_vals):
     while table_keys[s] != key:
         s = (s + 1) & mask
     return table_vals[s]
+
+
+@njit(cache=True, inline="always")
+def find(cx, cy, cz, table_keys, table_vals):
+    """Index of chunk (cx, cy, cz), -1 if it is not in the table (read only: thread safe).
+    Probing first and inserting only on a miss (:func:`find_or_insert`) costs a kernel that
+    places chunks about what a lookup costs (8 ns; a loop around find_or_insert, inlined, takes
+    30 ns a call)."""
+    key = pack_key(cx, cy, cz)
+    mask = table_keys.shape[0] - 1
+    s = home_slot(key, mask)
+    while table_keys[s] != key and table_keys[s] != -1:
+        s = (s + 1) & mask
+    return table_vals[s] if table_keys[s] == key else -1
 
 
 @njit(cache=True, inline="always")

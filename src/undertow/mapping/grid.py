@@ -27,6 +27,12 @@ from .kernels import (
     scatter_slab,
     slab_splits,
 )
+from .rayscatter import (
+    ray_insert_chunks,
+    ray_scatter_parallel,
+    ray_scatter_slab,
+    ray_slab_splits,
+)
 from .threads import parallel_slot
 
 
@@ -40,6 +46,15 @@ def points_extent(points: np.ndarray):
 CHUNK_BYTES = 2 * 4 * CHUNK**3 + 3 * 8 + 2 * 2 * 8
 GROWTH_PEAK = 2.5  # growing by 1.5 holds the old and the new arrays at once
 READOUT_BYTES_PER_CELL = 100  # cells(): indices, keys, alpha and beta as float64, temporaries
+RAY_PARALLEL_MIN_SAMPLES = 1 << 16  # scatter_rays: fewer samples stay on the calling thread
+
+
+def peak_bytes(chunks: float, cells_bound: float) -> float:
+    """Peak bytes of holding ``chunks`` chunks: the growth copy, or the chunks plus the readout
+    of their cells with mass (at most ``cells_bound``)."""
+    cells = min(chunks * CHUNK**3, cells_bound)
+    held = chunks * CHUNK_BYTES
+    return max(GROWTH_PEAK * held, held + cells * READOUT_BYTES_PER_CELL)
 
 
 def load_kernels() -> None:
@@ -53,6 +68,7 @@ class ChunkedGrid:
 
     def __init__(self, resolution: float, capacity: int = 64) -> None:
         self.resolution = float(resolution)
+        self._support_cells: dict = {}  # _cells_per_axis by mode and length scales
         self._n = np.zeros(1, np.int64)
         self._allocate(max(int(capacity), 8))
 
@@ -113,12 +129,48 @@ class ChunkedGrid:
             else:
                 scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
 
+    def scatter_rays(self, rays, var_bounds, l_min, l_max, extent) -> None:
+        """:meth:`scatter` in product mode (the adaptive kernel) of the samples of ``rays``
+        (:class:`~undertow.mapping.samples.Rays`) straight from the rays
+        (:mod:`undertow.mapping.rayscatter`): the same chunks in the same order and the same
+        map, bit for bit. On one thread the chunks are placed as the scatter reaches them (one
+        pass); on several, first. ``extent``: of the samples
+        (:func:`~undertow.mapping.rayscatter.ray_extent`)."""
+        self._check_extent(extent)
+        n = int(rays.rows[-1])
+        if n < RAY_PARALLEL_MIN_SAMPLES:  # (no thread slot to take)
+            self._scatter_rays(rays, var_bounds, l_min, l_max, extent, 1)
+            return
+        with parallel_slot(n, RAY_PARALLEL_MIN_SAMPLES) as parts:
+            self._scatter_rays(rays, var_bounds, l_min, l_max, extent, parts)
+
+    def _scatter_rays(self, rays, var_bounds, l_min, l_max, extent, parts: int) -> None:
+        """:meth:`scatter_rays` on ``parts`` threads."""
+        lo, hi = var_bounds
+        res, n, start = self.resolution, int(rays.rows[-1]), 0
+        geometry = (rays.origin, rays.direction, rays.r, rays.var)
+        while start < n:
+            if parts > 1:
+                start = ray_insert_chunks(start, *geometry, rays.rows, rays.f, lo, hi, l_min,
+                                          l_max, res, *self._tables()[:4])  # fmt: skip
+            else:
+                start = ray_scatter_slab(start, 0, -ALL_CELLS, ALL_CELLS, *geometry, rays.sig,
+                                         rays.rows, rays.f, lo, hi, l_min, l_max, res,
+                                         *self._tables(), True)  # fmt: skip
+            if start < n:
+                self._grow()
+        if parts > 1:
+            splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows, rays.f, res,
+                                     parts, *extent[:2])  # fmt: skip
+            ray_scatter_parallel(*splits, *geometry, rays.sig, rays.rows, rays.f, lo, hi, l_min,
+                                 l_max, res, *self._tables())  # fmt: skip
+
     def _check_extent(self, extent) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range (and
         finite); ``extent`` as :func:`points_extent`."""
         limit = (CHUNK_LIMIT - 2) * CHUNK * self.resolution
         lo, hi, finite = extent
-        if not (finite and max(-lo.min(), hi.max()) < limit):
+        if not (finite and max(max(hi.tolist()), -min(lo.tolist())) < limit):
             raise DataError(f"map coordinates beyond +-{limit:.0f} m: shift the origin closer")
 
     def estimate_bytes(self, mode, points, variance, var_bounds, l_min, l_max,
@@ -130,43 +182,60 @@ class ChunkedGrid:
         n = points.shape[0]
         if n == 0:
             return self.nbytes
-        # support radius per axis: up to l_max (product kernel) or l (radial kernel); scalar
-        # arithmetic, so the common case (far below the limit) costs a streaming call little
-        if mode == MODE_CELL:
-            cells_per_axis = (1.0, 1.0, 1.0)
-        elif mode == MODE_PRODUCT:
-            cells_per_axis = tuple(
-                math.ceil(2 * max(float(a), float(b)) / self.resolution) + 1.0
-                for a, b in zip(l_min, l_max, strict=True)
-            )
-        else:
-            cells_per_axis = (math.ceil(2 * float(l_min[0]) / self.resolution) + 1.0,) * 3
-        chunks_per_sample = math.prod(math.ceil(c / CHUNK) + 1.0 for c in cells_per_axis)
-        cells_bound = float(n) * math.prod(cells_per_axis)
-
-        def peak(chunks: float) -> float:
-            cells = min(chunks * CHUNK**3, cells_bound)
-            return max(GROWTH_PEAK * chunks * CHUNK_BYTES,
-                       chunks * CHUNK_BYTES + cells * READOUT_BYTES_PER_CELL)  # fmt: skip
-
+        extent = points_extent(points) if extent is None else extent
+        bound = self.bound_bytes(mode, n, l_min, l_max, limit_bytes, extent)
+        if bound is not None:
+            return bound
         held = self.n_chunks
-        if peak(held + n * chunks_per_sample) <= limit_bytes:
-            return int(peak(held + n * chunks_per_sample))  # cheapest upper bound
-        cells_per_axis = np.asarray(cells_per_axis)
-        p_lo, p_hi, _ = points_extent(points) if extent is None else extent
-        extent = (p_hi - p_lo) / self.resolution + cells_per_axis
-        box = float(np.prod(np.ceil(extent / CHUNK) + 1))
-        if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:
-            return int(peak(held + min(n * chunks_per_sample, box)))  # cheap upper bound
-        if peak(held + chunks_per_sample) > limit_bytes:
-            return int(peak(held + chunks_per_sample))  # one sample's support alone is too much
         limit_chunks = held + int(limit_bytes // (GROWTH_PEAK * CHUNK_BYTES)) + 1
         table = np.full(1 << int(np.ceil(np.log2(2 * limit_chunks + 2))), -1, np.int64)
         rehash(self._keys, held, table, np.zeros(table.size, np.int64))
         lo, hi = var_bounds
         chunks = count_chunks(mode, points, variance, lo, hi, l_min, l_max, self.resolution,
                                table, held, limit_chunks)  # fmt: skip
-        return int(peak(chunks))
+        return int(peak_bytes(chunks, n * math.prod(self._cells_per_axis(mode, l_min, l_max))))
+
+    def _cells_per_axis(self, mode, l_min, l_max) -> tuple:
+        """Cells a sample's support spans per axis, at most: up to l_max (product kernel) or l
+        (radial kernel) either side; scalar arithmetic, remembered per mode and length scales,
+        so the common case (far below the limit) costs a streaming call little."""
+        key = (mode, *np.asarray(l_min, float).tolist(), *np.asarray(l_max, float).tolist())
+        cells = self._support_cells.get(key)
+        if cells is None:
+            lo, hi = key[1:4], key[4:7]
+            if mode == MODE_CELL:
+                cells = (1.0, 1.0, 1.0)
+            elif mode == MODE_PRODUCT:
+                cells = tuple(math.ceil(2 * max(a, b) / self.resolution) + 1.0
+                              for a, b in zip(lo, hi, strict=True))  # fmt: skip
+            else:
+                cells = (math.ceil(2 * lo[0] / self.resolution) + 1.0,) * 3
+            self._support_cells[key] = cells
+        return cells
+
+    def bound_bytes(self, mode, n: int, l_min, l_max, limit_bytes: float, extent) -> int | None:
+        """:meth:`estimate_bytes` of n > 0 samples of ``extent`` (:func:`points_extent`) when
+        an upper bound settles it (every sample's support in new chunks, or the chunks of the
+        samples' bounding box, within the limit; or one sample's support alone over it); None
+        when only counting the chunks can tell."""
+        cells_per_axis = self._cells_per_axis(mode, l_min, l_max)
+        chunks_per_sample = math.prod(math.ceil(c / CHUNK) + 1.0 for c in cells_per_axis)
+        cells_bound = float(n) * math.prod(cells_per_axis)
+        held = self.n_chunks
+
+        def peak(chunks: float) -> float:
+            return peak_bytes(chunks, cells_bound)
+
+        if peak(held + n * chunks_per_sample) <= limit_bytes:
+            return int(peak(held + n * chunks_per_sample))  # cheapest upper bound
+        p_lo, p_hi, _ = extent
+        box_cells = (p_hi - p_lo) / self.resolution + np.asarray(cells_per_axis)
+        box = float(np.prod(np.ceil(box_cells / CHUNK) + 1))
+        if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:
+            return int(peak(held + min(n * chunks_per_sample, box)))  # cheap upper bound
+        if peak(held + chunks_per_sample) > limit_bytes:
+            return int(peak(held + chunks_per_sample))  # one sample's support alone is too much
+        return None
 
     def add_mass(self, cells, d_alpha, d_beta) -> None:
         """Add evidence mass to given cells (seeding from a prior map)."""

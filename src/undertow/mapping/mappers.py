@@ -37,7 +37,8 @@ from ..occupancy import OccupancyMap
 from .config import MappingConfig, Method
 from .grid import ChunkedGrid, points_extent
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
-from .samples import Samples
+from .rayscatter import ray_extent
+from .samples import RaySamples, Samples
 from .tpu import tpu_training
 
 DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
@@ -95,12 +96,20 @@ class Mapper:
 
     def _grid_scatter(self, mode, samples: Samples, bounds, l_min, l_max) -> None:
         """Refuse (one line) when the storage the samples need exceeds ``max_memory_gb``,
-        then scatter; running out of memory anyway is the same one line, not a traceback."""
+        then scatter; running out of memory anyway is the same one line, not a traceback.
+        Samples kept as rays (:class:`~undertow.mapping.samples.RaySamples`) are scattered
+        straight from the rays in product mode (the same map bit for bit, faster)."""
         limit_gb = self.max_memory_gb or default_max_memory_gb()
-        args = (mode, samples.points, samples.label, samples.sigma0, samples.pose_variance)
-        extent = points_extent(samples.points)  # non-empty: integrate() skips empty samples
-        need = self.grid.estimate_bytes(mode, samples.points, samples.pose_variance, bounds,
-                                        l_min, l_max, limit_gb * 1e9, extent)  # fmt: skip
+        rays = samples.rays if mode == MODE_PRODUCT and isinstance(samples, RaySamples) else None
+        if rays is None:
+            extent = points_extent(samples.points)  # non-empty: integrate() skips empty samples
+            need = None
+        else:
+            extent = ray_extent(rays.origin, rays.direction, rays.r, rays.rows, rays.f)
+            need = self.grid.bound_bytes(mode, len(samples), l_min, l_max, limit_gb * 1e9, extent)
+        if need is None:  # the written samples (when a bound does not settle it: counted)
+            need = self.grid.estimate_bytes(mode, samples.points, samples.pose_variance, bounds,
+                                            l_min, l_max, limit_gb * 1e9, extent)  # fmt: skip
         if need > limit_gb * 1e9:
             raise ConfigError(
                 f"mapping {len(samples)} samples at resolution {self.resolution:g} m would need "
@@ -108,7 +117,11 @@ class Mapper:
                 "mapping.max_memory_gb): use a coarser resolution or raise the limit"
             )
         try:
-            self.grid.scatter(*args, bounds, l_min, l_max, extent)
+            if rays is None:
+                self.grid.scatter(mode, samples.points, samples.label, samples.sigma0,
+                                  samples.pose_variance, bounds, l_min, l_max, extent)  # fmt: skip
+            else:
+                self.grid.scatter_rays(rays, bounds, l_min, l_max, extent)
         except MemoryError:
             raise out_of_memory(self.resolution) from None
 
@@ -203,7 +216,9 @@ class AdaptiveBkiMapper(Mapper):
         return s2 * (self.l_max - self.l_min) + self.l_min
 
     def _scatter(self, samples: Samples) -> None:
-        bounds = self._bounds(samples.pose_variance)
+        # every ray has a sample (its hit): the rays' variances are the samples' min and max
+        rays = samples.rays if isinstance(samples, RaySamples) else None
+        bounds = self._bounds(samples.pose_variance if rays is None else rays.var)
         self.last_variance_bounds = bounds
         self._grid_scatter(MODE_PRODUCT, samples, bounds, self.l_min, self.l_max)
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
@@ -85,18 +86,6 @@ class Samples:
         object.__setattr__(self, "origins", np.asarray(self.origins, dtype=float).reshape(-1, 3))
 
     @classmethod
-    def _checked_rays(cls, points, label, sigma0, pose_variance, ray, sensor, origins,
-                      dropped) -> Samples:  # fmt: skip
-        """Samples from :func:`expand`, whose arrays have the types and shapes above and whose
-        values come from rays already checked (finite, sigma_0 > 0, variance >= 0): the
-        per-sample checks of ``__post_init__`` (a pass over every sample's memory) skipped."""
-        obj = object.__new__(cls)
-        values = (points, label, sigma0, pose_variance, ray, sensor, origins, dropped)
-        for name, value in zip(cls.__dataclass_fields__, values, strict=True):
-            object.__setattr__(obj, name, value)
-        return obj
-
-    @classmethod
     def from_points(cls, points, label, sigma0=1.0, pose_variance=0.0) -> Samples:
         """Samples from plain arrays (no ray bookkeeping); scalars and a (3,) variance broadcast."""
         return cls(points, label, sigma0, pose_variance, -1, -1)
@@ -107,6 +96,53 @@ class Samples:
     @property
     def n_hits(self) -> int:
         return int(np.sum(self.label > 0.5))
+
+
+class Rays(NamedTuple):
+    """Rays as :func:`expand` takes them (one row per ray: origin, direction, range, pose
+    variance, sigma_0, sensor) and the rows of their samples: ray i's hit in row i, its free
+    samples (s = k f along it, k = 0, 1, ...) in rows ``rows[i]`` .. ``rows[i + 1] - 1``."""
+
+    origin: np.ndarray
+    direction: np.ndarray
+    r: np.ndarray
+    var: np.ndarray
+    sig: np.ndarray
+    sensor: np.ndarray
+    rows: np.ndarray
+    f: float
+
+
+class RaySamples(Samples):
+    """:class:`Samples` of checked rays (finite, sigma_0 > 0, variance >= 0) kept as the rays
+    (``rays``, :class:`Rays`): the per-sample arrays are written on first access, and the
+    adaptive mapper scatters straight from the rays (:mod:`undertow.mapping.rayscatter`; the
+    same map bit for bit), so a mapping call need not write 65 bytes per sample."""
+
+    def __init__(self, rays: Rays, dropped: dict) -> None:  # frozen: the fields set directly
+        object.__setattr__(self, "rays", rays)
+        object.__setattr__(self, "origins", rays.origin)
+        object.__setattr__(self, "dropped", dropped)
+        object.__setattr__(self, "_written", None)
+
+    def _column(self, index: int) -> np.ndarray:
+        if self._written is None:
+            object.__setattr__(self, "_written", write_samples(self.rays))
+        return self._written[index]
+
+    points = property(lambda self: self._column(0), doc="(N, 3) world points, written on use")
+    label = property(lambda self: self._column(1), doc="(N,) 1 hit / 0 free, written on use")
+    sigma0 = property(lambda self: self._column(2), doc="(N,) sigma_0, written on use")
+    pose_variance = property(lambda self: self._column(3), doc="(N, 3) m^2, written on use")
+    ray = property(lambda self: self._column(4), doc="(N,) ray index, written on use")
+    sensor = property(lambda self: self._column(5), doc="(N,) sensor code, written on use")
+
+    def __len__(self) -> int:
+        return int(self.rays.rows[-1])
+
+    @property
+    def n_hits(self) -> int:
+        return int(self.rays.r.size)  # one hit (label 1) per ray, every other sample free
 
 
 def _interpolate_pose(trajectory: Trajectory, t: np.ndarray):
@@ -251,28 +287,56 @@ def _ray_splits(first: np.ndarray, parts: int) -> np.ndarray:
 
 
 def expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
-    """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f (numba kernel
-    :func:`_expand_part`: hits first, then free samples ray by ray, on numba's threads for
-    large batches)."""
+    """One hit per ray plus free samples at s = k f, k = 0 .. while s <= r - f: rays that pass
+    the checks :class:`Samples` makes of its samples give :class:`RaySamples` (the samples
+    written only when read), the others the written samples, checked (the one-line error
+    names the bad field)."""
     origin, direction, r, var, sig = (np.ascontiguousarray(a, float)
                                       for a in (origin, direction, r, var, sig))  # fmt: skip
-    n_free = np.where(r >= f, np.floor((r - f) / f + 1e-9).astype(np.int64) + 1, 0)
-    rays_ok = (np.isfinite(origin).all() and np.isfinite(direction).all()
-               and np.isfinite(r).all() and np.all((sig > 0) & (sig < np.inf))
-               and np.all((var >= 0) & (var < np.inf)))  # fmt: skip
-    first = len(r) + np.concatenate([[0], np.cumsum(n_free)])  # rows of each ray's free samples
-    total = int(first[-1])
+    rows, rays_ok = _layout(origin, direction, r, var, sig, float(f))
+    rays = Rays(origin, direction, r, var, sig, np.ascontiguousarray(sensor, np.int8), rows,
+                float(f))  # fmt: skip
+    if rays_ok:  # every sample is finite, labelled 0 or 1, with its ray's sigma_0 and variance
+        return RaySamples(rays, dropped)
+    return Samples(*write_samples(rays), origin, dropped)
+
+
+def write_samples(rays: Rays) -> tuple:
+    """(points, label, sigma0, pose_variance, ray, sensor) of the rays' samples (numba kernel
+    :func:`_expand_part`: hits first, then free samples ray by ray, on numba's threads for
+    large batches)."""
+    total = int(rays.rows[-1])
     arrays = (np.empty((total, 3)), np.empty(total), np.empty(total), np.empty((total, 3)),
               np.empty(total, np.int64), np.empty(total, np.int8))  # fmt: skip
-    rays = (origin, direction, r, var, sig, np.ascontiguousarray(sensor, np.int8), first, float(f))
+    args = (rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor, rays.rows,
+            rays.f)  # fmt: skip
     with parallel_slot(total) as parts:  # hits first, then free samples ray by ray
         if parts > 1:
-            _expand_parallel(_ray_splits(first, parts), *rays, *arrays)
+            _expand_parallel(_ray_splits(rays.rows, parts), *args, *arrays)
         else:
-            _expand_part(0, len(r), *rays, *arrays)
-    if rays_ok:  # every sample is finite, labelled 0 or 1, with its ray's sigma_0 and variance
-        return Samples._checked_rays(*arrays, origin, dropped)
-    return Samples(*arrays, origin, dropped)  # names the bad field
+            _expand_part(0, len(rays.r), *args, *arrays)
+    return arrays
+
+
+@njit(cache=True)
+def _layout(origin, direction, r, var, sig, f):
+    """(rows (R + 1,): ray i's free samples in rows rows[i] .. rows[i + 1] - 1 after the R
+    hits, whether every ray passes the checks :class:`Samples` makes): ray i has
+    floor((r - f) / f + 1e-9) + 1 free samples when r >= f (none for a non-finite r)."""
+    n = r.shape[0]
+    rows = np.empty(n + 1, np.int64)
+    rows[0] = n
+    ok = True
+    for i in range(n):
+        free = 0
+        if r[i] >= f and r[i] < np.inf:
+            free = np.int64(np.floor((r[i] - f) / f + 1e-9)) + 1
+        rows[i + 1] = rows[i] + free
+        ok = ok and np.isfinite(r[i]) and sig[i] > 0 and sig[i] < np.inf
+        for j in range(3):
+            ok = ok and np.isfinite(origin[i, j]) and np.isfinite(direction[i, j])
+            ok = ok and var[i, j] >= 0 and var[i, j] < np.inf
+    return rows, ok
 
 
 @njit(cache=True, nogil=True)

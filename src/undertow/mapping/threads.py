@@ -30,10 +30,11 @@ def scatter_threads(n: int):
 
 
 @contextmanager
-def parallel_slot(n_samples: int):
+def parallel_slot(n_samples: int, min_samples: int = PARALLEL_MIN_SAMPLES):
     """Yields how many parts (threads) a kernel over ``n_samples`` may use now: 1 when small
-    (:func:`parallel_parts`) or while another thread holds the process's parallel slot."""
-    parts = parallel_parts(n_samples)
+    (:func:`parallel_parts`; under ``min_samples`` for a kernel that sets its own threshold) or
+    while another thread holds the process's parallel slot."""
+    parts = parallel_parts(n_samples) if n_samples >= min_samples else 1
     if parts > 1 and _PARALLEL.acquire(blocking=False):
         try:
             yield parts

@@ -1,0 +1,398 @@
+"""The adaptive kernel's scatter straight from the rays, without writing their samples out.
+
+:func:`~undertow.mapping.samples.expand` lays the training samples of R rays out as every ray's
+hit first (rows 0 .. R - 1), then ray by ray its free samples (rows ``rows[i]`` ..
+``rows[i + 1] - 1``). Ray i (origin o, direction v, range r, pose variance s^2, sigma_0) gives
+
+    hit m = o + r v (label 1),   free samples m_k = o + (k f) v, k = 0 .. rows[i + 1] - rows[i] - 1
+    (label 0),
+
+and each sample adds sigma_0 prod_j k(|d_j|; l_j) (``eq:new_conc_params_alpha`` /
+``eq:new_conc_params_beta`` with the unit kernels of ``eq:kernel``) to alpha (a hit) or beta (a
+free sample) of the cells of its support box, l_j = s~_j^2 (l_max_j - l_min_j) + l_min_j
+(``eq:lengthscale_1``, s~_j^2 = clip((s_j^2 - lo_j) / (hi_j - lo_j), 0, 1)). The kernels here
+compute each sample where it is used, in the same order and with the same floating-point
+operations as :func:`~undertow.mapping.kernels.insert_chunks` and
+:func:`~undertow.mapping.kernels.scatter_slab` on the written samples, so the map is the same bit
+for bit (``tests/mapping/test_rayscatter.py``); what they save:
+
+- writing and reading every sample (65 bytes each: point, variance, label, sigma_0, ray, sensor);
+- per-sample work the samples of one ray share: their length scales, and the supports and
+  kernel weights of a block of samples are computed in loops the compiler vectorizes (the sine
+  and cosine by fdlibm's kernels, as :func:`~undertow.mapping.kernels.scatter_slab` takes them,
+  with the quadrant chosen without branches, :func:`sincos_lanes`);
+- chunk placement looks each chunk up once: a small direct-mapped cache remembers the chunks
+  already placed (they stay placed), and the hash table is probed only for the others;
+- the slab threads skip whole blocks of free samples whose supports miss their slab.
+
+Cells and chunks are as in :mod:`undertow.mapping.chunks`: chunks are placed in the order the
+samples first touch them, as :func:`~undertow.mapping.kernels.insert_chunks` places them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .chunks import CHUNK, CHUNK_SHIFT, find, find_or_insert, lookup, pack_key
+from .kernels import ALL_CELLS
+
+BLOCK = 64  # samples whose supports and weights are computed together
+PLACED_CACHE = 512  # direct-mapped cache of placed chunks: 8 x 8 x 8 chunk coordinates
+
+_TWO_PI = 2.0 * np.pi
+_THIRD, _INV_2PI = 1.0 / 3.0, 1.0 / _TWO_PI
+# fdlibm's kernels (Sun Microsystems 1993; FreeBSD msun k_sin.c, k_cos.c, e_rem_pio2.c), the
+# coefficients of undertow.mapping.kernels' sine and cosine
+_S1, _S2, _S3 = -1.66666666666666324348e-01, 8.33333333332248946124e-03, -1.98412698298579493134e-04
+_S4, _S5, _S6 = 2.75573137070700676789e-06, -2.50507602534068634195e-08, 1.58969099521155010221e-10
+_C1, _C2, _C3 = 4.16666666666666019037e-02, -1.38888888888741095749e-03, 2.48015872894767294178e-05
+_C4, _C5, _C6 = -2.75573143513906633035e-07, 2.08757232129817482790e-09, -1.13596475577881948265e-11
+_PIO2_HI, _PIO2_LO = 1.57079632673412561417e00, 6.07710050650619224932e-11
+_TWO_OVER_PI = 2.0 / np.pi
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def sincos_lanes(x):
+    """(sin x, cos x) for |x| < 2^20 pi / 2 with the operations of the mapping kernels' fdlibm
+    sine and cosine (x = k pi/2 + y, |y| <= pi/4, minimax polynomials on y), the quadrant k mod 4
+    chosen by selects instead of branches so that a loop over x vectorizes: (s, c), (c, -s),
+    (-s, -c), (-c, s) for k mod 4 = 0, 1, 2, 3."""
+    k = np.floor(x * _TWO_OVER_PI + 0.5)
+    y = (x - k * _PIO2_HI) - k * _PIO2_LO
+    z = y * y
+    s = y + y * z * (_S1 + z * (_S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))))
+    c = 1.0 - 0.5 * z + z * z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
+    q = np.int64(k)
+    odd = (q & 1) != 0
+    s1 = c if odd else s
+    c1 = s if odd else c
+    return (-s1 if (q & 2) != 0 else s1), (-c1 if ((q + 1) & 2) != 0 else c1)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _length_scale(s2, lo, hi, l_min, l_max):
+    """``eq:lengthscale_1`` along one axis for pose variance s2, bounds lo, hi (l_min where
+    hi <= lo). Scalars only: numba counts references to arrays passed to inlined helpers, which
+    costs more than the helper in a loop."""
+    span = hi - lo
+    if span > 0.0:
+        return min(max((s2 - lo) / span, 0.0), 1.0) * (l_max - l_min) + l_min
+    return l_min
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _ray_scales(i, var, var_lo, var_hi, l_min, l_max, res, lengths, rot):
+    """Ray i's length scales l_j (``eq:lengthscale_1``) into ``lengths``, and rot[j] = (l,
+    cos and sin of the step 2 pi res / l, l / res, 1 / l), recomputed only when l changes."""
+    for j in range(3):
+        lj = _length_scale(var[i, j], var_lo[j], var_hi[j], l_min[j], l_max[j])
+        lengths[j] = lj
+        if rot[j, 0] != lj:
+            step = _TWO_PI * res / lj
+            rot[j, 0], rot[j, 1], rot[j, 2] = lj, np.cos(step), np.sin(step)
+            rot[j, 3], rot[j, 4] = lj / res, 1.0 / lj
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _first_cell(p, lj, res):
+    """First cell of the support along one axis of a sample at coordinate p (``_support``)."""
+    return np.int64(np.floor(p / res - lj / res - 0.5)) + 1
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _last_cell(p, lj, res):
+    """Last cell of the support (before the at-least-one-cell rule of ``_support``)."""
+    return np.int64(np.ceil(p / res + lj / res - 0.5)) - 1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi, l_min, l_max,
+                      res, table_keys, table_vals, chunk_keys, n_chunks):  # fmt: skip
+    """:func:`~undertow.mapping.kernels.insert_chunks` (product mode) of the rays' samples
+    (module doc) from sample row ``start``: returns rows[R] when done, else the first row whose
+    chunks did not fit (the caller grows the chunk arrays and resumes there)."""
+    n_rays = r.shape[0]
+    lengths = np.empty(3)
+    lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
+    box = np.full(6, -1, np.int64)
+    placed = np.full(PLACED_CACHE, -1, np.int64)  # keys of chunks placed, by their low bits
+    for seg in range(-1, n_rays):  # the hits (rows 0 .. R - 1), then ray by ray the free samples
+        t0, t1 = (start, n_rays) if seg < 0 else (max(start - rows[seg], 0),
+                                                  rows[seg + 1] - rows[seg])  # fmt: skip
+        for t in range(t0, t1):
+            ray, k = (t, -1) if seg < 0 else (seg, t)
+            if seg < 0 or t == t0:
+                for j in range(3):
+                    lengths[j] = _length_scale(var[ray, j], var_lo[j], var_hi[j], l_min[j],
+                                               l_max[j])  # fmt: skip
+            x = r[ray] if k < 0 else k * f  # the hit o + r v, free samples o + (k f) v
+            for j in range(3):
+                p = origin[ray, j] + x * direction[ray, j]
+                lo[j] = _first_cell(p, lengths[j], res)
+                hi[j] = max(_last_cell(p, lengths[j], res), lo[j]) >> CHUNK_SHIFT
+                lo[j] >>= CHUNK_SHIFT
+            if (box[0] == lo[0] and box[1] == lo[1] and box[2] == lo[2] and box[3] == hi[0]
+                    and box[4] == hi[1] and box[5] == hi[2]):  # fmt: skip
+                continue  # the previous sample's chunks
+            for cx in range(lo[0], hi[0] + 1):
+                for cy in range(lo[1], hi[1] + 1):
+                    for cz in range(lo[2], hi[2] + 1):
+                        key = pack_key(cx, cy, cz)
+                        slot = ((cx & 7) << 6) | ((cy & 7) << 3) | (cz & 7)
+                        if placed[slot] == key:
+                            continue
+                        if (
+                            find(cx, cy, cz, table_keys, table_vals) < 0
+                            and find_or_insert(
+                                cx, cy, cz, table_keys, table_vals, chunk_keys, n_chunks
+                            )
+                            < 0
+                        ):
+                            return t if seg < 0 else rows[seg] + t
+                        placed[slot] = key
+            box[:3], box[3:] = lo, hi
+    return rows[n_rays]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _block_weights(n, pts, scales, res, first_cell, count, w, scratch):
+    """Supports (first cell, cells per axis) and unit kernel weights of the n samples of a
+    block (coordinates ``pts[j, b]``; ``scales[:, j, b]``: the cosine and sine of the step
+    2 pi res / l, l / res and 1 / l, l the sample's length scale along axis j), as
+    :func:`~undertow.mapping.kernels.scatter_slab` computes them per sample: w[j, a, b] =
+    k(|d0 + a res|; l) at the support's cell centres along axis j, d0 the first centre's
+    offset, the angles advanced by the angle-addition recurrence. (Each quotient is the one
+    ``scatter_slab`` takes, computed once.)"""
+    sn, cs, d0s, cells = scratch[0], scratch[1], scratch[2], scratch[3]
+    for j in range(3):
+        widest = 1
+        for b in range(n):
+            p = pts[j, b] / res
+            rr = scales[2, j, b]
+            i0 = np.int64(np.floor(p - rr - 0.5)) + 1
+            i1 = np.int64(np.ceil(p + rr - 0.5)) - 1
+            first_cell[j, b] = i0
+            count[j, b] = max(i1, i0) - i0 + 1
+            widest = max(widest, count[j, b])
+            cells[b] = p
+        for b in range(n):
+            d0 = (first_cell[j, b] + 0.5 - cells[b]) * res
+            sn[b], cs[b] = sincos_lanes(_TWO_PI * d0 * scales[3, j, b])
+            d0s[b] = d0
+        for a in range(widest):
+            for b in range(n):
+                d = d0s[b] + a * res
+                rel = abs(d) * scales[3, j, b]
+                s, c = sn[b], cs[b]
+                v = (2.0 + c) * (1.0 - rel) * _THIRD + (s if d >= 0.0 else -s) * _INV_2PI
+                w[j, a, b] = 0.0 if rel >= 1.0 else v
+                cd, sd = scales[0, j, b], scales[1, j, b]
+                cs[b] = c * cd - s * sd
+                sn[b] = s * cd + c * sd
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, chunks, span, box,
+                 place, axes, table_keys, table_vals, chunk_keys, n_chunks, alpha,
+                 beta):  # fmt: skip
+    """Add each of the block's n samples' weight sigma_0 w_x w_y w_z to alpha (hits) or beta
+    (free samples, both flat: cell offset o of chunk c at c CHUNK^3 + o) of its support's cells
+    in the slab [first, stop) along ``axis``, skipping the cells whose weights are not positive
+    (as ``scatter_slab``). The chunks of the support box (``chunks``, span^3, flat) are looked
+    up once per box, and placed first with ``place``; ``axes`` (6, cells) holds the chunk and
+    in-chunk offsets of the support's cells along x, y, z (unsigned: no negative-index
+    handling in the loop). Returns -1, or the first sample whose chunks did not fit (nothing of
+    it added)."""
+    cube = np.uint64(CHUNK**3)
+    for b in range(n):
+        u0 = max(first - first_cell[axis, b], 0)
+        u1 = min(stop - first_cell[axis, b], count[axis, b])
+        if u0 >= u1:
+            continue
+        lx, ly, lz = first_cell[0, b], first_cell[1, b], first_cell[2, b]
+        nx, ny, nz = count[0, b], count[1, b], count[2, b]
+        c0x, c0y, c0z = lx >> CHUNK_SHIFT, ly >> CHUNK_SHIFT, lz >> CHUNK_SHIFT
+        ncx = ((lx + nx - 1) >> CHUNK_SHIFT) - c0x + 1
+        ncy = ((ly + ny - 1) >> CHUNK_SHIFT) - c0y + 1
+        ncz = ((lz + nz - 1) >> CHUNK_SHIFT) - c0z + 1
+        if not (box[0] == c0x and box[1] == c0y and box[2] == c0z and box[3] == ncx
+                and box[4] == ncy and box[5] == ncz):  # fmt: skip
+            box[0] = -1  # (until every chunk of the box is found)
+            for p in range(ncx):
+                for q in range(ncy):
+                    for s in range(ncz):
+                        if place:
+                            ci = find(c0x + p, c0y + q, c0z + s, table_keys, table_vals)
+                            if ci < 0:  # a new chunk
+                                ci = find_or_insert(c0x + p, c0y + q, c0z + s, table_keys,
+                                                    table_vals, chunk_keys, n_chunks)  # fmt: skip
+                            if ci < 0:
+                                return b
+                        else:
+                            ci = lookup(c0x + p, c0y + q, c0z + s, table_keys, table_vals)
+                        chunks[(p * span + q) * span + s] = ci
+            box[0], box[1], box[2], box[3], box[4], box[5] = c0x, c0y, c0z, ncx, ncy, ncz
+        a0, a1, b0, b1 = (u0, u1, 0, ny) if axis == 0 else (0, nx, u0, u1)
+        for a in range(a0, a1):  # chunk (flat, in ``chunks``) and offset in the chunk, per axis
+            axes[0, a] = ((((lx + a) >> CHUNK_SHIFT) - c0x) * span) * span
+            axes[1, a] = ((lx + a) & 7) << 6
+        for q in range(b0, b1):
+            axes[2, q] = (((ly + q) >> CHUNK_SHIFT) - c0y) * span
+            axes[3, q] = ((ly + q) & 7) << 3
+        for c in range(nz):
+            axes[4, c] = ((lz + c) >> CHUNK_SHIFT) - c0z
+            axes[5, c] = (lz + c) & 7
+        sg = sig[b]
+        for c in range(nz):  # each cell gets one term per sample: any loop order is exact
+            wc = w[2, c, b]
+            for a in range(a0, a1):
+                wa = w[0, a, b]
+                if wa <= 0.0:
+                    continue
+                row, off = axes[0, a] + axes[4, c], axes[1, a] | axes[5, c]
+                for q in range(np.uint64(b0), np.uint64(b1)):
+                    wb = w[1, q, b]
+                    k = wa * wb * wc
+                    # a zero added to a non-negative sum leaves it unchanged: no branch
+                    mass = k * sg if (wb > 0.0 and k > 0.0) else 0.0
+                    cell = np.uint64(chunks[row + axes[2, q]]) * cube + (off | axes[3, q])
+                    if hit:
+                        alpha[cell] += mass
+                    else:
+                        beta[cell] += mass
+    return -1
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def ray_scatter_slab(start, axis, first, stop, origin, direction, r, var, sig, rows, f, var_lo,
+                     var_hi, l_min, l_max, res, table_keys, table_vals, chunk_keys, n_chunks,
+                     alpha, beta, place):  # fmt: skip
+    """:func:`~undertow.mapping.kernels.scatter_slab` (product mode, the adaptive kernel) of
+    the rays' samples (module doc) from sample row ``start``, in the cells whose index along
+    ``axis`` is in [first, stop). Every chunk touched must be placed (:func:`ray_insert_chunks`)
+    unless ``place`` (one thread): then each chunk is placed where
+    :func:`~undertow.mapping.kernels.insert_chunks` would place it, and the row returned is
+    the first whose chunks did not fit (the caller grows the arrays and resumes there), rows[R]
+    when done. Samples are applied in ``expand``'s row order, in blocks of up to :data:`BLOCK`
+    (the hits of BLOCK rays, or BLOCK free samples of one ray)."""
+    n_rays = r.shape[0]
+    alpha, beta = alpha.reshape(-1), beta.reshape(-1)
+    widest = int(np.ceil(2.0 * max(l_max.max(), l_min.max()) / res)) + 3
+    span = (widest >> CHUNK_SHIFT) + 2  # chunks a support spans per axis, at most
+    chunks, axes = np.empty(span**3, np.int64), np.empty((6, widest), np.uint64)
+    box = np.full(6, -1, np.int64)
+    # per sample: the point, (cos, sin of the step, l / res, 1 / l) per axis, sigma_0
+    pts, scales, sigs = np.empty((3, BLOCK)), np.empty((4, 3, BLOCK)), np.empty(BLOCK)
+    scratch = np.empty((4, BLOCK))
+    first_cell, count = np.empty((3, BLOCK), np.int64), np.empty((3, BLOCK), np.int64)
+    w = np.empty((3, widest, BLOCK))
+    lengths, rot = np.empty(3), np.full((3, 5), np.nan)  # l, cos, sin of the step, l / res, 1 / l
+    for seg in range(-1, n_rays):  # the hits, then ray by ray the free samples
+        t_start, size = (start, n_rays) if seg < 0 else (max(start - rows[seg], 0),
+                                                          rows[seg + 1] - rows[seg])  # fmt: skip
+        if seg >= 0 and t_start < size:  # the ray's length scales, for its free samples
+            _ray_scales(seg, var, var_lo, var_hi, l_min, l_max, res, lengths, rot)
+        for t0 in range(t_start, size, BLOCK):
+            n = min(BLOCK, size - t0)
+            if seg < 0:  # hits: each ray its own length scales
+                for b in range(n):
+                    ray = t0 + b
+                    _ray_scales(ray, var, var_lo, var_hi, l_min, l_max, res, lengths, rot)
+                    sigs[b] = sig[ray]
+                    for j in range(3):
+                        pts[j, b] = origin[ray, j] + r[ray] * direction[ray, j]
+                        for q in range(4):
+                            scales[q, j, b] = rot[j, q + 1]
+            else:  # free samples o + (k f) v, k = t0 ..
+                for j in range(3):
+                    o, v = origin[seg, j], direction[seg, j]
+                    for b in range(n):
+                        pts[j, b] = o + ((t0 + b) * f) * v
+                    for q in range(4):
+                        scales[q, j, :n] = rot[j, q + 1]
+                sigs[:n] = sig[seg]
+            if seg >= 0:  # the block's supports along `axis` span its first to its last sample's
+                lj, e0, e1 = lengths[axis], pts[axis, 0], pts[axis, n - 1]
+                top = max(e0, e1)
+                if (max(_last_cell(top, lj, res), _first_cell(top, lj, res)) < first
+                        or _first_cell(min(e0, e1), lj, res) >= stop):  # fmt: skip
+                    continue
+            _block_weights(n, pts, scales, res, first_cell, count, w, scratch)
+            b = _block_cells(n, seg < 0, sigs, axis, first, stop, first_cell, count, w, chunks,
+                             span, box, place, axes, table_keys, table_vals, chunk_keys,
+                             n_chunks, alpha, beta)  # fmt: skip
+            if b >= 0:
+                return t0 + b if seg < 0 else rows[seg] + t0 + b
+    return rows[n_rays]
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def ray_scatter_parallel(axis, splits, origin, direction, r, var, sig, rows, f, var_lo, var_hi,
+                         l_min, l_max, res, table_keys, table_vals, chunk_keys, n_chunks, alpha,
+                         beta):  # fmt: skip
+    """:func:`ray_scatter_slab` for the slabs [splits[t], splits[t + 1]) on numba's threads
+    (each writes only its own slab's cells, every cell gets its terms in the serial order;
+    the chunks placed before)."""
+    for part in prange(splits.shape[0] - 1):
+        ray_scatter_slab(0, axis, splits[part], splits[part + 1], origin, direction, r, var, sig,
+                         rows, f, var_lo, var_hi, l_min, l_max, res, table_keys, table_vals,
+                         chunk_keys, n_chunks, alpha, beta, False)  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy")
+def ray_extent(origin, direction, r, rows, f):
+    """(min (3,), max (3,), all finite) of the rays' samples (at least one ray), as
+    :func:`~undertow.mapping.grid.points_extent` of the written samples: along a ray the
+    coordinates o + (k f) v are monotone in k (each rounding is), so the extremes lie at its
+    hit, its first and its last free sample."""
+    n_rays = r.shape[0]
+    lo = np.empty(3)
+    hi = np.empty(3)
+    finite = True
+    for j in range(3):
+        lo[j] = origin[0, j] + r[0] * direction[0, j]
+        hi[j] = lo[j]
+    for i in range(n_rays):
+        last = rows[i + 1] - rows[i] - 1
+        for k in (-1, 0, last):
+            if k > last:
+                continue
+            x = r[i] if k < 0 else k * f  # the hit o + r v, free samples o + (k f) v
+            for j in range(3):
+                v = origin[i, j] + x * direction[i, j]
+                if v < lo[j]:
+                    lo[j] = v
+                elif v > hi[j]:
+                    hi[j] = v
+                elif v != v:
+                    finite = False
+    return lo, hi, finite
+
+
+@njit(cache=True, error_model="numpy")
+def ray_slab_splits(origin, direction, r, rows, f, res, parts, p_lo, p_hi):
+    """(axis, splits) for :func:`ray_scatter_parallel`, as
+    :func:`~undertow.mapping.kernels.slab_splits` chooses them (the horizontal axis along which
+    the samples spread most, cut at the quantiles of their cells), each ray's samples counted
+    at its segment's midpoint (the splits only share the work out: any splits give the same
+    map)."""
+    n_rays = r.shape[0]
+    axis = 0 if p_hi[0] - p_lo[0] >= p_hi[1] - p_lo[1] else 1
+    index = np.empty(n_rays)
+    weight = np.empty(n_rays, np.int64)
+    for i in range(n_rays):
+        mid = origin[i, axis] + 0.5 * r[i] * direction[i, axis]
+        index[i] = np.floor(mid / res)
+        weight[i] = rows[i + 1] - rows[i] + 1
+    order = np.argsort(index)
+    total = weight.sum()
+    splits = np.empty(parts + 1, np.int64)
+    splits[0], splits[parts] = -ALL_CELLS, ALL_CELLS
+    t, seen = 1, 0
+    for i in order:
+        seen += weight[i]
+        while t < parts and seen * parts >= t * total:
+            splits[t] = np.int64(index[i]) + 1
+            t += 1
+    return axis, splits
