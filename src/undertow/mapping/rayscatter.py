@@ -95,6 +95,18 @@ def _ray_scales(i, var, var_lo, var_hi, l_min, l_max, res, lengths, rot):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _ray_meets(i, k0, m, origin, direction, f, lj, axis, res, first, stop):
+    """Whether the supports of ray i's free samples k0 .. k0 + m - 1 reach the cells [first,
+    stop) along ``axis``: their coordinates along it are monotone in k, so their supports span
+    the first sample's to the last sample's."""
+    e0 = origin[i, axis] + (k0 * f) * direction[i, axis]
+    e1 = origin[i, axis] + ((k0 + m - 1) * f) * direction[i, axis]
+    top = max(e0, e1)
+    last = max(_last_cell(top, lj, res), _first_cell(top, lj, res))
+    return last >= first and _first_cell(min(e0, e1), lj, res) < stop
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _first_cell(p, lj, res):
     """First cell of the support along one axis of a sample at coordinate p (``_support``)."""
     return np.int64(np.floor(p / res - lj / res - 0.5)) + 1
@@ -156,14 +168,17 @@ def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi,
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _block_weights(n, pts, scales, res, first_cell, count, w, scratch):
+def _block_weights(n, pts, scales, res, span, first_cell, count, w, offsets, scratch):
     """Supports (first cell, cells per axis) and unit kernel weights of the n samples of a
     block (coordinates ``pts[j, b]``; ``scales[:, j, b]``: the cosine and sine of the step
     2 pi res / l, l / res and 1 / l, l the sample's length scale along axis j), as
     :func:`~undertow.mapping.kernels.scatter_slab` computes them per sample: w[j, a, b] =
     k(|d0 + a res|; l) at the support's cell centres along axis j, d0 the first centre's
-    offset, the angles advanced by the angle-addition recurrence. (Each quotient is the one
-    ``scatter_slab`` takes, computed once.)"""
+    offset, the angles advanced by the angle-addition recurrence (each quotient is the one
+    ``scatter_slab`` takes, computed once); and where those cells sit: ``offsets[0, j, a, b]``
+    the chunk relative to the support's first (times span^2, span, 1 for x, y, z: an index
+    into the support's chunks, flat), ``offsets[1, j, a, b]`` the cell within its chunk
+    (times CHUNK^2, CHUNK, 1)."""
     sn, cs, d0s, cells = scratch[0], scratch[1], scratch[2], scratch[3]
     for j in range(3):
         widest = 1
@@ -190,20 +205,28 @@ def _block_weights(n, pts, scales, res, first_cell, count, w, scratch):
                 cd, sd = scales[0, j, b], scales[1, j, b]
                 cs[b] = c * cd - s * sd
                 sn[b] = s * cd + c * sd
+        step = span ** (2 - j)
+        shift = CHUNK_SHIFT * (2 - j)
+        for a in range(widest):
+            for b in range(n):
+                i = first_cell[j, b] + a
+                offsets[0, j, a, b] = (
+                    (i >> CHUNK_SHIFT) - (first_cell[j, b] >> CHUNK_SHIFT)
+                ) * step
+                offsets[1, j, a, b] = (i & (CHUNK - 1)) << shift
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, chunks, span, box,
-                 place, axes, table_keys, table_vals, chunk_keys, n_chunks, alpha,
+def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, offsets, chunks, span,
+                 box, place, table_keys, table_vals, chunk_keys, n_chunks, alpha,
                  beta):  # fmt: skip
     """Add each of the block's n samples' weight sigma_0 w_x w_y w_z to alpha (hits) or beta
     (free samples, both flat: cell offset o of chunk c at c CHUNK^3 + o) of its support's cells
     in the slab [first, stop) along ``axis``, skipping the cells whose weights are not positive
     (as ``scatter_slab``). The chunks of the support box (``chunks``, span^3, flat) are looked
-    up once per box, and placed first with ``place``; ``axes`` (6, cells) holds the chunk and
-    in-chunk offsets of the support's cells along x, y, z (unsigned: no negative-index
-    handling in the loop). Returns -1, or the first sample whose chunks did not fit (nothing of
-    it added)."""
+    up once per box, and placed first with ``place``; ``offsets`` as :func:`_block_weights`
+    (unsigned: no negative-index handling in the loop). Returns -1, or the first sample whose
+    chunks did not fit (nothing of it added)."""
     cube = np.uint64(CHUNK**3)
     for b in range(n):
         u0 = max(first - first_cell[axis, b], 0)
@@ -234,15 +257,6 @@ def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, chunks, s
                         chunks[(p * span + q) * span + s] = ci
             box[0], box[1], box[2], box[3], box[4], box[5] = c0x, c0y, c0z, ncx, ncy, ncz
         a0, a1, b0, b1 = (u0, u1, 0, ny) if axis == 0 else (0, nx, u0, u1)
-        for a in range(a0, a1):  # chunk (flat, in ``chunks``) and offset in the chunk, per axis
-            axes[0, a] = ((((lx + a) >> CHUNK_SHIFT) - c0x) * span) * span
-            axes[1, a] = ((lx + a) & 7) << 6
-        for q in range(b0, b1):
-            axes[2, q] = (((ly + q) >> CHUNK_SHIFT) - c0y) * span
-            axes[3, q] = ((ly + q) & 7) << 3
-        for c in range(nz):
-            axes[4, c] = ((lz + c) >> CHUNK_SHIFT) - c0z
-            axes[5, c] = (lz + c) & 7
         sg = sig[b]
         for c in range(nz):  # each cell gets one term per sample: any loop order is exact
             wc = w[2, c, b]
@@ -250,13 +264,16 @@ def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, chunks, s
                 wa = w[0, a, b]
                 if wa <= 0.0:
                     continue
-                row, off = axes[0, a] + axes[4, c], axes[1, a] | axes[5, c]
+                row = offsets[0, 0, a, b] + offsets[0, 2, c, b]
+                off = offsets[1, 0, a, b] | offsets[1, 2, c, b]
                 for q in range(np.uint64(b0), np.uint64(b1)):
                     wb = w[1, q, b]
                     k = wa * wb * wc
                     # a zero added to a non-negative sum leaves it unchanged: no branch
                     mass = k * sg if (wb > 0.0 and k > 0.0) else 0.0
-                    cell = np.uint64(chunks[row + axes[2, q]]) * cube + (off | axes[3, q])
+                    cell = np.uint64(chunks[row + offsets[0, 1, q, b]]) * cube + (
+                        off | offsets[1, 1, q, b]
+                    )
                     if hit:
                         alpha[cell] += mass
                     else:
@@ -274,13 +291,14 @@ def ray_scatter_slab(start, axis, first, stop, origin, direction, r, var, sig, r
     unless ``place`` (one thread): then each chunk is placed where
     :func:`~undertow.mapping.kernels.insert_chunks` would place it, and the row returned is
     the first whose chunks did not fit (the caller grows the arrays and resumes there), rows[R]
-    when done. Samples are applied in ``expand``'s row order, in blocks of up to :data:`BLOCK`
-    (the hits of BLOCK rays, or BLOCK free samples of one ray)."""
+    when done. Samples are applied in ``expand``'s row order, in blocks of :data:`BLOCK` (the
+    hits of BLOCK rays, or BLOCK free samples, of as many rays as it takes: the compiler's
+    vector loops want full blocks)."""
     n_rays = r.shape[0]
     alpha, beta = alpha.reshape(-1), beta.reshape(-1)
     widest = int(np.ceil(2.0 * max(l_max.max(), l_min.max()) / res)) + 3
     span = (widest >> CHUNK_SHIFT) + 2  # chunks a support spans per axis, at most
-    chunks, axes = np.empty(span**3, np.int64), np.empty((6, widest), np.uint64)
+    chunks, offsets = np.empty(span**3, np.int64), np.empty((2, 3, widest, BLOCK), np.uint64)
     box = np.full(6, -1, np.int64)
     # per sample: the point, (cos, sin of the step, l / res, 1 / l) per axis, sigma_0
     pts, scales, sigs = np.empty((3, BLOCK)), np.empty((4, 3, BLOCK)), np.empty(BLOCK)
@@ -288,42 +306,48 @@ def ray_scatter_slab(start, axis, first, stop, origin, direction, r, var, sig, r
     first_cell, count = np.empty((3, BLOCK), np.int64), np.empty((3, BLOCK), np.int64)
     w = np.empty((3, widest, BLOCK))
     lengths, rot = np.empty(3), np.full((3, 5), np.nan)  # l, cos, sin of the step, l / res, 1 / l
-    for seg in range(-1, n_rays):  # the hits, then ray by ray the free samples
-        t_start, size = (start, n_rays) if seg < 0 else (max(start - rows[seg], 0),
-                                                          rows[seg + 1] - rows[seg])  # fmt: skip
-        if seg >= 0 and t_start < size:  # the ray's length scales, for its free samples
-            _ray_scales(seg, var, var_lo, var_hi, l_min, l_max, res, lengths, rot)
-        for t0 in range(t_start, size, BLOCK):
-            n = min(BLOCK, size - t0)
-            if seg < 0:  # hits: each ray its own length scales
-                for b in range(n):
-                    ray = t0 + b
-                    _ray_scales(ray, var, var_lo, var_hi, l_min, l_max, res, lengths, rot)
-                    sigs[b] = sig[ray]
-                    for j in range(3):
-                        pts[j, b] = origin[ray, j] + r[ray] * direction[ray, j]
-                        for q in range(4):
-                            scales[q, j, b] = rot[j, q + 1]
-            else:  # free samples o + (k f) v, k = t0 ..
+    total, row = rows[n_rays], start
+    ray = -1 if start < n_rays else np.searchsorted(rows, start, side="right") - 2
+    while row < total:
+        n, hit = 0, row < n_rays
+        if hit:  # the hits of BLOCK rays, each ray its own length scales
+            n = min(BLOCK, n_rays - row)
+            for b in range(n):
+                _ray_scales(row + b, var, var_lo, var_hi, l_min, l_max, res, lengths, rot)
+                sigs[b] = sig[row + b]
                 for j in range(3):
-                    o, v = origin[seg, j], direction[seg, j]
-                    for b in range(n):
-                        pts[j, b] = o + ((t0 + b) * f) * v
+                    pts[j, b] = origin[row + b, j] + r[row + b] * direction[row + b, j]
                     for q in range(4):
-                        scales[q, j, :n] = rot[j, q + 1]
-                sigs[:n] = sig[seg]
-            if seg >= 0:  # the block's supports along `axis` span its first to its last sample's
-                lj, e0, e1 = lengths[axis], pts[axis, 0], pts[axis, n - 1]
-                top = max(e0, e1)
-                if (max(_last_cell(top, lj, res), _first_cell(top, lj, res)) < first
-                        or _first_cell(min(e0, e1), lj, res) >= stop):  # fmt: skip
-                    continue
-            _block_weights(n, pts, scales, res, first_cell, count, w, scratch)
-            b = _block_cells(n, seg < 0, sigs, axis, first, stop, first_cell, count, w, chunks,
-                             span, box, place, axes, table_keys, table_vals, chunk_keys,
-                             n_chunks, alpha, beta)  # fmt: skip
-            if b >= 0:
-                return t0 + b if seg < 0 else rows[seg] + t0 + b
+                        scales[q, j, b] = rot[j, q + 1]
+            row += n
+        while not hit and n < BLOCK and row < total:  # free samples, ray after ray
+            if row >= rows[ray + 1]:  # the next ray with free samples
+                ray += 1
+                while rows[ray + 1] == rows[ray]:
+                    ray += 1
+                _ray_scales(ray, var, var_lo, var_hi, l_min, l_max, res, lengths, rot)
+            k0 = row - rows[ray]
+            m = min(BLOCK - n, rows[ray + 1] - row)
+            row += m
+            if not _ray_meets(ray, k0, m, origin, direction, f, lengths[axis], axis, res, first,
+                              stop):  # fmt: skip
+                continue  # (a slab thread: none of these samples reaches its cells)
+            for j in range(3):  # o + (k f) v
+                o, v = origin[ray, j], direction[ray, j]
+                for t in range(m):
+                    pts[j, n + t] = o + ((k0 + t) * f) * v
+                for q in range(4):
+                    scales[q, j, n : n + m] = rot[j, q + 1]
+            sigs[n : n + m] = sig[ray]
+            n += m
+        if n == 0:
+            continue
+        _block_weights(n, pts, scales, res, span, first_cell, count, w, offsets, scratch)
+        b = _block_cells(n, hit, sigs, axis, first, stop, first_cell, count, w, offsets, chunks,
+                         span, box, place, table_keys, table_vals, chunk_keys, n_chunks, alpha,
+                         beta)  # fmt: skip
+        if b >= 0:  # (one thread, everything its slab: the block's rows are row - n ..)
+            return row - n + b
     return rows[n_rays]
 
 
