@@ -118,6 +118,7 @@ def test_parallel_expand_gives_the_serial_samples(monkeypatch, parts):
             "sensor": rng.integers(0, 3, n).astype(np.int8)}  # fmt: skip
     monkeypatch.setattr(threads_module, "parallel_parts", lambda n: 1)
     serial = expand(**rays, f=0.1, dropped={})
+    serial.points  # noqa: B018 (written when read: now, on one thread)
     monkeypatch.setattr(threads_module, "parallel_parts", lambda n: parts)
     threaded = expand(**rays, f=0.1, dropped={})
     assert len(serial) > 2048

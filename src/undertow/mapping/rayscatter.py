@@ -14,19 +14,24 @@ free sample) of the cells of its support box, l_j = s~_j^2 (l_max_j - l_min_j) +
 compute each sample where it is used, in the same order and with the same floating-point
 operations as :func:`~undertow.mapping.kernels.insert_chunks` and
 :func:`~undertow.mapping.kernels.scatter_slab` on the written samples, so the map is the same bit
-for bit (``tests/mapping/test_rayscatter.py``); what they save:
+for bit (``tests/mapping/test_rayscatter.py``). What they save:
 
 - writing and reading every sample (65 bytes each: point, variance, label, sigma_0, ray, sensor);
-- per-sample work the samples of one ray share: their length scales, and the supports and
-  kernel weights of a block of samples are computed in loops the compiler vectorizes (the sine
-  and cosine by fdlibm's kernels, as :func:`~undertow.mapping.kernels.scatter_slab` takes them,
-  with the quadrant chosen without branches, :func:`sincos_lanes`);
-- chunk placement looks each chunk up once: a small direct-mapped cache remembers the chunks
-  already placed (they stay placed), and the hash table is probed only for the others;
-- the slab threads skip whole blocks of free samples whose supports miss their slab.
+- work the samples of one ray share (their length scales), and per-sample branches: the
+  supports and kernel weights of a block of samples (of one ray or several) are computed in
+  loops the compiler vectorizes (the sine and cosine by fdlibm's kernels, as
+  :func:`~undertow.mapping.kernels.scatter_slab` takes them, with the quadrant chosen without
+  branches, :func:`sincos_lanes`), and the cell loop adds a zero where a weight is not positive
+  instead of branching (x + 0 = x for every x but -0, which no sum of masses is);
+- on one thread, a separate pass placing the chunks: the scatter places each chunk as it
+  reaches it, probing the table read-only first (:func:`~undertow.mapping.chunks.find`);
+- on several threads (:func:`ray_scatter_parallel`, each owning a slab of cells), the chunks
+  are placed first (:func:`ray_insert_chunks`, a small cache remembering the chunks placed),
+  and each thread skips the runs of free samples whose supports miss its slab.
 
-Cells and chunks are as in :mod:`undertow.mapping.chunks`: chunks are placed in the order the
-samples first touch them, as :func:`~undertow.mapping.kernels.insert_chunks` places them.
+Chunks are placed in the order the samples first touch them, as
+:func:`~undertow.mapping.kernels.insert_chunks` places them, so the chunk arrays (and the order
+of :meth:`~undertow.mapping.grid.ChunkedGrid.cells`) are the same too.
 """
 
 from __future__ import annotations
@@ -154,13 +159,11 @@ def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi,
                         slot = ((cx & 7) << 6) | ((cy & 7) << 3) | (cz & 7)
                         if placed[slot] == key:
                             continue
-                        if (
-                            find(cx, cy, cz, table_keys, table_vals) < 0
-                            and find_or_insert(
-                                cx, cy, cz, table_keys, table_vals, chunk_keys, n_chunks
-                            )
-                            < 0
-                        ):
+                        ci = find(cx, cy, cz, table_keys, table_vals)
+                        if ci < 0:  # a new chunk
+                            ci = find_or_insert(cx, cy, cz, table_keys, table_vals, chunk_keys,
+                                                n_chunks)  # fmt: skip
+                        if ci < 0:
                             return t if seg < 0 else rows[seg] + t
                         placed[slot] = key
             box[:3], box[3:] = lo, hi
@@ -269,7 +272,7 @@ def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, offsets, 
                 for q in range(np.uint64(b0), np.uint64(b1)):
                     wb = w[1, q, b]
                     k = wa * wb * wc
-                    # a zero added to a non-negative sum leaves it unchanged: no branch
+                    # a zero added leaves the sum as it is (module doc): no branch
                     mass = k * sg if (wb > 0.0 and k > 0.0) else 0.0
                     cell = np.uint64(chunks[row + offsets[0, 1, q, b]]) * cube + (
                         off | offsets[1, 1, q, b]
