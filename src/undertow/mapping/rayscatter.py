@@ -263,6 +263,8 @@ def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, offsets, 
         sg = sig[b]
         for c in range(nz):  # each cell gets one term per sample: any loop order is exact
             wc = w[2, c, b]
+            if wc <= 0.0:  # (scatter_slab skips each of these cells: w_x w_y w_z <= 0 or w_y <= 0)
+                continue
             for a in range(a0, a1):
                 wa = w[0, a, b]
                 if wa <= 0.0:
@@ -270,10 +272,9 @@ def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, offsets, 
                 row = offsets[0, 0, a, b] + offsets[0, 2, c, b]
                 off = offsets[1, 0, a, b] | offsets[1, 2, c, b]
                 for q in range(np.uint64(b0), np.uint64(b1)):
-                    wb = w[1, q, b]
-                    k = wa * wb * wc
+                    k = wa * w[1, q, b] * wc  # > 0 where scatter_slab adds it (w_x, w_z > 0)
                     # a zero added leaves the sum as it is (module doc): no branch
-                    mass = k * sg if (wb > 0.0 and k > 0.0) else 0.0
+                    mass = k * sg if k > 0.0 else 0.0
                     cell = np.uint64(chunks[row + offsets[0, 1, q, b]]) * cube + (
                         off | offsets[1, 1, q, b]
                     )
