@@ -130,7 +130,7 @@ def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi,
     (module doc) from sample row ``start``: returns rows[R] when done, else the first row whose
     chunks did not fit (the caller grows the chunk arrays and resumes there)."""
     n_rays = r.shape[0]
-    lengths = np.empty(3)
+    ratio = np.empty(3)  # l_j / res of the current ray
     lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
     box = np.full(6, -1, np.int64)
     placed = np.full(PLACED_CACHE, -1, np.int64)  # keys of chunks placed, by their low bits
@@ -141,14 +141,15 @@ def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi,
             ray, k = (t, -1) if seg < 0 else (seg, t)
             if seg < 0 or t == t0:
                 for j in range(3):
-                    lengths[j] = _length_scale(var[ray, j], var_lo[j], var_hi[j], l_min[j],
-                                               l_max[j])  # fmt: skip
+                    ratio[j] = _length_scale(var[ray, j], var_lo[j], var_hi[j], l_min[j],
+                                             l_max[j]) / res  # fmt: skip
             x = r[ray] if k < 0 else k * f  # the hit o + r v, free samples o + (k f) v
-            for j in range(3):
-                p = origin[ray, j] + x * direction[ray, j]
-                lo[j] = _first_cell(p, lengths[j], res)
-                hi[j] = max(_last_cell(p, lengths[j], res), lo[j]) >> CHUNK_SHIFT
-                lo[j] >>= CHUNK_SHIFT
+            for j in range(3):  # the support as _support takes it
+                p = (origin[ray, j] + x * direction[ray, j]) / res
+                first = np.int64(np.floor(p - ratio[j] - 0.5)) + 1
+                last = np.int64(np.ceil(p + ratio[j] - 0.5)) - 1
+                lo[j] = first >> CHUNK_SHIFT
+                hi[j] = max(last, first) >> CHUNK_SHIFT
             if (box[0] == lo[0] and box[1] == lo[1] and box[2] == lo[2] and box[3] == hi[0]
                     and box[4] == hi[1] and box[5] == hi[2]):  # fmt: skip
                 continue  # the previous sample's chunks
@@ -407,20 +408,29 @@ def ray_slab_splits(origin, direction, r, rows, f, res, parts, p_lo, p_hi):
     map)."""
     n_rays = r.shape[0]
     axis = 0 if p_hi[0] - p_lo[0] >= p_hi[1] - p_lo[1] else 1
-    index = np.empty(n_rays)
-    weight = np.empty(n_rays, np.int64)
-    for i in range(n_rays):
-        mid = origin[i, axis] + 0.5 * r[i] * direction[i, axis]
-        index[i] = np.floor(mid / res)
-        weight[i] = rows[i + 1] - rows[i] + 1
-    order = np.argsort(index)
-    total = weight.sum()
+    first = np.int64(np.floor(p_lo[axis] / res))
+    width = np.int64(np.floor(p_hi[axis] / res)) - first + 1
     splits = np.empty(parts + 1, np.int64)
     splits[0], splits[parts] = -ALL_CELLS, ALL_CELLS
+    index = np.empty(n_rays, np.int64)
+    weight = np.empty(n_rays, np.int64)
+    for i in range(n_rays):  # (the midpoint lies within the samples' extent)
+        mid = origin[i, axis] + 0.5 * r[i] * direction[i, axis]
+        index[i] = min(max(np.int64(np.floor(mid / res)), first), first + width - 1)
+        weight[i] = rows[i + 1] - rows[i] + 1
+    total = weight.sum()
+    if width > 4 * n_rays + 4096:  # sparse: sort the midpoints instead of counting them
+        order = np.argsort(index)
+    else:
+        counts = np.zeros(width, np.int64)
+        for i in range(n_rays):
+            counts[index[i] - first] += weight[i]
+        index = first + np.arange(width)
+        weight, order = counts, np.arange(width)
     t, seen = 1, 0
     for i in order:
         seen += weight[i]
         while t < parts and seen * parts >= t * total:
-            splits[t] = np.int64(index[i]) + 1
+            splits[t] = index[i] + 1
             t += 1
     return axis, splits
