@@ -501,6 +501,7 @@ def recover(source, cache: Path | None = None) -> Recovered:
         raise ReaderError(f"{source}: cannot recover into {folder} ({exc})") from None
     if not result.header or not written.messages:
         what = "no complete chunk of messages yet" if result.header else "no readable header"
+        what = what if stat.st_size else "nothing written yet"
         raise ReaderError(
             f"{source}: incomplete recording with {what} ({stat.st_size} bytes; {result.stop});"
             " nothing to read"
