@@ -1,5 +1,6 @@
-"""Flushing the live recording's chunk: written to the file before its sync, the sync in the
-background, one at a time, waited for before the file closes; a failing sync is harmless."""
+"""Flushing the live recording's chunk: written to the file before it is synced, synced in the
+background (at most once per ``every_s``, every flush before a sync in it), what is pending
+synced before the file closes; a failing sync is harmless."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import threading
 
 import pytest
 
-from undertow.live.chunk_sync import flush_chunk, wait_synced
+from undertow.live.chunk_sync import ChunkSync
 from undertow.live.recorder import Recorder
 from undertow.records import Record
 
@@ -20,7 +21,7 @@ class _Chunk:
 
 
 class _Storage:
-    """rosbags' McapWriter as flush_chunk sees it: a pending chunk and the file object."""
+    """rosbags' McapWriter as ChunkSync sees it: a pending chunk and the file object."""
 
     def __init__(self, path) -> None:
         self.bio = open(path, "wb")  # (closed by the test)
@@ -32,10 +33,14 @@ class _Storage:
         self.chunk = _Chunk()
         self.closed_chunks += 1
 
+    def add(self, data: bytes) -> None:
+        self.chunk.bio.write(data)
+
 
 @pytest.fixture
 def syncs(monkeypatch):
-    """The calls of os.fdatasync: (fd, the file's size on the OS's side at the call)."""
+    """The calls of os.fdatasync: (fd, the file's size on the OS's side at the call); a sync
+    waits while the gate is closed."""
     calls, gate = [], threading.Event()
     gate.set()
 
@@ -47,26 +52,34 @@ def syncs(monkeypatch):
     return calls, gate
 
 
-def test_a_chunk_is_written_then_synced_in_the_background(tmp_path, syncs):
+@pytest.mark.parametrize("every_s", [0.0, 1000.0])
+def test_every_flushed_chunk_is_synced_by_the_end(tmp_path, syncs, every_s):
     calls, gate = syncs
     storage = _Storage(tmp_path / "f")
-    assert flush_chunk(storage, None) is None and storage.closed_chunks == 0  # nothing pending
-    storage.chunk.bio.write(b"x" * 100)
-    gate.clear()  # the disk is slow: the first sync waits
-    first = flush_chunk(storage, None)
-    storage.chunk.bio.write(b"y" * 50)
-    again = flush_chunk(storage, first)  # while the first sync runs: no second one
-    assert again is first and storage.closed_chunks == 2
-    assert os.stat(tmp_path / "f").st_size == 150  # both chunks written all the same
+    sync = ChunkSync(every_s)
+    sync.flush(storage)
+    assert storage.closed_chunks == 0 and sync._thread is None  # nothing pending: nothing done
+    gate.clear()  # a slow disk: the first sync waits
+    storage.add(b"x" * 100)
+    sync.flush(storage)
+    _until(lambda: len(calls) == 1)  # the first sync has begun (and waits at the gate)
+    for size in (50, 7):
+        storage.add(b"x" * size)
+        sync.flush(storage)  # never waits for the disk
+    assert storage.closed_chunks == 3 and os.stat(tmp_path / "f").st_size == 157
     gate.set()
-    wait_synced(first)
-    assert [fd for fd, _ in calls] == [storage.bio.fileno()]
-    assert calls[0][1] >= 100  # the chunk was in the file before its sync
-    storage.chunk.bio.write(b"z")
-    later = flush_chunk(storage, first)  # the first has ended: a new sync
-    wait_synced(later)
-    assert later is not first and len(calls) == 2 and calls[1][1] == 151
+    sync.wait()
+    # one sync at the first flush, one for the two that came while it ran (and its pause)
+    assert calls == [(storage.bio.fileno(), 100), (storage.bio.fileno(), 157)]
     storage.bio.close()
+
+
+def _until(condition) -> None:
+    for _ in range(3000):
+        if condition():
+            return
+        threading.Event().wait(0.01)
+    pytest.fail("the sync thread did not start")
 
 
 def test_a_failing_sync_is_harmless(tmp_path, monkeypatch):
@@ -78,8 +91,10 @@ def test_a_failing_sync_is_harmless(tmp_path, monkeypatch):
 
     monkeypatch.setattr(os, "fdatasync", fail, raising=False)
     storage = _Storage(tmp_path / "f")
-    storage.chunk.bio.write(b"x")
-    wait_synced(flush_chunk(storage, None))
+    storage.add(b"x")
+    sync = ChunkSync()
+    sync.flush(storage)
+    sync.wait()
     storage.bio.close()
     assert errors == []
 
@@ -88,7 +103,7 @@ def test_the_recorder_syncs_its_chunks_and_waits_before_closing(tmp_path, syncs)
     calls, gate = syncs
     rec = Recorder(tmp_path / "rec", flush_every_s=0.5)
     gate.clear()
-    for i in range(5):  # a flush at each record from the second on: one sync runs
+    for i in range(5):  # a flush at each record from the second on
         rec.write_record(Record("pressure", 1.0 + i, {"pressure": 1e5}))
     closing = threading.Thread(target=rec.close)
     closing.start()
@@ -96,4 +111,4 @@ def test_the_recorder_syncs_its_chunks_and_waits_before_closing(tmp_path, syncs)
     assert closing.is_alive()  # close waits for the sync
     gate.set()
     closing.join(30)
-    assert not closing.is_alive() and (tmp_path / "rec").is_dir() and len(calls) == 1
+    assert not closing.is_alive() and (tmp_path / "rec").is_dir() and calls

@@ -1,13 +1,16 @@
 """Closing the live recording's MCAP chunk durably: what a crash keeps.
 
-:func:`flush_chunk` closes rosbags' pending chunk (the chunk record and its message indexes go to
-the file object), pushes it to the OS (``flush``: what a killed process keeps) and has the disk
-take it (``fdatasync``, POSIX: "all data for the open file descriptor ... transferred to the
-storage device", https://pubs.opengroup.org/onlinepubs/9799919799/functions/fdatasync.html):
-what a power cut keeps, which without it is whatever the OS had written back (Linux: data dirty
-for more than ``vm.dirty_expire_centisecs``, 30 s by default). The sync runs in a thread of its
-own so that the live loop never waits on the disk; a flush that comes while the previous sync
-still runs leaves its chunk to the next one.
+:meth:`ChunkSync.flush` closes rosbags' pending chunk (the chunk record and its message indexes
+go to the file object) and pushes it to the OS (``flush``: what a killed process keeps); a
+thread of its own then has the disk take it (``fdatasync``, POSIX: "all data for the open file
+descriptor ... transferred to the storage device",
+https://pubs.opengroup.org/onlinepubs/9799919799/functions/fdatasync.html): what a power cut
+keeps, which without it is whatever the OS had written back (Linux: data dirty for more than
+``vm.dirty_expire_centisecs``, 30 s by default). The live loop never waits on the disk, and the
+thread syncs at most once per ``every_s`` (1 s) of wall time: every flush before a sync is in
+it, so a chunk reaches the disk within about ``every_s`` of its flush plus the sync's own time
+(one sync per flush at real time, where the recorder flushes once per second; fewer when a log
+is replayed faster, so the disk's work per wall second stays the same).
 """
 
 from __future__ import annotations
@@ -16,35 +19,60 @@ import os
 import threading
 
 
-def flush_chunk(storage, syncing: threading.Thread | None) -> threading.Thread | None:
-    """Close the pending chunk of rosbags' MCAP ``storage`` (when it holds anything), write it
-    and start its sync unless ``syncing`` (the previous flush's sync) still runs; the thread
-    that syncs the file now (or ``syncing``)."""
-    chunk = getattr(storage, "chunk", None)
-    if chunk is None or not chunk.bio.tell() or not hasattr(storage, "close_chunk"):
-        return syncing
-    storage.close_chunk()
-    storage.bio.flush()
-    if syncing is not None and syncing.is_alive():
-        return syncing
-    thread = threading.Thread(target=_datasync, args=(storage.bio.fileno(),),
-                              name="recording-sync", daemon=True)  # fmt: skip
-    thread.start()
-    return thread
+class ChunkSync:
+    """``flush(storage)`` after each chunk, ``wait()`` before the file closes (module
+    docstring). Not thread-safe by itself: the recorder calls both under its lock."""
 
+    def __init__(self, every_s: float = 1.0) -> None:
+        self.every_s = float(every_s)
+        self._pending = False  # flushed, not yet synced
+        self._wake = threading.Event()
+        self._closing = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._fd: int | None = None
 
-def wait_synced(syncing: threading.Thread | None) -> None:
-    """Wait for the sync ``syncing`` (before its file is closed)."""
-    if syncing is not None:
-        syncing.join()
+    def flush(self, storage) -> None:
+        """Close the pending chunk of rosbags' MCAP ``storage`` (when it holds anything), write
+        it to the file and have it synced."""
+        chunk = getattr(storage, "chunk", None)
+        if chunk is None or not chunk.bio.tell() or not hasattr(storage, "close_chunk"):
+            return
+        storage.close_chunk()
+        storage.bio.flush()
+        if self._thread is None:
+            self._fd = storage.bio.fileno()
+            self._thread = threading.Thread(target=self._run, name="recording-sync", daemon=True)
+            self._thread.start()
+        self._pending = True  # (after the write: a sync that sees it covers the chunk)
+        self._wake.set()
+
+    def wait(self) -> None:
+        """Sync what was flushed and is not yet synced, then end the thread (before the file
+        closes: the thread uses its descriptor)."""
+        self._closing.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join()
+
+    def _run(self) -> None:
+        while True:
+            if not self._closing.is_set():
+                self._wake.wait()
+            self._wake.clear()
+            if self._pending:
+                self._pending = False
+                _datasync(self._fd)
+                self._closing.wait(self.every_s)  # at most one sync per every_s, until closing
+            elif self._closing.is_set():
+                return
 
 
 def _datasync(fd: int) -> None:
     """The file's data to the disk (``fdatasync``; ``fsync`` where there is none)."""
     try:
         getattr(os, "fdatasync", os.fsync)(fd)
-    except OSError:  # a file system that cannot (or a closed file): what the OS holds stays
+    except OSError:  # a file system that cannot: what the OS holds is all there is
         pass
 
 
-__all__ = ["flush_chunk", "wait_synced"]
+__all__ = ["ChunkSync"]

@@ -104,7 +104,7 @@ from ..records import RECORD_FIELDS, Record
 from ..robot import Mounting
 from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
 from .cdr import DVL_FORM, DVL_TAIL, CdrTemplate, stamp, string_cdr
-from .chunk_sync import flush_chunk, wait_synced
+from .chunk_sync import ChunkSync
 from .mcap_append import MessageAppender
 
 #: topics of the estimates (the raw streams use TopicMap's first names)
@@ -211,7 +211,7 @@ class Recorder:
         self._dvl_last_t: float | None = None
         self._dvl_keys: set[tuple] = set()
         self._last_flush: float | None = None
-        self._syncing = None  # the thread of the last flush's fdatasync
+        self._sync = ChunkSync()  # each flushed chunk to the disk, in the background
         self._templates: dict[tuple, CdrTemplate | None] = {}
         self._string_template: bytes | bool | None = None  # std_msgs/String's encapsulation
         self._by_stream = {stream: getattr(self, f"_{stream}") for stream in RECORD_FIELDS}
@@ -304,8 +304,8 @@ class Recorder:
     # -- finishing ----------------------------------------------------------------------------
     def flush(self) -> None:
         """Close the pending mcap chunk, write it and sync it to the disk in the background
-        (what a crash or a power cut keeps; :func:`~undertow.live.chunk_sync.flush_chunk`)."""
-        self._syncing = flush_chunk(getattr(self._writer, "storage", None), self._syncing)
+        (what a crash or a power cut keeps; :class:`~undertow.live.chunk_sync.ChunkSync`)."""
+        self._sync.flush(getattr(self._writer, "storage", None))
 
     def close(self) -> Path:
         """Finish the bag (metadata.yaml, sidecar undertow.yaml) and rename it into place."""
@@ -313,7 +313,7 @@ class Recorder:
             if self._state == "closed":
                 return self.path
             self._check_open()
-            wait_synced(self._syncing)
+            self._sync.wait()
             self._writer.close()
             sidecar = {
                 "source": "undertow live",
@@ -336,7 +336,7 @@ class Recorder:
             if self._state != "open":
                 return
             self._state = "aborted"
-            wait_synced(self._syncing)
+            self._sync.wait()
             try:
                 self._writer.close()
             except Exception:  # a half-open writer: the folder goes anyway
