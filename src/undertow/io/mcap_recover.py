@@ -4,9 +4,9 @@
 target and renames the bag into place at the end (:mod:`undertow.live.recorder`). After a
 SIGKILL or a power cut the ``.partial`` folder stays, its ``.mcap`` holding every chunk flushed
 so far but no summary nor footer, which rosbags refuses ("File end magic is invalid").
-:func:`recover` reads such a file chunk by chunk, the way ``mcap recover`` (the MCAP command
-line tool, Go) does, and writes what it read as a new complete MCAP file; the original is only
-read, never changed.
+:func:`recover` reads such a file chunk by chunk and writes what it read as a new complete MCAP
+file (the job of ``mcap recover``, the MCAP command line tool, which is Go and not part of
+undertow); the original is only read, never changed.
 
 **The walk.** An MCAP file (https://mcap.dev/spec) is the magic ``\\x89MCAP0\\r\\n``, a Header
 record, then records of ``op`` (uint8), ``length`` (uint64) and ``length`` bytes of content.
@@ -20,12 +20,13 @@ a message of a known channel, at least 22 bytes); it stops at the first record t
 a truncated record (the crash's cut) or a damaged one (a length beyond the file, an unknown op
 code, a malformed chunk). Records other than chunks (indexes, attachments, metadata) are
 stepped over; a Data End or Footer record ends the data section. What follows the first bad
-record is not read: after it, record boundaries are unknown.
+record is not read: after it, record boundaries are unknown. Damage inside a message's bytes
+is not seen here (rosbags writes no CRC): the reader skips a message it cannot decode.
 
-**The output** is the file rosbags would have written with those chunks: the header, then
-each kept chunk (its records as they were, uncompressed) with its message indexes, a Data End
-record, the summary (schemas, channels, chunk indexes, statistics) and the footer. A lone
-``.mcap``: :func:`undertow.io.read_log` reads it as any other.
+**The output** is a complete MCAP file of those chunks: the header, then each kept chunk (its
+records as they were, uncompressed) with its message indexes, a Data End record, the summary
+(schemas, channels, chunk indexes, statistics) and the footer. A lone ``.mcap``:
+:func:`undertow.io.read_log` reads it as any other.
 
 **Where it goes.** ``$UNDERTOW_CACHE_DIR/recovered/<name>-<hash of the original's path>/``
 (default cache folder: ``$XDG_CACHE_HOME/undertow``, else ``~/.cache/undertow``; a temporary
