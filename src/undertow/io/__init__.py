@@ -6,7 +6,9 @@ Linked TCP JSON, and so is ``.log`` unless it is an ArduPilot dataflash log (bin
 whose lines start ``FMT,``); ``.tlog`` (or any other file whose first bytes are a timestamped
 MAVLink record) is a MAVLink telemetry log; ``.BIN`` (or any other file starting with a binary
 dataflash FMT record, 0xA3 0x95 0x80) is an ArduPilot dataflash log; named pipes, devices and
-sockets are refused before opening.
+sockets are refused before opening. A crashed ``undertow live`` recording (its ``.partial-*``
+folder, or the intended target when only that folder exists) is ROS 2: read up to its last
+complete chunk (:mod:`undertow.io.rosbag`).
 :func:`write_log` writes a ROS 2 mcap bag; TUM trajectories and PLY clouds have their own small
 modules.
 """
@@ -22,6 +24,7 @@ from .collect import check_regular
 from .dataflash import DATAFLASH_SUFFIXES, read_dataflash
 from .dataflash_records import looks_like_dataflash
 from .info import LogSummary, StreamSummary, summarize
+from .mcap_recover import partial_bag
 from .ply import read_ply, write_ply
 from .read_options import LogOptions
 from .rosbag import read_rosbag
@@ -39,6 +42,8 @@ def detect_format(path) -> str:
     file otherwise."""
     path = Path(path)
     suffix = path.suffix.lower()
+    if partial_bag(path) is not None:  # a crashed recording (undertow live's .partial folder)
+        return "ros2"
     check_regular(path, directory_ok=True)  # a named pipe must not block, a device be read
     if path.is_dir():
         if (path / "metadata.yaml").exists() or any(

@@ -21,13 +21,22 @@ fields is skipped and counted (one warning per topic); a sidecar that is not a m
 mounting or numeric metadata (``water_density_kg_m3``, ``surface_pressure_pa``) is malformed, is
 ignored in that part with one warning; named pipes, devices and sockets are refused before
 opening.
+
+A crashed recording (``undertow live`` killed, a power cut) is read up to its last complete
+chunk: the ``.partial-*`` folder the recorder left, the bag folder or ``.mcap`` inside it, the
+intended target when only its ``.partial-*`` sibling exists, or any lone ``.mcap`` without its
+end magic (not one of a bag folder with ``metadata.yaml``: such a file was complete once) is
+recovered into a new file by :func:`undertow.io.mcap_recover.recover` (the original is not
+changed) and read from there, with one line saying so, how much was recovered and where the
+copy is (``metadata['recovered']`` holds the same). The sidecar ``undertow.yaml`` the recorder
+writes at the end is then missing: the mounting comes from the bag's ``/tf_static``.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +49,7 @@ from ..robot import DvlGeometry, Mounting
 from ..rotations import quaternion_to_rpy
 from .a50_json import add_velocity_report, dead_reckoning_from_rows, report_covariance
 from .collect import MALFORMED, DvlRows, Notes, check_regular
+from .mcap_recover import Recovered, incomplete_mcap, partial_bag, recover
 from .msgdefs import dvl_typestore
 from .read_options import LogOptions
 from .rosbag_choices import apply_time_base, depth_sign, dvl_frame, resolve_topics
@@ -119,12 +129,30 @@ def read_rosbag(path, topics: TopicMap | None = None, options: LogOptions | None
     base, a pose-depth's sign and the GPS origin (:class:`~undertow.io.read_options.LogOptions`,
     default: detected)."""
     path = Path(path)
-    if not path.exists():
+    recovered = recover_crashed(path)
+    if recovered is None and not path.exists():
         raise ReaderError(f"{path}: no such file or directory")
-    if path.is_file() and path.stat().st_size == 0:
+    if recovered is None and path.is_file() and path.stat().st_size == 0:
         raise ReaderError(f"{path}: empty file")
     with np.errstate(all="ignore"):  # overflow to inf is counted as non-finite, not warned
-        return _read_rosbag(path, topics or TopicMap(), options or LogOptions())
+        return _read_rosbag(path, topics or TopicMap(), options or LogOptions(), recovered)
+
+
+def recover_crashed(path) -> Recovered | None:
+    """The recovered copy of the crashed recording ``path`` names (module docstring), None
+    when it names none."""
+    path = Path(path)
+    inside = partial_bag(path)
+    mcap = incomplete_mcap(inside or path)
+    return recover(mcap) if mcap is not None else None
+
+
+def _storage(path: Path, recovered: Recovered | None) -> list[Path]:
+    """What rosbags opens: the recovered copy, the bag inside a ``.partial`` folder (its
+    writer finished it but did not rename it), else the bag itself."""
+    if recovered is not None:
+        return [Path(recovered.path)]
+    return _bag_paths(partial_bag(path) or path)
 
 
 def bag_topics(path) -> dict[str, tuple[str, int]]:
@@ -132,7 +160,7 @@ def bag_topics(path) -> dict[str, tuple[str, int]]:
     message is read); one ReaderError line for a file that is not a readable bag."""
     path = Path(path)
     try:
-        reader = AnyReader(_bag_paths(path), default_typestore=dvl_typestore())
+        reader = AnyReader(_storage(path, recover_crashed(path)), default_typestore=dvl_typestore())
         reader.open()
     except ReaderError:
         raise
@@ -148,10 +176,13 @@ def bag_topics(path) -> dict[str, tuple[str, int]]:
         reader.close()
 
 
-def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions) -> Log:
+def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
+                 recovered: Recovered | None) -> Log:  # fmt: skip
     notes = Notes(str(path))
     rows = Rows(notes)
-    paths = _bag_paths(path)
+    paths = _storage(path, recovered)
+    if recovered is not None:
+        notes.state(recovered.line())
     try:
         reader = AnyReader(paths, default_typestore=dvl_typestore())
         reader.open()
@@ -172,7 +203,10 @@ def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions) -> Log:
         _read_messages(reader, conns, used, rows, notes, path)
     finally:
         reader.close()
-    log = _assemble(rows, notes, path, used, topics, options)
+    beside = Path(recovered.source) if recovered else partial_bag(path) or path  # the sidecar's
+    log = _assemble(rows, notes, path, used, topics, options, beside)
+    if recovered is not None:
+        log.metadata["recovered"] = asdict(recovered)
     if guessed:
         log.metadata["topics_guessed"] = guessed
     unmatched = _warn_unmatched(topics, available, path, log)
@@ -217,7 +251,7 @@ def _read_messages(reader, conns, used, rows: Rows, notes: Notes, path: Path) ->
 
 
 def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap,
-              options: LogOptions) -> Log:  # fmt: skip
+              options: LogOptions, beside: Path) -> Log:  # fmt: skip
     metadata: dict = {"format": "rosbag", "topics": {s: t for t, s in used.items()}}
     metadata["time_base"] = apply_time_base(rows, notes, used, options)
     dvl = _dvl(rows, notes, metadata)
@@ -227,7 +261,7 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap
     elif rows.json_position:
         dead_reckoning = dead_reckoning_from_rows(rows.json_position, notes)
         metadata["dead_reckoning_source"] = "dvl_json position_local reports"
-    mounting, source_meta = _sidecar(path, notes)
+    mounting, source_meta = _sidecar(beside, notes)
     if mounting is not None:
         metadata["mounting_source"] = SIDECAR
     elif (mounting := _tf_mounting(rows.transforms, topics, notes)) is not None:

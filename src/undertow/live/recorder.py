@@ -61,14 +61,11 @@ Same-time records of one stream come back in write order.
 **Atomicity.** The bag is written in ``<name>.partial-XXXXXXXX/<name>`` next to the target and
 renamed into place by :meth:`Recorder.close` (after ``metadata.yaml`` and the sidecar
 ``undertow.yaml`` with the mounting, as ``write_log`` writes); :meth:`Recorder.abort` removes it;
-nothing half-written ever appears at the target. After a crash the ``.partial`` folder stays (it
-is not one of the temporary folders :mod:`undertow._util.atomic` cleans up): its ``.mcap`` holds
-every chunk written so far (:meth:`Recorder.flush` closes a chunk; done every ``flush_every_s``
-of record time) but has no summary or footer, which rosbags, and so ``read_log``, refuse
-("File end magic is invalid"); ``mcap recover IN.mcap -o OUT.mcap`` (the MCAP command line tool,
-https://mcap.dev/guides/cli: "Recover data from a potentially corrupt MCAP file") rebuilds a
-readable file from it, which ``read_log`` reads as a lone ``.mcap`` (mounting from its
-``/tf_static``).
+nothing half-written ever appears at the target. After a crash the ``.partial`` folder stays
+(:mod:`undertow._util.atomic` does not clean it up): its ``.mcap`` holds every chunk flushed
+(:meth:`Recorder.flush`, at the first record ``flush_every_s`` = 1 s of record time or more after
+the last: written and synced to the disk) but no footer; ``read_log`` reads it up to its last
+complete chunk (:mod:`undertow.io.mcap_recover`; the mounting from ``/tf_static``).
 """
 
 from __future__ import annotations
@@ -107,6 +104,7 @@ from ..records import RECORD_FIELDS, Record
 from ..robot import Mounting
 from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
 from .cdr import DVL_FORM, DVL_TAIL, CdrTemplate, stamp, string_cdr
+from .chunk_sync import ChunkSync
 from .mcap_append import MessageAppender
 
 #: topics of the estimates (the raw streams use TopicMap's first names)
@@ -213,6 +211,7 @@ class Recorder:
         self._dvl_last_t: float | None = None
         self._dvl_keys: set[tuple] = set()
         self._last_flush: float | None = None
+        self._sync = ChunkSync()  # each flushed chunk to the disk, in the background
         self._templates: dict[tuple, CdrTemplate | None] = {}
         self._string_template: bytes | bool | None = None  # std_msgs/String's encapsulation
         self._by_stream = {stream: getattr(self, f"_{stream}") for stream in RECORD_FIELDS}
@@ -305,12 +304,9 @@ class Recorder:
 
     # -- finishing ----------------------------------------------------------------------------
     def flush(self) -> None:
-        """Close the pending mcap chunk and push it to the file (what a crash keeps)."""
-        storage = getattr(self._writer, "storage", None)
-        chunk = getattr(storage, "chunk", None)
-        if chunk is not None and chunk.bio.tell() and hasattr(storage, "close_chunk"):
-            storage.close_chunk()
-            storage.bio.flush()
+        """Close the pending mcap chunk, write it and sync it to the disk in the background
+        (what a crash or a power cut keeps; :class:`~undertow.live.chunk_sync.ChunkSync`)."""
+        self._sync.flush(getattr(self._writer, "storage", None))
 
     def close(self) -> Path:
         """Finish the bag (metadata.yaml, sidecar undertow.yaml) and rename it into place."""
@@ -318,6 +314,7 @@ class Recorder:
             if self._state == "closed":
                 return self.path
             self._check_open()
+            self._sync.wait()
             self._writer.close()
             sidecar = {
                 "source": "undertow live",
@@ -340,6 +337,7 @@ class Recorder:
             if self._state != "open":
                 return
             self._state = "aborted"
+            self._sync.wait()
             try:
                 self._writer.close()
             except Exception:  # a half-open writer: the folder goes anyway
