@@ -25,8 +25,6 @@ apart (state times) arrive less than 20 ms apart and are dropped as too close: b
 
 from __future__ import annotations
 
-import json
-import math
 import socket
 import threading
 import time
@@ -34,16 +32,14 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from autopilot_checks import Estimate
 from pymavlink.dialects.v20 import ardupilotmega as m
-from rosbags.highlevel import AnyReader
 
 from undertow.commands.serve import serve
-from undertow.io.msgdefs import dvl_typestore
 from undertow.live.autopilot import gate as gate_module
 from undertow.live.pipeline import LiveSession
 from undertow.settings import LiveSettings, Settings
 from undertow.sim.robot import Faults
-from undertow.trajectory import Trajectory
 
 pytestmark = [pytest.mark.network, pytest.mark.slow]
 
@@ -144,46 +140,6 @@ def _drive(log, out, *, faults=None, serve_kw=None, handover_s=None, late_s=None
     finally:
         summary = robot.stop()
     return Run(robot, results, summary)
-
-
-def _sent(result) -> list[dict]:
-    """undertow's /autopilot/sent records, in sending order."""
-    with AnyReader([result.recording], default_typestore=dvl_typestore()) as reader:
-        conns = [c for c in reader.connections if c.topic == "/autopilot/sent"]
-        rows = [json.loads(reader.deserialize(raw, c.msgtype).data)
-                for c, _, raw in reader.messages(connections=conns)]  # fmt: skip
-    return sorted(rows, key=lambda r: r["sent_at"])
-
-
-class Estimate:
-    """undertow's saved trajectory in the autopilot's terms: its clock (a state's time in the
-    autopilot's clock is its message's time_usec) and its frame (turned by the heading offset
-    undertow found and reported), and the error it sent."""
-
-    def __init__(self, result):
-        self.traj = Trajectory.load_npz(result.localization / "trajectory.npz")
-        self.sent = _sent(result)
-        self.sent_at = np.array([r["time_usec"] * 1e-6 for r in self.sent])
-        # undertow's estimate of the clock offset (its least arrival-minus-boot time) firms
-        # up by a millisecond or two: each message carries the one it used
-        self.offsets = np.array([r["state_t"] for r in self.sent]) - self.sent_at
-        assert np.ptp(self.offsets) < 0.02
-        dpsi = math.radians(result.summary["autopilot"]["heading_offset_deg"])
-        c, s = math.cos(dpsi), math.sin(dpsi)
-        self.turn = np.array([[c, -s], [s, c]])
-
-    def position(self, t_ap: float) -> np.ndarray:
-        """The trajectory's horizontal position at autopilot time ``t_ap``, north-east."""
-        s = t_ap + float(np.interp(t_ap, self.sent_at, self.offsets))
-        xy = [np.interp(s, self.traj.t, self.traj.x[:, k]) for k in (0, 1)]
-        return self.turn @ np.array(xy)
-
-    def record_before(self, t_ap: float) -> dict | None:
-        k = int(np.searchsorted(self.sent_at, t_ap, side="right")) - 1
-        return self.sent[k] if k >= 0 else None
-
-    def span(self) -> tuple[float, float]:
-        return float(self.sent_at[0]), float(self.sent_at[-1])
 
 
 def _flags_between(run: Run, t0: float, t1: float) -> list[int]:
