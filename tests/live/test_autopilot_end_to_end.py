@@ -192,7 +192,7 @@ def test_a_position_mode_is_taken_and_followed(dive, tmp_path, mode):
     run = _drive(_cut(dive, 20.0), tmp_path, autopilot_mode=mode, autopilot_origin=ORIGIN)
     _check_position_modes(run, mode)
     # the origin: none on the vehicle, undertow's set once it runs (it refuses one before)
-    (origin,) = [msg for _, msg in run.of("GPS_GLOBAL_ORIGIN")][:1]
+    origin = run.of("GPS_GLOBAL_ORIGIN")[0][1]
     assert (origin.latitude, origin.longitude) == tuple(round(v * 1e7) for v in ORIGIN)
     assert run.counts["SET_GPS_GLOBAL_ORIGIN:set"] == 1
     assert run.results[0].summary["autopilot"]["origin"]["state"] == "set"
