@@ -68,6 +68,9 @@ class LiveSettings(BaseModel):
         description="a sensor clock within this of arrival is trusted (wall s; x time_scale)",
     )  # fmt: skip
     ping_rate_hz: float = Field(10.0, gt=0, le=100, description="Ping1D request rate, Hz")
+    mavlink_pressure: Literal["SCALED_PRESSURE", "SCALED_PRESSURE2", "SCALED_PRESSURE3"] = Field(
+        "SCALED_PRESSURE2", description="the MAVLink pressure message (Bar30: SCALED_PRESSURE2)"
+    )
     map: bool = Field(True, description="map the sonar and DVL ranges online")
     record_pose_hz: float | None = Field(
         10.0, gt=0, description="poses recorded per sensor second (None: every filter state)"

@@ -140,8 +140,22 @@ def test_origin_set_once_when_none_and_said_when_not_asked():
     assert v.origin.state == "none" and any("has none" in n for n in notes)
 
 
+def test_origin_keeper_sends_again_while_unconfirmed():
+    keeper = OriginKeeper((1.0, 2.0), asks=1, every_s=1.0, sets=2)
+    keeper.step(0.0)
+    set_ = ("set", 10_000_000, 20_000_000, 0)
+    assert keeper.step(1.0)[0] == [set_]
+    keeper.step(2.0)  # asks: no reply (an EKF not yet running refused it)
+    actions, notes = keeper.step(3.0)
+    assert actions == [set_] and "again" in notes[0]
+    keeper.step(4.0)
+    actions, notes = keeper.step(5.0)  # two sent: gives up
+    assert not actions and "no GPS_GLOBAL_ORIGIN came back" in notes[0]
+    assert keeper.step(9.0) == ([], [])
+
+
 def test_origin_keeper_after_a_refusal_and_a_reboot():
-    keeper = OriginKeeper((1.0, 2.0), asks=1, every_s=1.0)
+    keeper = OriginKeeper((1.0, 2.0), asks=1, every_s=1.0, sets=1)
     assert keeper.step(0.0)[0] == [("request",)]
     actions, notes = keeper.step(1.0)
     assert actions == [("set", 10_000_000, 20_000_000, 0)]

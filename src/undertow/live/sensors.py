@@ -61,11 +61,13 @@ def open_links(live: LiveSettings, callback: Callable[[Record], None],
         rate = min(live.ping_rate_hz * live.time_scale, MAX_PING_RATE_HZ)
         links["sonar"] = Ping1DLink(live.sonar, callback, rate_hz=rate, now=now)
     if live.mavlink:
+        from ..io.mavlink import MavlinkConfig
         from .links.mavlink_udp import MavlinkLink
 
+        config = MavlinkConfig(pressure=live.mavlink_pressure)
         links["mavlink"] = MavlinkLink(live.mavlink, callback, now=now, max_offset_s=max_offset,
-                                       deferred=True, wake=wake, kernel_filter=True,
-                                       polled="dvl" in links)  # fmt: skip
+                                       config=config, deferred=True, wake=wake,
+                                       kernel_filter=True, polled="dvl" in links)  # fmt: skip
     if not links:
         raise ConfigError("live: no sensor link given (--dvl, --sonar and/or --mavlink)")
     return links

@@ -9,9 +9,12 @@ has an origin. So, from the moment the autopilot is found:
 1. ask for GPS_GLOBAL_ORIGIN ``asks`` times, ``every_s`` apart;
 2. an origin that arrives (then, or any time later) is **adopted**: stated in one line, never
    fought (``--origin`` is then not sent);
-3. none after the asks: with ``--origin LAT,LON[,ALT]``, send SET_GPS_GLOBAL_ORIGIN **once**
-   (latitude and longitude in degE7, altitude in mm) and ask again to see it confirmed; without,
-   say that the vehicle has no origin.
+3. none after the asks: with ``--origin LAT,LON[,ALT]``, send SET_GPS_GLOBAL_ORIGIN (latitude
+   and longitude in degE7, altitude in mm) and ask again to see it confirmed; unconfirmed, send
+   it again, at most ``sets`` times in all: ArduPilot refuses an origin silently before its EKF
+   runs (``setOriginLLH`` of an EKF core not yet initialised, a few seconds after boot, e.g.
+   right after the reboot that parameters need), and a repeat cannot fight an origin set
+   meanwhile (it takes one only while it has none); without, say that the vehicle has no origin.
 
 An autopilot reboot forgets its origin: :meth:`OriginKeeper.rebooted` starts again.
 """
@@ -33,9 +36,11 @@ class OriginKeeper:
     """The steps of the module docstring; :meth:`step` returns the actions due, :meth:`seen`
     takes a GPS_GLOBAL_ORIGIN; both return the one-line notes to tell."""
 
-    def __init__(self, wanted=None, *, asks: int = 3, every_s: float = 1.0) -> None:
+    def __init__(self, wanted=None, *, asks: int = 3, every_s: float = 1.0,
+                 sets: int = 3) -> None:  # fmt: skip
         self.wanted = None if wanted is None else tuple(float(v) for v in wanted)
         self.asks = int(asks)
+        self.sets = int(sets)
         self.every_s = float(every_s)
         self.rebooted()
 
@@ -44,7 +49,7 @@ class OriginKeeper:
         self.origin: tuple[float, float, float] | None = None
         self._asked = 0
         self._next = None
-        self._sent = False
+        self._sent = 0  # SET_GPS_GLOBAL_ORIGIN sent this boot
 
     def step(self, now: float) -> tuple[list[tuple], list[str]]:
         """(actions, notes): actions ("request",) or ("set", lat_e7, lon_e7, alt_mm)."""
@@ -57,18 +62,22 @@ class OriginKeeper:
             self._asked += 1
             self.state = "asking" if self.state == "unknown" else self.state
             return [("request",)], []
-        if self.state == "sent":
+        if self.state == "sent" and self._sent >= self.sets:
             self.state = "none"
             return [], ["no GPS_GLOBAL_ORIGIN came back after SET_GPS_GLOBAL_ORIGIN: the vehicle "
                         "refused or did not hear it (an origin is set once per boot)"]  # fmt: skip
-        if self.wanted is not None and not self._sent:
+        if self.wanted is not None and self._sent < self.sets:
             lat, lon, *alt = self.wanted
-            self._sent, self.state, self._asked = True, "sent", 0
+            again = self._sent > 0
+            self._sent, self.state, self._asked = self._sent + 1, "sent", 0
             action = ("set", int(round(lat * 1e7)), int(round(lon * 1e7)),
                       int(round((alt[0] if alt else 0.0) * 1e3)))  # fmt: skip
-            return [action], [
-                f"EKF origin: none on the vehicle; setting {describe(lat, lon, action[3] / 1e3)}"
-            ]
+            where = describe(lat, lon, action[3] / 1e3)
+            if again:  # (said once: the EKF may not have run yet)
+                return [action], [] if self._sent > 2 else [
+                    f"EKF origin: not confirmed; sending {where} again (an EKF that has not "
+                    "started refuses it)"]  # fmt: skip
+            return [action], [f"EKF origin: none on the vehicle; setting {where}"]
         self.state = "none"
         return [], ["EKF origin: the vehicle has none; ArduSub's position modes need one "
                     "(--origin LAT,LON[,ALT] sets it)"]  # fmt: skip
