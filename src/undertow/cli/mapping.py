@@ -153,33 +153,30 @@ def print_warnings(lines: list[str]) -> None:
         err.print(f"[yellow]warning:[/] {line}", highlight=False, soft_wrap=True)
 
 
-def _variance_bounds(text: str | None):
-    if text is None:
-        return None
+def _numbers(text: str, option: str, counts: tuple[int, ...], expected: str) -> list[float]:
+    """The comma-separated numbers of ``option``, as many as one of ``counts``; else one line."""
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:
         values = []
-    if len(values) != 6:
-        raise UndertowError(
-            "--variance-bounds: expected six comma-separated numbers "
-            f"min_x,min_y,min_z,max_x,max_y,max_z (m^2), got {text!r}"
-        )
+    if len(values) not in counts:
+        raise UndertowError(f"{option}: expected {expected}, got {text!r}")
+    return values
+
+
+def _variance_bounds(text: str | None):
+    if text is None:
+        return None
+    values = _numbers(text, "--variance-bounds", (6,), "six comma-separated numbers "
+                      "min_x,min_y,min_z,max_x,max_y,max_z (m^2)")  # fmt: skip
     return (tuple(values[:3]), tuple(values[3:]))
 
 
 def _pose_std(text: str | None):
     if text is None:
         return None
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        values = []
-    if len(values) not in (3, 6):
-        raise UndertowError(
-            "--pose-std: expected 3 or 6 comma-separated numbers SX,SY,SZ[,SROLL,SPITCH,SYAW] "
-            f"(m, rad), got {text!r}"
-        )
+    values = _numbers(text, "--pose-std", (3, 6), "3 or 6 comma-separated numbers "
+                      "SX,SY,SZ[,SROLL,SPITCH,SYAW] (m, rad)")  # fmt: skip
     if not all(math.isfinite(v) and v >= 0 for v in values):
         raise UndertowError(
             f"--pose-std: standard deviations must be finite and >= 0, got {text!r}"
