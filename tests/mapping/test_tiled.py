@@ -14,7 +14,7 @@ from undertow.errors import ConfigError
 from undertow.mapping import tiled
 from undertow.mapping.config import MappingConfig
 from undertow.mapping.mappers import mapper_from_config
-from undertow.mapping.samples import Samples
+from undertow.mapping.samples import SENSOR_MULTIBEAM, Samples
 from undertow.mapping.tiled import Tiling, map_tiled, read_tiles
 
 runner = CliRunner()
@@ -38,13 +38,17 @@ def fan_survey(n_pings=150, beams=16, seed=0) -> Samples:
     r = (1.5 + 0.1 * np.sin(o[:, 0] * 2.0)) / np.cos(np.tile(angle, n_pings))
     r += rng.normal(0, 0.01, r.size)
     var = np.repeat(1e-4 + 1e-3 * k[:, None] / n_pings * [1.0, 1.2, 0.2], beams, axis=0)
-    pts, lab, pv = [o + r[:, None] * d], [np.ones(r.size)], [var]
+    rays = np.arange(r.size)
+    pts, lab, pv, ray = [o + r[:, None] * d], [np.ones(r.size)], [var], [rays]
     for s in np.arange(0.0, r.max(), 0.1):
         keep = s <= r - 0.1
         pts.append(o[keep] + s * d[keep])
         lab.append(np.zeros(keep.sum()))
         pv.append(var[keep])
-    return Samples.from_points(np.concatenate(pts), np.concatenate(lab), 0.9, np.concatenate(pv))
+        ray.append(rays[keep])
+    ray = np.concatenate(ray)
+    return Samples(np.concatenate(pts), np.concatenate(lab), 0.9, np.concatenate(pv), ray,
+                   np.full(ray.size, SENSOR_MULTIBEAM), o)  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -82,6 +86,18 @@ def test_tiled_equals_single_process(survey, method):
     if method == "adaptive":  # session bounds over all samples, not per tile
         var = survey.pose_variance
         assert np.allclose(result.metadata["variance_bounds"], [var.min(0), var.max(0)])
+
+
+def test_tiled_tpu_with_a_wave_equals_single_process(survey):
+    """The wave's range noise depends on each hit alone (its depth, its sensor's): tiles map
+    as the whole, and differ from the map without it."""
+    config = MappingConfig(method="tpu", wave=(0.15, 0.33))
+    result = map_tiled(survey, config, TILE_M, scheduler="sync")
+    single = single_process(survey, config)
+    assert_same_map(result.map, single)
+    assert result.metadata["wave"] == (0.15, 0.33)
+    calm = single_process(survey, MappingConfig(method="tpu"))
+    assert not np.array_equal(sorted_map(calm)[1], sorted_map(single)[1])
 
 
 def test_halo_is_needed(survey):

@@ -18,6 +18,7 @@ from undertow.mapping.tpu import (
     lattice_weights,
     trajectory_wave,
     wave_range_std,
+    with_wave,
 )
 from undertow.sim.waves import wavenumber
 from undertow.trajectory import Trajectory
@@ -112,13 +113,13 @@ def test_the_waves_range_noise_is_the_orbital_displacement_between_sensor_and_fl
     a, f, h = 0.2, 0.3, 4.0
     k = float(wavenumber(2 * np.pi * f, h))
     for d in (0.0, 1.0, 3.0, 4.0):
-        s_w = wave_range_std(_hit(z=h, origin_z=d), (a, f), RES)[0]
+        s_w = wave_range_std(_hit(z=h, origin_z=d), np.array([0]), (a, f), RES)[0]
         assert s_w == pytest.approx(a * math.sinh(k * (h - d)) / math.sinh(k * h) / math.sqrt(2))
     free = _hit(z=h)
     free = Samples(free.points, np.zeros(1), free.sigma0, free.pose_variance, free.ray,
                    free.sensor, free.origins)  # fmt: skip
-    assert wave_range_std(free, (a, f), RES)[0] == 0.0
-    assert wave_range_std(_hit(z=h), None, RES)[0] == 0.0
+    assert hit_sigmas(free, (0.005, 0.01, 0.01), 0.005, 0.0, (a, f))[0].size == 0  # hits only
+    assert wave_range_std(_hit(z=h), np.array([0]), None, RES)[0] == 0.0
 
 
 def test_the_trajectorys_wave_is_read_from_its_metadata():
@@ -133,6 +134,21 @@ def test_the_trajectorys_wave_is_read_from_its_metadata():
     traj.metadata["wave_track"] = {"t": [0], "amplitude_m": [0.0], "frequency_hz": [0.0]}
     traj.metadata.pop("wave_noise")
     assert trajectory_wave(traj) is None  # calm
+
+
+def test_the_wave_is_resolved_once_into_the_settings():
+    """with_wave: the settings' wave wins, else the trajectory's (tpu with the wave term only),
+    so a tiled map's tasks, which see only the settings, map with the same wave."""
+    t = np.arange(3.0)
+    traj = Trajectory(t, np.zeros((3, 18)), np.zeros((3, 18, 18)))
+    traj.metadata["wave_noise"] = {"amplitude_m": 0.1, "frequency_hz": 0.5}
+    assert with_wave(MappingConfig(), traj).wave == (0.1, 0.5)
+    assert with_wave(MappingConfig(wave=(0.2, 0.3)), traj).wave == (0.2, 0.3)
+    assert with_wave(MappingConfig(wave_range_noise=False), traj).wave is None
+    assert with_wave(MappingConfig(method="adaptive"), traj).wave is None
+    config = with_wave(MappingConfig(), traj)
+    assert mapper_from_config(config).wave == (0.1, 0.5)
+    assert mapper_from_config(config.model_copy(update={"wave_range_noise": False})).wave is None
 
 
 def test_tpu_is_the_default_mapper_and_reads_back_with_the_evidence_surface():

@@ -46,6 +46,7 @@ from ..mapping.run import MappingResult, check_prior, map_log, tiled_map_metadat
 from ..mapping.samples import samples_from_config
 from ..mapping.surface import Surface, map_surface, surface_from_points
 from ..mapping.tiled import check_tiling, map_tiled
+from ..mapping.tpu import with_wave
 from ..occupancy import MAP_FILE, OccupancyMap
 from ..settings import Settings
 from ..trajectory import Trajectory
@@ -118,8 +119,8 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     result.warnings = caught
     result.metadata["trajectory"] = record
     if out_dir is not None:
-        save_map(result.map, config.model_dump(mode="json"), result.metadata, out_dir, overwrite,
-                 threshold=config.occupied_threshold)  # fmt: skip
+        save_map(result.map, result.config.model_dump(mode="json"), result.metadata, out_dir,
+                 overwrite, threshold=config.occupied_threshold)  # fmt: skip
     return result
 
 
@@ -162,6 +163,7 @@ def _map_tiled_file(log, trajectory, config: MappingConfig, tiles: float, schedu
                     record: dict) -> MappingResult:  # fmt: skip
     """:func:`map_file` with ``tiles``: samples, tiles on Dask, merged map; with ``out_dir``
     the tiles are written to ``out_dir/tiles`` as they finish, then the merged map."""
+    config = with_wave(config, trajectory)  # once, so every tile maps with the same wave
     with collect_warnings(caught):
         samples = samples_from_config(log, trajectory, config)
         with output_folder(out_dir, overwrite) if out_dir is not None else nullcontext() as out:

@@ -80,6 +80,10 @@ class MappingConfig(BaseModel):
         True, description="tpu: add the waves' orbital displacement (the trajectory's wave) "
         "to the range noise",
     )  # fmt: skip
+    wave: Annotated[tuple[Finite, Finite] | None, BeforeValidator(_as_sequence)] = Field(
+        None, description="tpu: (amplitude m, frequency Hz) of that wave; None: the "
+        "trajectory's (mapping.tpu.with_wave)",
+    )  # fmt: skip
     alpha0: float = Field(1e-10, gt=0, allow_inf_nan=False)
     beta0: float = Field(1e-10, gt=0, allow_inf_nan=False)
     variance_bounds: Annotated[tuple[Triple, Triple] | None, BeforeValidator(_as_sequence)] = Field(

@@ -245,7 +245,7 @@ class TpuBkiMapper(Mapper):
         super().__init__(**base)
         self.sonar_beam_width_deg = float(sonar_beam_width_deg)
         #: (amplitude m, frequency Hz) of the waves whose orbital motion adds to the range
-        #: noise (:func:`~undertow.mapping.tpu.trajectory_wave`), or None
+        #: noise (the settings' ``wave``, resolved by :func:`~undertow.mapping.tpu.with_wave`)
         self.wave = wave
         self.base_length, self.max_length = float(base_length), float(max_length)
         self.range_std = tuple(float(v) for v in range_std)  # DVL, sonar, multibeam
@@ -297,6 +297,7 @@ def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
                               range_std=(config.range_std_dvl, config.range_std_sonar,
                                          config.range_std_multibeam),
                               sonar_beam_width_deg=config.sonar_beam_width_deg,
+                              wave=config.wave if config.wave_range_noise else None,
                               range_std_fraction=config.range_std_fraction, **base)  # fmt: skip
     else:
         mapper = AdaptiveBkiMapper(l_min=config.l_min, l_max=config.l_max,

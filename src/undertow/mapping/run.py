@@ -15,7 +15,7 @@ from ..trajectory import Trajectory
 from .config import MappingConfig
 from .mappers import mapper_from_config, out_of_memory
 from .samples import samples_from_config
-from .tpu import trajectory_wave
+from .tpu import with_wave
 
 
 @dataclass
@@ -34,14 +34,12 @@ def map_log(
     log: Log, trajectory: Trajectory, config: MappingConfig | None = None, prior=None
 ) -> MappingResult:
     """Training samples from every valid range (DVL beams, sonar), then one mapper pass."""
-    config = config or MappingConfig()
+    config = with_wave(config or MappingConfig(), trajectory)
     if config.use_dvl and log.sonar is None and log.multibeam is None:
         log.require("dvl", stage="map")
     try:
         samples = samples_from_config(log, trajectory, config)
         mapper = mapper_from_config(config, prior=prior)
-        if config.method == "tpu" and config.wave_range_noise:
-            mapper.wave = trajectory_wave(trajectory)
         mapper.integrate(samples)
         occupancy = mapper.occupancy()
     except MemoryError:

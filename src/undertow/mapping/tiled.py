@@ -68,6 +68,8 @@ TPU_FIELDS = (
     "range_std_multibeam",
     "range_std_fraction",
     "sonar_beam_width_deg",
+    "wave_range_noise",
+    "wave",
 )
 
 

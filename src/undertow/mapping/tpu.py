@@ -17,7 +17,8 @@ acoustic measurements): the RMS vertical orbital displacement between the sensor
 and the floor at depth h of the linear wave of amplitude a and frequency f the trajectory's
 filter used, s_w = a K_s(d) / sqrt(2), K_s = sinh(k (h - d)) / sinh(k h), k from
 omega^2 = g k tanh(k h) (Dean and Dalrymple, "Water Wave Mechanics for Engineers and
-Scientists", 1991, ch. 4), h the hits' median depth.
+Scientists", 1991, ch. 4), h the hit's depth (rounded to the grid for k). The wave is the
+settings' ``wave``, else the one the trajectory's filter used (:func:`with_wave`).
 
 **Across the floor** (x, y) the hit's kernel is the sparse kernel of ``eq:kernel`` at the
 length scale whose standard deviation is the hit's: the kernel k(d; l) has standard
@@ -88,18 +89,29 @@ def trajectory_wave(trajectory) -> tuple[float, float] | None:
     return None
 
 
-def wave_range_std(samples: Samples, wave, resolution: float) -> np.ndarray:
-    """s_w of every hit (0 for free samples; module doc): a K_s(d) / sqrt(2) for its sensor
-    depth d and the water depth h at its end point (z, rounded to the grid's ``resolution`` for the
-    wavenumber, so a sample's value does not depend on the others: tiles map alike); zeros
-    without a wave."""
-    out = np.zeros(len(samples))
-    known = (samples.ray >= 0) & (samples.label > 0.5)  # the hits: free samples do not use it
-    if wave is None or not known.any() or not len(samples.origins):
+def with_wave(config, trajectory):
+    """``config`` with its ``wave`` resolved: as given, else :func:`trajectory_wave` of the
+    trajectory when the tpu mapper adds the wave's range noise (``wave_range_noise``); other
+    methods, or no wave, unchanged. Resolved once per map, so tiles and the whole agree."""
+    if config.method != "tpu" or not config.wave_range_noise or config.wave is not None:
+        return config
+    wave = trajectory_wave(trajectory)
+    return config if wave is None else config.model_copy(update={"wave": wave})
+
+
+def wave_range_std(hits: Samples, rows, wave, resolution: float) -> np.ndarray:
+    """s_w of the samples ``rows`` of ``hits`` (module doc): a K_s(d) / sqrt(2) for the
+    sensor depth d and the water depth h at the end point (z, rounded to the grid's
+    ``resolution`` for the wavenumber, so a sample's value does not depend on the others:
+    tiles map alike); zeros without a wave or where the ray is unknown."""
+    out = np.zeros(len(rows))
+    ray = hits.ray[rows]
+    known = ray >= 0
+    if wave is None or not known.any() or not len(hits.origins):
         return out
     amplitude, frequency = wave
-    d = samples.origins[samples.ray[known], 2]
-    h = np.maximum(np.round(samples.points[known, 2] / resolution) * resolution, resolution)
+    d = hits.origins[ray[known], 2]
+    h = np.maximum(np.round(hits.points[rows[known], 2] / resolution) * resolution, resolution)
     depths, index = np.unique(h, return_inverse=True)
     k = np.array([float(wavenumber(2.0 * np.pi * frequency, float(v))) for v in depths])[index]
     d = np.clip(d, 0.0, h)
@@ -111,21 +123,24 @@ def wave_range_std(samples: Samples, wave, resolution: float) -> np.ndarray:
 
 def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
                sonar_beam_width_deg: float = 0.0, wave=None, resolution: float = 0.1):  # fmt: skip
-    """(sigma_x, sigma_y, sigma_v, s_r') of every sample (module doc): the horizontal standard
-    deviations (pose and footprint), the vertical one, and the range noise in these waves.
-    ``range_std``: s_0 of the DVL, the sonar and the multibeam (by ``Samples.sensor``; a
-    sample of unknown sensor takes the largest); ``wave``: (amplitude, frequency) or None."""
-    var = samples.pose_variance
-    rng = np.zeros(len(samples))
-    known = samples.ray >= 0
+    """(sigma_x, sigma_y, sigma_v, s_r') of every hit of ``samples`` (label 1, in order; the
+    free samples need none; module doc): the horizontal standard deviations (pose and
+    footprint), the vertical one, and the range noise in these waves. ``range_std``: s_0 of
+    the DVL, the sonar and the multibeam (by ``Samples.sensor``; a sample of unknown sensor
+    takes the largest); ``wave``: (amplitude, frequency) or None."""
+    rows = np.flatnonzero(samples.label > 0.5)
+    var = samples.pose_variance[rows]
+    ray = samples.ray[rows]
+    rng = np.zeros(len(rows))
+    known = ray >= 0
     if known.any() and len(samples.origins):
-        rng[known] = np.linalg.norm(samples.points[known] - samples.origins[samples.ray[known]],
+        rng[known] = np.linalg.norm(samples.points[rows[known]] - samples.origins[ray[known]],
                                     axis=1)  # fmt: skip
     s0 = np.asarray(range_std, float)
     fraction = np.array([0.0, range_std_fraction, range_std_fraction])
-    known_sensor = (samples.sensor >= 0) & (samples.sensor < 3)
-    sensor = np.where(known_sensor, samples.sensor, int(np.argmax(s0))).astype(np.int64)
-    s_w = wave_range_std(samples, wave, resolution)
+    sensor = samples.sensor[rows].astype(np.int64)
+    sensor = np.where((sensor >= 0) & (sensor < 3), sensor, int(np.argmax(s0)))
+    s_w = wave_range_std(samples, rows, wave, resolution)
     s_r = np.hypot(s0[sensor] + fraction[sensor] * rng, s_w)
     half = np.deg2rad(sonar_beam_width_deg) / 2.0
     s_b2 = np.where(sensor == SENSOR_SONAR, (rng * np.tan(half) / 2.0) ** 2, 0.0)
@@ -162,17 +177,14 @@ def tpu_training(samples: Samples, *, resolution: float, base_length: float, max
     lx = np.clip(sx / KERNEL_STD, base_length, max_length)
     ly = np.clip(sy / KERNEL_STD, base_length, max_length)
     precision = np.divide(s_r * s_r, sv * sv, out=np.ones_like(sv), where=sv > 0)
-    weight = samples.sigma0 * (base_length / lx) * (base_length / ly) * precision
+    weight = samples.sigma0[hit] * (base_length / lx) * (base_length / ly) * precision
     free = ~hit
-    n_free = int(free.sum())
-    lengths_free = np.tile([base_length, base_length, resolution / 2], (n_free, 1))
-    centres, w = lattice_weights(samples.points[hit, 2], sv[hit], resolution)
-    n_hit = int(hit.sum())
+    lengths_free = np.tile([base_length, base_length, resolution / 2], (int(free.sum()), 1))
+    centres, w = lattice_weights(samples.points[hit, 2], sv, resolution)
     pts_hit = np.repeat(samples.points[hit], 3, axis=0)
     pts_hit[:, 2] = centres.reshape(-1)
-    lengths_hit = np.repeat(np.stack([lx[hit], ly[hit], np.full(n_hit, resolution / 2)], 1), 3,
-                            axis=0)  # fmt: skip
-    weight_hit = (weight[hit][:, None] * w).reshape(-1)
+    lengths_hit = np.repeat(np.stack([lx, ly, np.full(len(lx), resolution / 2)], 1), 3, axis=0)
+    weight_hit = (weight[:, None] * w).reshape(-1)
     keep = weight_hit > 0
     points = np.concatenate([samples.points[free], pts_hit[keep]])
     label = np.concatenate([samples.label[free], np.ones(int(keep.sum()))])
