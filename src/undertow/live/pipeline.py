@@ -47,6 +47,7 @@ import yaml
 
 from .._util.atomic import check_output_folder
 from .._util.clocks import ScaledClock
+from .._util.histogram import Durations
 from .._util.plain import to_plain
 from ..errors import ConfigError
 from ..estimation.calibration import Calibration
@@ -62,11 +63,12 @@ from ..robot import Mounting
 from ..seastate.online import OnlineSeaState
 from ..settings import LIVE_VARIANCE_BOUNDS, Settings
 from .autopilot import open_bridge
+from .map_cloud import MapCloud
 from .preview import PreviewCheckpoints
 from .recorder import Recorder
 from .reorder import ReorderBuffer
 from .sensors import expected_streams, open_links
-from .view import newest_ranges
+from .view import PathTrail, newest_ranges
 from .warmup import warm_up
 
 #: wall seconds between status updates (status line, /undertow/status, the view's map)
@@ -97,17 +99,12 @@ class LiveStats:
     late: int = 0
     states: int = 0
     pings: int = 0
-    latency_s: list = field(default_factory=list)
+    latency: Durations = field(default_factory=Durations)  # bounded: a day of reports
     started_filter_at: float | None = None
     span_s: float = 0.0
 
     def latency_summary(self) -> dict:
-        lat = np.asarray(self.latency_s, float)
-        if lat.size == 0:
-            return {"n": 0}
-        return {"n": int(lat.size), "median_ms": float(np.median(lat) * 1e3),
-                "p99_ms": float(np.percentile(lat, 99) * 1e3),
-                "max_ms": float(lat.max() * 1e3)}  # fmt: skip
+        return self.latency.summary_ms()
 
 
 @dataclass
@@ -169,7 +166,8 @@ class LiveSession:
         self._last_wall: float | None = None
         self._next_status = 0.0
         self._next_map_view = 0.0
-        self._path: list = []
+        self._path = PathTrail()  # the positions shown, in bounded memory
+        self._cloud = None  # the view's map (MapCloud), made at the first draw
         self._early: list = []  # chunks released before the filter started (for the map)
         self._first_t: float | None = None
         self._said_missing = False
@@ -380,7 +378,7 @@ class LiveSession:
                 self.recorder.write_pose(t, x_all[k], P_all[k])
                 self._next_pose = t + period
         self.stats.span_s = float(t_all[n - first - 1]) - self.stats.started_filter_at
-        self._path.extend(trajectory.position[k0 - first : n - first : PATH_DECIMATION].tolist())
+        self._path.extend(trajectory.position[k0 - first : n - first : PATH_DECIMATION])
 
     def _update_map(self, trajectory) -> None:
         """The chunks released since the last update, to the map as one."""
@@ -435,7 +433,7 @@ class LiveSession:
         if self.view is not None:
             self.view.publish_pose(float(states.t[-1]), states.x[-1], states.P[-1])
         done = time.perf_counter()
-        self.stats.latency_s.extend(done - a for a in arrivals)
+        self.stats.latency.add([done - a for a in arrivals])
         if self.autopilot is not None:  # sent at once when its slot is free
             self.autopilot.offer(states, arrivals)
 
@@ -465,10 +463,14 @@ class LiveSession:
         if view is not None and self.mapper is not None and self.stats.pings:
             start = time.perf_counter()
             if view.subscribed("/undertow/map") and start >= self._next_map_view:
-                view.publish_map(status["clock"], self.mapper.occupancy())
+                if self._cloud is None:
+                    self._cloud = MapCloud(self.mapper.mapper,
+                                           self.mapping_config.occupied_threshold)  # fmt: skip
+                self._cloud.update()
+                view.publish_cloud(status["clock"], self._cloud.points())
                 self._next_map_view = map_view_due(start, time.perf_counter() - start)
-        if view is not None and self._path and view.subscribed("/undertow/path"):
-            view.publish_path(status["clock"], np.asarray(self._path))
+        if view is not None and len(self._path) and view.subscribed("/undertow/path"):
+            view.publish_path(status["clock"], self._path.positions())
         if self.status_callback is not None:
             self.status_callback(status)
 

@@ -26,7 +26,8 @@ Topics (:data:`TOPICS`, topic -> schema name):
 - ``/undertow/map`` (``foxglove.PointCloud``): the occupied cells' centres (mean occupancy above
   the threshold, 0.5 by default), fields x, y, z (float32) and red, green, blue, alpha (uint8),
   coloured by the cell's mean E[theta] or variance V[theta] (eq:mean_var) from blue (lowest of the
-  cloud) to red (highest);
+  cloud) to red (highest); the live session sends the cloud it keeps chunk by chunk
+  (:mod:`undertow.live.map_cloud`: colours on a fixed scale, at most about 200 000 points);
 - ``/undertow/wave`` (JSON, schema ``undertow.Wave``): ``{"t": s, "amplitude_m": a,
   "frequency_hz": f}``;
 With ``autopilot`` (``undertow live --autopilot``; :data:`AUTOPILOT_TOPICS`):
@@ -140,6 +141,43 @@ def path_points(positions, max_poses: int = MAX_PATH_POSES) -> np.ndarray:
         return p
     step = -(-len(p) // (max_poses - 1))
     return np.concatenate([p[: len(p) - 1 : step], p[-1:]])
+
+
+class PathTrail:
+    """The positions behind ``/undertow/path`` in bounded memory: of the positions offered
+    (numbered 0, 1, ... in order), those whose number is a multiple of ``step`` are kept; when
+    more than ``limit`` are kept, every other one is dropped and ``step`` doubles (the kept
+    ones stay evenly spaced over the whole path), so a day's path holds at most ``limit``
+    positions. :meth:`positions` adds the newest offered."""
+
+    def __init__(self, limit: int = 2 * MAX_PATH_POSES) -> None:
+        self.limit = max(int(limit), 2)
+        self.step = 1
+        self.offered = 0
+        self._kept = np.empty((0, 3))
+        self._newest: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self._kept)
+
+    def extend(self, positions) -> None:
+        p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+        if not len(p):
+            return
+        first = (-self.offered) % self.step  # the first offered number that is a multiple
+        self._kept = np.concatenate([self._kept, p[first :: self.step]])
+        self.offered += len(p)
+        self._newest = p[-1].copy()
+        while len(self._kept) > self.limit:
+            self._kept, self.step = self._kept[::2], 2 * self.step
+
+    def positions(self) -> np.ndarray:
+        """The kept positions and the newest offered (N, 3)."""
+        if self._newest is None:
+            return self._kept
+        if (self.offered - 1) % self.step == 0:  # the newest is kept already
+            return self._kept
+        return np.concatenate([self._kept, self._newest[None]])
 
 
 def ellipsoid_axes(cov) -> tuple[list[float], tuple[float, float, float, float]]:
@@ -349,13 +387,20 @@ class LiveView:
             raise ConfigError(f"live view: color_by '{color_by}' is not 'mean' or 'variance'")
         if not self.subscribed(MAP):
             return
-        m = self._m
-        stamp, ns = _stamp(m, t)
         cells = occupancy.occupied(threshold)
         value = cells.mean if color_by == "mean" else cells.variance
         data = np.zeros(len(cells), dtype=[("xyz", "<f4", 3), ("rgba", "u1", 4)])
         data["xyz"] = cells.centres
         data["rgba"] = _colors(value)
+        self.publish_cloud(t, data)
+
+    def publish_cloud(self, t: float, data: np.ndarray) -> None:
+        """Points already packed (x, y, z float32, red, green, blue, alpha uint8: 16 bytes
+        each, e.g. :meth:`~undertow.live.map_cloud.MapCloud.points`) on ``/undertow/map``."""
+        if not self.subscribed(MAP):
+            return
+        m = self._m
+        stamp, ns = _stamp(m, t)
         f32, u8 = m.PackedElementFieldNumericType.Float32, m.PackedElementFieldNumericType.Uint8
         fields = [m.PackedElementField(name=n, offset=4 * i, type=f32) for i, n in enumerate("xyz")]
         fields += [

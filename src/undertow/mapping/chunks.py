@@ -118,6 +118,21 @@ def find(cx, cy, cz, table_keys, table_vals):
     return table_vals[s] if table_keys[s] == key else -1
 
 
+@njit(cache=True)
+def boxes_chunks(lo, hi, count, table_keys, table_vals):
+    """The chunk index (-1 where none) of every chunk coordinate in the boxes lo[b]..hi[b]
+    (inclusive, (B, 3) each; ``count`` coordinates in all)."""
+    out = np.empty(count, np.int64)
+    k = 0
+    for b in range(lo.shape[0]):
+        for cx in range(lo[b, 0], hi[b, 0] + 1):
+            for cy in range(lo[b, 1], hi[b, 1] + 1):
+                for cz in range(lo[b, 2], hi[b, 2] + 1):
+                    out[k] = find(cx, cy, cz, table_keys, table_vals)
+                    k += 1
+    return out
+
+
 @njit(cache=True, inline="always")
 def chunk_box(lo, cnt, box, c0, chunks, table_keys, table_vals):
     """The chunks of the support box (first cell ``lo``, ``cnt`` cells per axis) into

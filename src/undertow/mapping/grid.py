@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import DataError
-from .chunks import CHUNK, CHUNK_LIMIT, add_mass_to_cells, rehash
+from .chunks import CHUNK, CHUNK_LIMIT, add_mass_to_cells, boxes_chunks, rehash
 from .kernels import (
     ALL_CELLS,
     MODE_CELL,
@@ -71,6 +71,41 @@ class ChunkedGrid:
         self._support_cells: dict = {}  # _cells_per_axis by mode and length scales
         self._n = np.zeros(1, np.int64)
         self._allocate(max(int(capacity), 8))
+        self._touched: list | None = None  # boxes (lo, hi) in m written since taken
+
+    def track_touched(self) -> None:
+        """Record the box each later write may touch, for :meth:`take_touched` (a live view
+        that redraws only the chunks changed since its last draw)."""
+        if self._touched is None:
+            self._touched = []
+
+    def _touch(self, extent, reach) -> None:
+        """Note the samples' box ``extent`` widened by the kernels' reach (m, >= the largest
+        support: the largest length scale; a cell kernel reaches one cell)."""
+        if self._touched is not None:
+            r = max(float(np.max(reach)), self.resolution)
+            self._touched.append((np.asarray(extent[0]) - r, np.asarray(extent[1]) + r))
+
+    def take_touched(self) -> np.ndarray:
+        """Indices of the chunks that the writes since the last call may have changed (every
+        chunk written, and maybe a few neighbours: the boxes are the samples' extents widened
+        by the kernels' reach), sorted; the record is then cleared."""
+        boxes, self._touched = self._touched or [], [] if self._touched is not None else None
+        n = self.n_chunks
+        if not boxes or n == 0:
+            return np.zeros(0, np.int64)
+        span = CHUNK * self.resolution
+        lo = np.floor(np.array([b[0] for b in boxes]) / span).astype(np.int64)
+        hi = np.floor(np.array([b[1] for b in boxes]) / span).astype(np.int64)
+        count = int(np.prod(hi - lo + 1, axis=1).sum())
+        if count > n:  # larger than the map: compare every chunk's key with the boxes
+            keys = self._keys[:n]
+            inside = np.zeros(n, bool)
+            for a, b in zip(lo, hi, strict=True):
+                inside |= np.all((keys >= a) & (keys <= b), axis=1)
+            return np.flatnonzero(inside)
+        found = boxes_chunks(lo, hi, count, self._table_keys, self._table_vals)
+        return np.unique(found[found >= 0])
 
     def _allocate(self, capacity: int) -> None:
         self._keys = np.zeros((capacity, 3), np.int64)
@@ -113,6 +148,7 @@ class ChunkedGrid:
         if extent is None:
             extent = points_extent(points)
         self._check_extent(extent)
+        self._touch(extent, l_max)
         lo, hi = var_bounds
         res = self.resolution
         while start < n:
@@ -137,6 +173,7 @@ class ChunkedGrid:
         pass); on several, first. ``extent``: of the samples
         (:func:`~undertow.mapping.rayscatter.ray_extent`)."""
         self._check_extent(extent)
+        self._touch(extent, l_max)
         n = int(rays.rows[-1])
         if n < RAY_PARALLEL_MIN_SAMPLES:  # (no thread slot to take)
             self._scatter_rays(rays, var_bounds, l_min, l_max, extent, 1)
@@ -242,11 +279,19 @@ class ChunkedGrid:
         start, n = 0, cells.shape[0]
         if n == 0:
             return
-        self._check_extent(points_extent((cells + 0.5) * self.resolution))
+        extent = points_extent((cells + 0.5) * self.resolution)
+        self._check_extent(extent)
+        self._touch(extent, 0.0)
         while start < n:
             start = add_mass_to_cells(start, cells, d_alpha, d_beta, *self._tables())
             if start < n:
                 self._grow()
+
+    def chunk_mass(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(chunk coordinates (k, 3), alpha mass (k, C, C, C), beta mass) of chunks ``idx``
+        (copies; C = CHUNK: cell (i, j, l) of chunk c is cell c * C + (i, j, l))."""
+        idx = np.asarray(idx, np.int64)
+        return self._keys[idx], self._alpha[idx], self._beta[idx]
 
     def cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(cells (M, 3) int64, alpha mass (M,), beta mass (M,)) of cells with mass > 0."""
