@@ -267,14 +267,17 @@ def test_online_map_equals_the_offline_map(session, method):
         online = OnlineLocalizer("proposed", wave=WAVE, mounting=mounting, expected=EXPECTED)
         mapper = OnlineMapper(config, mounting=mounting)
         cuts = _cuts(recs, "300", 3)
-        integrated, k = 0, 0
+        integrated, k, held = 0, 0, []
         for c in [*cuts, len(recs)]:
             chunk = records_to_log(recs[k:c])
             k = c
             online.push(chunk)
             integrated += mapper.push(chunk, online.trajectory())
+            held.append(mapper.poses.held)
         final = online.trajectory()
         assert integrated > 0  # the map grows during the run
+        # the map keeps a window of states, not the run's (and the map is the same)
+        assert mapper.poses.base > 0 and max(held) < 0.5 * len(final)
         integrated += mapper.finish(final)
         offline = map_log(whole, final, config)
     cells, alpha, beta = _sorted(mapper.occupancy())
@@ -431,3 +434,34 @@ def test_depth_rate_verdicts_are_those_of_the_whole_history():
             break
     whole = depth_jumps(t, d, cfg)
     assert whole.sum() > 3 and rate.rejected() == int(whole.sum())
+
+
+def test_released_states_are_freed_and_the_rest_unchanged(session):
+    """A consumer that takes the final states and releases them keeps a window: the states
+    after the release are bit for bit those of a run that kept everything, and asking for a
+    released one is refused."""
+    recs, mounting = session
+    cuts = [*_cuts(recs, "200", 5), len(recs)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ref = Localizer("proposed", wave=WAVE).run(_whole(recs, mounting))
+        online = OnlineLocalizer("proposed", wave=WAVE, mounting=mounting, expected=EXPECTED)
+        taken, t, x, P, k = 0, [], [], [], 0
+        for c in cuts:
+            online.push(records_to_log(recs[k:c]))
+            k = c
+            part = online.committed(taken)
+            final = part.metadata["online"]["final_states"]
+            t.append(part.t[: final - taken])
+            x.append(part.x[: final - taken])
+            P.append(part.P[: final - taken].copy())
+            taken = final
+            freed = online.release(taken)
+        rest = online.trajectory(since=taken)
+    assert 0 < freed <= taken
+    got_t = np.concatenate([*t, rest.t])
+    assert np.array_equal(got_t, ref.t)
+    assert np.array_equal(np.concatenate([*x, rest.x]), ref.x)
+    assert np.array_equal(np.concatenate([*P, rest.P]), ref.P)
+    with pytest.raises(ValueError, match="released"):
+        online.committed(0)

@@ -180,15 +180,29 @@ class OnlineLocalizer:
             return None
         return self._run.states(self._run.out.n - 1)
 
-    def trajectory(self) -> Trajectory:
+    def trajectory(self, since: int = 0) -> Trajectory:
         """All states so far (views: a later push may revise those after ``final_states``),
-        with the metadata of :meth:`Localizer.run` and ``"online"``."""
+        with the metadata of :meth:`Localizer.run` and ``"online"``; ``since``: from that state
+        number on (``metadata["online"]["first_state"]``; those before may be released)."""
         if self._run is None:
             empty = Trajectory(np.zeros(0), np.zeros((0, 18)), np.zeros((0, 18, 18)))
             return dataclasses.replace(empty, variant=self.config.variant,
                                        metadata={"online": self._online_meta()})  # fmt: skip
-        traj = self._run.states(0)
-        return dataclasses.replace(traj, metadata=self._metadata())
+        traj = self._run.states(min(max(int(since), 0), self._run.out.n))
+        metadata = self._metadata()
+        if since:
+            metadata["online"]["first_state"] = int(since)
+        return dataclasses.replace(traj, metadata=metadata)
+
+    def release(self, n: int) -> int:
+        """Let go of the states before number ``n`` (at most the final ones: a later push can
+        revise none of them), which the caller has taken (recorded, mapped, stored); a later
+        :meth:`trajectory` or :meth:`committed` cannot return them. Returns the number of
+        states before which all are freed (whole storage blocks)."""
+        if self._run is None:
+            return 0
+        self._run.out.release(min(int(n), self._run.final_states()))
+        return self._run.out.released
 
     def committed(self, since: int = 0) -> Trajectory:
         """The states from number ``since`` on (views, unless they span storage blocks) with

@@ -25,13 +25,23 @@ class OutputBlocks:
     """The states recorded so far, in blocks of BLOCK states: appending never copies the states
     before (a single array grown by doubling copies them all at each growth, a stall of tens of
     ms at a few thousand states and of seconds in an hour of states). ``n`` may be set back
-    (a rewind); :meth:`view` hands out views when the range lies in one block."""
+    (a rewind); :meth:`view` hands out views when the range lies in one block. :meth:`release`
+    frees the blocks wholly before a state number (a consumer that took them: a day's live
+    session keeps a window of states, not the day's)."""
 
     BLOCK = 2048
 
     def __init__(self) -> None:
         self.n = 0
-        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.released = 0  # states before this number are freed (a multiple of BLOCK)
+        self._blocks: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+
+    def release(self, n: int) -> None:
+        """Free the blocks whose states all lie before state number ``n`` (<= self.n)."""
+        b_end = min(int(n), self.n) // self.BLOCK
+        for b in range(self.released // self.BLOCK, b_end):
+            self._blocks[b] = None
+        self.released = max(self.released, b_end * self.BLOCK)
 
     def append(self, t, x, P) -> None:
         k, i = t.size, 0
@@ -51,6 +61,9 @@ class OutputBlocks:
         B = self.BLOCK
         if n1 <= n0:
             return np.empty(0), np.empty((0, model.N_STATE)), np.empty((0,) + (model.N_STATE,) * 2)
+        if n0 < self.released:
+            raise ValueError(f"online filter: states from {n0} asked for, those before "
+                             f"{self.released} were released")  # fmt: skip
         b0, b1 = n0 // B, (n1 - 1) // B
         parts = [tuple(a[max(n0 - b * B, 0) : min(n1 - b * B, B)] for a in self._blocks[b])
                  for b in range(b0, b1 + 1)]  # fmt: skip

@@ -62,6 +62,7 @@ class OnlineMapper:
         self.dropped: dict[str, int] = {}
         self.hits = self.free = self.ranges = 0
         self._waiting: list[dict] = []  # ranges waiting for the trajectory, per chunk and sensor
+        self._t_queued = -np.inf  # the newest range queued
 
     def push(self, chunk: Log, trajectory: Trajectory) -> int:
         """Queue the chunk's ranges; integrate those the trajectory's final states now cover.
@@ -71,7 +72,12 @@ class OnlineMapper:
         first = int(online.get("first_state", 0))
         final = int(online.get("final_states", first + len(trajectory)))
         self.poses.extend(trajectory, final, first)
-        return self._integrate(self.poses.t_last())
+        n = self._integrate(self.poses.t_last())
+        # later chunks (in time order) bring ranges from the newest queued on: the states
+        # before those still waiting and before it are no longer needed
+        need = min([self._t_queued] + [float(w["t"][0]) for w in self._waiting])
+        self.poses.drop_before(need)
+        return n
 
     @property
     def states_used(self) -> int:
@@ -81,8 +87,10 @@ class OnlineMapper:
 
     def finish(self, trajectory: Trajectory) -> int:
         """Integrate the ranges still waiting that lie inside the final trajectory's span (the
-        rest are dropped as outside it). Returns the number integrated."""
-        self.poses.extend(trajectory, len(trajectory))
+        rest are dropped as outside it); ``trajectory``: from state ``metadata["online"]
+        ["first_state"]`` on (0 when absent). Returns the number integrated."""
+        first = int(trajectory.metadata.get("online", {}).get("first_state", 0))
+        self.poses.extend(trajectory, first + len(trajectory), first)
         return self._integrate(np.inf)
 
     def occupancy(self) -> OccupancyMap:
@@ -135,6 +143,7 @@ class OnlineMapper:
 
     def _wait(self, kind, t, r, unit, mount, sigma0, sensor) -> None:
         if t.size:
+            self._t_queued = max(self._t_queued, float(t[-1]))
             self._waiting.append({"kind": kind, "t": t, "r": r, "unit": unit, "mount": mount,
                                   "sigma0": sigma0, "sensor": sensor})  # fmt: skip
 
@@ -142,20 +151,24 @@ class OnlineMapper:
         """Integrate the waiting ranges with t <= until inside the poses' span."""
         if self.poses.n == 0:
             return 0
-        first, last = self.poses.t[0], self.poses.t_last()
+        first, last = self.poses.t_first, self.poses.t_last()
+        kept = self.poses.t_kept()
         parts, still = [], []
         for w in self._waiting:
             if w["t"][0] > until:  # all of it still waits
                 still.append(w)
                 continue
-            if w["t"][0] >= first and w["t"][-1] <= last:  # all of it now
+            if w["t"][0] >= kept and w["t"][-1] <= last:  # all of it now
                 parts.append(self._rays(w, slice(None)))
                 continue
             now = w["t"] <= until
             outside = now & ((w["t"] < first) | (w["t"] > last))
-            take = now & ~outside
-            key = f"{w['kind']}_outside_trajectory"
-            self.dropped[key] = self.dropped.get(key, 0) + int(outside.sum())
+            gone = now & ~outside & (w["t"] < kept)  # (a chunk older than those pushed before)
+            take = now & ~outside & ~gone
+            for key, count in ((f"{w['kind']}_outside_trajectory", outside.sum()),
+                               (f"{w['kind']}_before_the_states_kept", gone.sum())):
+                if count:
+                    self.dropped[key] = self.dropped.get(key, 0) + int(count)
             if take.any():
                 parts.append(self._rays(w, take))
             if not now.all():
@@ -183,17 +196,29 @@ class OnlineMapper:
 class _Poses:
     """The trajectory's states used so far: t, position, rpy unwrapped as numpy.unwrap does
     along the whole trajectory (continued state by state), position variance; grown by
-    doubling."""
+    doubling. ``n`` counts every state taken; the arrays hold those from number ``base`` on
+    (:meth:`drop_before` lets go of the states no range can need any more: a day's dive keeps
+    a window, not the dive)."""
 
     def __init__(self) -> None:
         self.n = 0
+        self.base = 0
+        self.t_first = np.inf  # the first state's time (kept when its row is dropped)
         self.t = np.empty(0)
         self.pos, self.ang, self.var = np.empty((0, 3)), np.empty((0, 3)), np.empty((0, 3))
         self._raw_last = None  # the last state's wrapped rpy
         self._correction = None  # numpy.unwrap's running sum of corrections (None: one state)
 
+    @property
+    def held(self) -> int:
+        return self.n - self.base
+
     def t_last(self) -> float:
-        return float(self.t[self.n - 1]) if self.n else -np.inf
+        return float(self.t[self.held - 1]) if self.held else -np.inf
+
+    def t_kept(self) -> float:
+        """The time of the first state held (ranges before it can no longer be placed)."""
+        return float(self.t[0]) if self.held else np.inf
 
     def extend(self, trajectory: Trajectory, upto: int, first: int = 0) -> None:
         """Take states n..upto-1 of a trajectory whose first state is number ``first``."""
@@ -201,14 +226,30 @@ class _Poses:
             return
         if first > self.n:
             raise ValueError(f"online map: states from {self.n} needed, given from {first}")
-        sl, src = slice(self.n, upto), slice(self.n - first, upto - first)
+        sl = slice(self.held, upto - self.base)
+        src = slice(self.n - first, upto - first)
         raw = np.asarray(trajectory.orientation[src], float)
-        self._grow(upto)
+        self._grow(upto - self.base)
         self.t[sl] = trajectory.t[src]
         self.pos[sl] = trajectory.position[src]
         self.var[sl] = np.einsum("nii->ni", trajectory.P[src, :3, :3])
         self.ang[sl] = self._unwrap(raw)
+        if self.n == 0:
+            self.t_first = float(self.t[0])
         self.n = upto
+
+    def drop_before(self, t: float) -> None:
+        """Let go of the states before the last one at or before ``t`` (:meth:`at` of times
+        >= t uses none of them), once they are at least half of those held (the copy is
+        then amortized)."""
+        k = int(np.searchsorted(self.t[: self.held], t, "right")) - 1
+        if k <= 0 or 2 * k < self.held:
+            return
+        m = self.held - k
+        for name in ("t", "pos", "ang", "var"):
+            a = getattr(self, name)
+            a[:m] = a[k : self.held]
+        self.base += k
 
     def _unwrap(self, raw: np.ndarray) -> np.ndarray:
         """numpy.unwrap's up[k] = p[k] + cumsum(correction)[k] (period 2 pi), continued."""
@@ -240,12 +281,13 @@ class _Poses:
         for name in ("t", "pos", "ang", "var"):
             old = getattr(self, name)
             new = np.empty((size, *old.shape[1:]))
-            new[: self.n] = old[: self.n]
+            new[: self.held] = old[: self.held]
             setattr(self, name, new)
 
     def at(self, t: np.ndarray):
         """pose_at over the states around t (the same values as over all of them)."""
-        lo = max(int(np.searchsorted(self.t[: self.n], t.min(), "right")) - 1, 0)
-        hi = min(int(np.searchsorted(self.t[: self.n], t.max(), "left")) + 1, self.n)
+        held = self.held
+        lo = max(int(np.searchsorted(self.t[:held], t.min(), "right")) - 1, 0)
+        hi = min(int(np.searchsorted(self.t[:held], t.max(), "left")) + 1, held)
         sl = slice(lo, hi)
         return pose_at(self.t[sl], self.pos[sl], self.ang[sl], self.var[sl], t)
