@@ -119,9 +119,10 @@ def write_npz(path: str | Path, store: TrajectoryStore, variant: str, metadata: 
         "metadata_json": np.array(json.dumps(to_plain(metadata), default=str)),
         **wave_arrays(metadata),
     }
-    with atomic_path(path) as tmp, zipfile.ZipFile(
-        tmp, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True
-    ) as zf:
+    with (
+        atomic_path(path) as tmp,
+        zipfile.ZipFile(tmp, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as zf,
+    ):
         for name, a in zip(ROW_SHAPES, arrays, strict=True):
             with zf.open(f"{name}.npy", "w", force_zip64=True) as fid:
                 header = {"descr": "<f8", "fortran_order": False, "shape": a.shape}
@@ -231,3 +232,31 @@ class StoredTrajectory:
     def save_npz(self, path: str | Path, chunk: int = CHUNK_STATES) -> Path:
         """The trajectory.npz of :meth:`Trajectory.save_npz`, streamed (:func:`write_npz`)."""
         return write_npz(path, self.store, self.variant, self.metadata, chunk)
+
+
+@dataclass(frozen=True, eq=False)
+class NpzTrajectory:
+    """A trajectory.npz on disk, read lazily: its variant and metadata at once, the rest when
+    asked (:meth:`pose_track` chunk by chunk, :meth:`load` whole)."""
+
+    path: Path
+    variant: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    @classmethod
+    def open(cls, path: str | Path) -> NpzTrajectory:
+        path = npz_path(path)
+        return cls(path, *npz_header(path))
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.concatenate([*npz_rows(self.path, "t"), np.empty(0)])
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    def pose_track(self, chunk: int = CHUNK_STATES) -> PoseTrack:
+        return PoseTrack.from_npz(self.path, chunk)
+
+    def load(self) -> Trajectory:
+        return Trajectory.load_npz(self.path)

@@ -120,14 +120,15 @@ class Localizer:
         self.wave = wave
         self.extrapolate = outside_policy(extrapolate, default=PHYSICS)
 
-    def run(self, log: Log, store: TrajectoryStore | None = None) -> Trajectory:
+    def run(self, log: Log, store: TrajectoryStore | None = None,
+            store_rows: int = FILTER_ROWS) -> Trajectory:  # fmt: skip
         """Filter the whole log; (x, P) at every processed measurement time (or output rate).
         The metadata records the wave condition used and where it came from, the states the
         log's sensors leave unobserved, and the innovations' consistency per sensor
         (``consistency``, :mod:`undertow.estimation.consistency`).
 
         With ``store`` (a :class:`~undertow.trajectory_chunks.TrajectoryStore`; no output rate)
-        the states go to it chunk by chunk (:func:`filter_to_store`) and a
+        the states go to it every ``store_rows`` measurements (:func:`filter_to_store`) and a
         :class:`~undertow.trajectory_chunks.StoredTrajectory` is returned: the same states, on
         disk."""
         cfg = self.config
@@ -150,7 +151,7 @@ class Localizer:
                 _output_times(meas["t"], cfg.output_rate_hz), r_adapted, whitened,
             )  # fmt: skip
         else:
-            counts, nis = filter_to_store(*records, r_adapted, whitened, store)
+            counts, nis = filter_to_store(*records, r_adapted, whitened, store, store_rows)
         counts = {**rejected, **dict(zip(filter_loop.COUNT_NAMES, counts.tolist(), strict=True))}
         _warn_if_frozen(counts, int(meas.size))
         rows = np.bincount(meas["kind"], minlength=len(model.KIND_NAMES))
