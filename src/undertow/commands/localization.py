@@ -34,7 +34,7 @@ from ..evaluation.drift import (
     reference_track,
     trajectory_drift,
 )
-from ..evaluation.trajectory import TrajectoryErrors, trajectory_rmse
+from ..evaluation.trajectory import PoseStates, TrajectoryErrors, trajectory_rmse
 from ..io.results import save_trajectory
 from ..io.trajectory_stream import save_stored_trajectory
 from ..io.tum import read_tum
@@ -259,7 +259,7 @@ def evaluate_trajectory_file(estimate: str | Path, ground_truth: str | Path | No
     caught: list[str] = []
     errors = drift = None
     with collect_warnings(caught):
-        trajectory = Trajectory.load_npz(estimate)
+        trajectory = PoseStates.from_npz(estimate)  # chunk by chunk: the pose block of P
         if reference is not None:
             track = reference_track(load_log(ground_truth, topics, settings), reference)
             drift = trajectory_drift(trajectory, track, align, checkpoints)
