@@ -28,6 +28,7 @@ STAGE_OF = {
     "records": "core",
     "robot": "core",
     "trajectory": "core",
+    "trajectory_chunks": "core",
     "occupancy": "core",
     "wavetrack": "core",
     "_util": "core",

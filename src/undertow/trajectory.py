@@ -92,7 +92,7 @@ class Trajectory:
                 state_names=np.array(STATE_NAMES),
                 variant=np.array(self.variant),
                 metadata_json=np.array(metadata),
-                **_wave_arrays(self.metadata),
+                **wave_arrays(self.metadata),
             )
         return path
 
@@ -102,7 +102,7 @@ class Trajectory:
         path = Path(path)
         if path.is_dir():
             path = path / "trajectory.npz"
-        _check_npz(path)
+        check_npz(path)
         try:
             with np.load(path, allow_pickle=False) as data:
                 metadata = {}
@@ -129,7 +129,7 @@ class Trajectory:
 _NOT_NPZ = "not a trajectory.npz written by `undertow localize`"
 
 
-def _wave_arrays(metadata: dict) -> dict:
+def wave_arrays(metadata: dict) -> dict:
     """The wave condition the filter followed over time (metadata ``wave_track``, e.g. from
     ``--wave auto``) as arrays ``wave_t``, ``wave_amplitude_m``, ``wave_frequency_hz`` (NaN
     where calm); none for a constant condition."""
@@ -144,7 +144,7 @@ def _wave_arrays(metadata: dict) -> dict:
     }
 
 
-def _check_npz(path: Path) -> None:
+def check_npz(path: Path) -> None:
     """A file that is not a zip archive (an .npz is one) is refused before numpy reads it, which
     would talk about pickled data: a TUM file in particular holds poses without covariances."""
     try:

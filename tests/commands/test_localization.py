@@ -310,3 +310,41 @@ def test_wrong_files_are_one_line_naming_what_they_should_be(run, tmp_path):
     line = _error_line(_localize(run, "--profile", str(profile), "--overwrite"))
     assert f"{profile}: noise profile field conditions.0.dvl_std: Field required" in line
     assert "KeyError" not in line
+
+
+@pytest.mark.slow
+def test_a_log_localized_on_disk_gives_the_files_map_and_metrics_of_one_in_memory(run, tmp_path):
+    """localize --smooth with the states on disk (chunked) writes the TUM and config.yaml bytes
+    and the npz arrays of the in-memory run, leaves no store behind; `map` (which now reads the
+    poses chunk by chunk) gives the map of map_log on the whole loaded Trajectory, and
+    `evaluate trajectory` the same metrics, from either folder."""
+    from undertow.commands.common import load_log
+    from undertow.commands.localization import evaluate_trajectory_file, localize_file
+    from undertow.commands.mapping import map_file
+    from undertow.mapping.config import MappingConfig
+    from undertow.mapping.run import map_log
+    from undertow.trajectory import Trajectory
+    from undertow.trajectory_chunks import NpzTrajectory
+
+    log, gt = run / "run" / "log", run / "run" / "ground_truth.tum"
+    mem = localize_file(log, smooth=True, out_dir=tmp_path / "mem", chunked=False)
+    disk = localize_file(log, smooth=True, out_dir=tmp_path / "disk", chunked=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["disk", "mem"]  # no store left
+    assert isinstance(disk.trajectory, NpzTrajectory) and disk.warnings == mem.warnings
+    assert disk.trajectory.metadata == Trajectory.load_npz(tmp_path / "mem").metadata
+    assert disk.counts == mem.counts and disk.consistency == mem.consistency
+    for name in ("trajectory.tum", "config.yaml"):
+        assert (tmp_path / "disk" / name).read_bytes() == (tmp_path / "mem" / name).read_bytes()
+    a, b = (np.load(tmp_path / f / "trajectory.npz") for f in ("mem", "disk"))
+    assert a.files == b.files
+    for key in a.files:
+        np.testing.assert_array_equal(a[key], b[key])
+    cheap = MappingConfig(method="csm", resolution=0.2)
+    today = map_log(load_log(log), Trajectory.load_npz(tmp_path / "mem"), cheap).map
+    for folder in ("mem", "disk"):
+        got = map_file(log, tmp_path / folder, method="csm", resolution=0.2).map
+        assert len(got) == len(today) > 0
+        for key in ("cells", "alpha", "beta"):
+            np.testing.assert_array_equal(getattr(got, key), getattr(today, key))
+    assert (evaluate_trajectory_file(tmp_path / "disk", gt).to_dict()
+            == evaluate_trajectory_file(tmp_path / "mem", gt).to_dict())  # fmt: skip

@@ -12,10 +12,11 @@ from test_nis import PARAMS, simulate
 from undertow._util.plain import to_plain
 from undertow.errors import ConfigError, DataError
 from undertow.estimation import Localizer, LocalizerConfig, ukf
-from undertow.estimation.smoother import _rts_step, _rts_workspace, smooth
+from undertow.estimation.smoother import _rts_step, _rts_workspace, smooth, smooth_store
 from undertow.log import Imu
 from undertow.rotations import wrap_angle
 from undertow.trajectory import Trajectory
+from undertow.trajectory_chunks import TrajectoryStore
 
 
 def test_linear_gaussian_equals_closed_form_rts():
@@ -172,3 +173,29 @@ def test_npz_without_metadata_still_loads(tmp_path):
     assert old.metadata == {} and old.variant == "be"
     with pytest.raises(ConfigError, match="carries no filter config"):
         smooth(old)
+
+
+@pytest.mark.parametrize("variant", ["be", "baseline"])
+def test_smoothing_a_store_backward_in_chunks_is_the_whole_smoother_bit_for_bit(tmp_path, variant):
+    """The filter writing its states to disk every 7 rows and the smoother rewriting them
+    backward in chunks of 3 states (chunks of 1 and of all too) give exactly the arrays and
+    metadata of the in-memory run and smoother."""
+    cfg = LocalizerConfig(variant=variant, **(PARAMS if variant == "be" else NO_BIAS))
+    log, _, _ = simulate(cfg, duration=3.0, seed=2)
+    localizer = Localizer(**cfg.model_dump())
+    whole = localizer.run(log)
+    ref = smooth(whole)
+    for chunk in (1, 3, len(whole) + 5):
+        store = TrajectoryStore(tmp_path / f"s{chunk}")
+        stored = localizer.run(log, store=store, store_rows=7)
+        assert stored.metadata == whole.metadata
+        filtered = store.trajectory()
+        for name in "txP":
+            np.testing.assert_array_equal(getattr(filtered, name), getattr(whole, name))
+        meta = smooth_store(store, stored.metadata, chunk=chunk)
+        assert meta == ref.metadata
+        back = store.trajectory()
+        np.testing.assert_array_equal(back.x, ref.x)
+        np.testing.assert_array_equal(back.P, ref.P)
+    with pytest.raises(ConfigError, match="already smoothed"):
+        smooth_store(store, meta)

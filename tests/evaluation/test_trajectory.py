@@ -5,6 +5,7 @@ import pytest
 
 from undertow.errors import DataError
 from undertow.evaluation.trajectory import (
+    PoseStates,
     pose_nees,
     trajectory_rmse,
 )
@@ -220,3 +221,23 @@ def test_a_tum_file_is_not_a_trajectory_npz(tmp_path):
     with pytest.raises(ReaderError, match="not a trajectory.npz") as info:
         Trajectory.load_npz(tmp_path / "junk.npz")
     assert "pickled" not in str(info.value)
+
+
+@pytest.mark.parametrize("align", ["none", "origin"])
+def test_the_pose_states_read_in_chunks_give_the_metrics_of_the_whole_trajectory(tmp_path, align):
+    """PoseStates.from_npz (t, x[:, :9], P[:, :6, :6], read 7 states at a time) gives exactly
+    the errors of the whole Trajectory, non-finite rows dropped alike."""
+    gt = _carriage()
+    est = _estimate(gt, np.linspace(1, 19, 120), dpos=(0.3, -0.1, 0.05), dyaw=0.02)
+    rng = np.random.default_rng(1)
+    A = rng.normal(size=(len(est), 18, 18)) * 0.05
+    x = est.x + rng.normal(size=est.x.shape) * 0.01
+    x[5, 0] = np.nan
+    est = est.replace(x=x, P=A @ np.swapaxes(A, 1, 2) + est.P)
+    est.save_npz(tmp_path / "trajectory.npz")
+    states = PoseStates.from_npz(tmp_path, chunk=7)
+    np.testing.assert_array_equal(states.P, est.P[:, :6, :6])
+    with pytest.warns(RuntimeWarning, match="dropped 1 samples"):
+        whole = trajectory_rmse(est, gt, align=align)
+    with pytest.warns(RuntimeWarning, match="dropped 1 samples"):
+        assert trajectory_rmse(states, gt, align=align) == whole

@@ -13,6 +13,7 @@ prints out::
 
 from __future__ import annotations
 
+import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,11 +34,13 @@ from ..evaluation.drift import (
     reference_track,
     trajectory_drift,
 )
-from ..evaluation.trajectory import TrajectoryErrors, trajectory_rmse
+from ..evaluation.trajectory import PoseStates, TrajectoryErrors, trajectory_rmse
 from ..io.results import save_trajectory
+from ..io.trajectory_stream import save_stored_trajectory
 from ..io.tum import read_tum
 from ..settings import Settings
 from ..trajectory import Trajectory
+from ..trajectory_chunks import NpzTrajectory, TrajectoryStore
 from .common import as_settings, collect_warnings, load_log
 
 
@@ -47,9 +50,10 @@ class LocalizationResult:
     condition the filter used and where it came from (``WAVE_GIVEN``, ``WAVE_DEFAULT`` of
     :mod:`undertow.estimation.localizer`, or the place in the log that recorded it), whether the
     variant added that condition's noise, the measurement counters, the warnings raised, and
-    the folder written (None when none was asked for)."""
+    the folder written (None when none was asked for). The trajectory of a log filtered on
+    disk (``chunked``) is the written trajectory.npz, read lazily."""
 
-    trajectory: Trajectory
+    trajectory: Trajectory | NpzTrajectory
     wave: str
     wave_source: str
     wave_noise_added: bool
@@ -70,7 +74,7 @@ class LocalizationResult:
 def localize_file(path: str | Path, settings: Settings | str | Path | None = None, *,
                   topics: str | Path | None = None, out_dir: str | Path | None = None,
                   overwrite: bool = False, profile=None, wave=None, calibration=None,
-                  extrapolate: bool = False, smooth: bool = False,
+                  extrapolate: bool = False, smooth: bool = False, chunked: bool | None = None,
                   **overrides) -> LocalizationResult:  # fmt: skip
     """Localize the log at ``path`` with the paper's UKF (see
     :func:`~undertow.estimation.localizer.localize` for what it takes from the log and the
@@ -84,7 +88,13 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     the one the log records, else calm; ``"auto"`` estimates it over time from the log's own
     sensors (:mod:`undertow.seastate`); ``calibration``: a Calibration or its YAML file.
     The options are checked before the log is read; with ``out_dir`` the folder is checked too
-    and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``)."""
+    and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``).
+
+    ``chunked``: filter (and smooth) into a store on disk next to ``out_dir`` and write the
+    folder from it chunk by chunk (:mod:`undertow.trajectory_chunks`; the same files); None
+    (default) does so for a log of more than :data:`STORE_ABOVE_ROWS` filter rows written to
+    ``out_dir`` at every state. The result's trajectory is then the written trajectory.npz,
+    read lazily (:class:`~undertow.trajectory_chunks.NpzTrajectory`)."""
     settings_path = None if isinstance(settings, Settings) else settings
     settings = as_settings(settings)
     params = {**settings.localizer_params(), **overrides}
@@ -96,9 +106,19 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(path, topics, settings)
-        trajectory = localize(log, profile=profile, wave=wave, calibration=calibration,
-                              extrapolate=extrapolate, smooth=smooth, **params)  # fmt: skip
-    if out_dir is not None:
+        store = _store(chunked, log, params, out_dir)
+        try:
+            trajectory = localize(log, profile=profile, wave=wave, calibration=calibration,
+                                  extrapolate=extrapolate, smooth=smooth, store=store,
+                                  **params)  # fmt: skip
+            if store is not None:
+                del log  # the log's arrays are not needed to write the folder
+                save_stored_trajectory(trajectory, out_dir, overwrite)
+                trajectory = NpzTrajectory.open(Path(out_dir) / "trajectory.npz")
+        finally:
+            if store is not None:
+                store.remove()
+    if out_dir is not None and store is None:
         save_trajectory(trajectory, out_dir, overwrite)
     meta = trajectory.metadata
     return LocalizationResult(
@@ -110,6 +130,29 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
         warnings=tuple(caught),
         out_dir=None if out_dir is None else Path(out_dir),
     )
+
+
+#: filter rows (IMU, DVL, DR, barometer) above which `localize` keeps its states on disk (about
+#: half an hour of a BlueROV2 log at 100 Hz: 0.5 GB of covariances)
+STORE_ABOVE_ROWS = 200_000
+
+
+def _store(chunked: bool | None, log, params: dict, out_dir) -> TrajectoryStore | None:
+    """The on-disk store for the states (a hidden folder beside ``out_dir``), or None to keep
+    them in memory: ``chunked`` as given, else by the log's filter rows (STORE_ABOVE_ROWS);
+    never without ``out_dir`` or for a decimated output."""
+    if out_dir is None or params.get("output_rate_hz") is not None:
+        if chunked:
+            raise ConfigError("chunked: needs an output folder and every state (no output rate)")
+        return None
+    if chunked is None:
+        streams = (log.imu, log.dvl, log.dead_reckoning, log.pressure)
+        chunked = sum(len(s) for s in streams if s is not None) > STORE_ABOVE_ROWS
+    if not chunked:
+        return None
+    out = Path(out_dir).absolute()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return TrajectoryStore(tempfile.mkdtemp(prefix=f".{out.name}.states-", dir=out.parent))
 
 
 def is_auto(wave) -> bool:
@@ -216,7 +259,7 @@ def evaluate_trajectory_file(estimate: str | Path, ground_truth: str | Path | No
     caught: list[str] = []
     errors = drift = None
     with collect_warnings(caught):
-        trajectory = Trajectory.load_npz(estimate)
+        trajectory = PoseStates.from_npz(estimate)  # chunk by chunk: the pose block of P
         if reference is not None:
             track = reference_track(load_log(ground_truth, topics, settings), reference)
             drift = trajectory_drift(trajectory, track, align, checkpoints)

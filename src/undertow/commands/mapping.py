@@ -50,6 +50,7 @@ from ..mapping.tpu import with_wave
 from ..occupancy import MAP_FILE, OccupancyMap
 from ..settings import Settings
 from ..trajectory import Trajectory
+from ..trajectory_chunks import PoseTrack
 from .common import as_settings, collect_warnings, load_log, npz_file
 
 #: options that only one mapping method uses: giving one for another method is an error
@@ -126,8 +127,9 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
 
 def _read_trajectory(path, settings: Settings, stated: TrajectoryOptions | None):
     """A TUM file (by its content) as a :class:`TumInput` (finished against the log), else a
-    trajectory.npz or its folder as ``(Trajectory, its file)``; ``stated`` options (pose std,
-    frame) with a trajectory.npz are an error: it carries its own covariance, in NED."""
+    trajectory.npz or its folder as ``(PoseTrack, its file)`` (what the mapper reads of it,
+    :class:`~undertow.trajectory_chunks.PoseTrack`, read chunk by chunk); ``stated`` options
+    (pose std, frame) with a trajectory.npz are an error: it carries its own covariance, in NED."""
     if is_tum_file(path):
         return read_tum_input(path, settings.trajectory, stated)
     file = npz_file(path, "trajectory.npz", _TRAJECTORY_NPZ)
@@ -136,10 +138,10 @@ def _read_trajectory(path, settings: Settings, stated: TrajectoryOptions | None)
             f"pose_std and trajectory_frame (--pose-std, --trajectory-frame) apply to a TUM "
             f"trajectory; {file} carries its own covariance, in undertow's NED frame"
         )
-    return Trajectory.load_npz(file), file
+    return PoseTrack.from_npz(file), file  # the poses and their variance, chunk by chunk
 
 
-def _trajectory_for_log(given, log, config: MappingConfig) -> tuple[Trajectory, dict]:
+def _trajectory_for_log(given, log, config: MappingConfig) -> tuple[Trajectory | PoseTrack, dict]:
     """The trajectory to map ``log`` with and what config.yaml records of it (file, format,
     frame, covariance); a constant pose std under the adaptive kernel's session
     normalization is a warning: every sample gets the same kernel (l_min)."""

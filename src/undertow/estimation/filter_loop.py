@@ -105,17 +105,17 @@ def start_state(t0, x0, P0, process, Ra):
                        np.zeros((4, len(NIS_FIELDS))))  # fmt: skip
 
 
-def resume_filter(meas, state: FilterState, process, sensors, flush: bool):
+def resume_filter(meas, state: FilterState, process, sensors, flush: bool, innovations=None):
     """Filter the rows ``meas`` (:data:`MEASUREMENT`, time-sorted, none before the state's last
     row) from ``state``, advanced in place. Returns (out_t, out_x, out_P): the states recorded,
     one per distinct time; the last row's state is recorded only with ``flush`` (else when the
     next call's first row has a later time), so rows fed in any pieces give the outputs and
-    final state of one :func:`run_filter` over them all, bit for bit."""
+    final state of one :func:`run_filter` over them all, bit for bit. ``innovations``
+    (len(meas), 3), optional: the rows' whitened innovations, as in :func:`run_filter`."""
     t, kind, z, R = _columns(meas)
     n_out = _distinct_times(t) + 1 if t.size else 1
-    return _filter_from(
-        t, kind, z, R, state, process, sensors, None, n_out, flush, np.empty((0, 3))
-    )
+    record = np.empty((0, 3)) if innovations is None or t.size == 0 else innovations
+    return _filter_from(t, kind, z, R, state, process, sensors, None, n_out, flush, record)
 
 
 def pack_measurements(t, kind, z, R) -> np.ndarray:

@@ -67,6 +67,7 @@ from ..errors import ConfigError, MissingStreamError
 from ..io.units import reading_record
 from ..log import Log
 from ..trajectory import Trajectory
+from ..trajectory_chunks import StoredTrajectory, TrajectoryStore
 from ..wavetrack import WaveTrack
 from . import filter_loop, model
 from .calibration import Calibration
@@ -77,6 +78,7 @@ from .noise import NoiseProfile
 from .noise_physics import PHYSICS, REFUSE, extrapolation_note, outside_policy, sensor_site
 from .rows import depth_reference, initial_state, measurements, start_attitude
 from .smoother import smooth as urts_smooth
+from .smoother import smooth_store
 
 # a run where more than this fraction of the processed measurements needed a covariance repair
 # or a reverted step (or were gated) is reported: the track is then mostly frozen
@@ -87,6 +89,8 @@ WAVE_GIVEN = "given"
 WAVE_DEFAULT = "default"
 WAVE_ESTIMATED = "estimated from the log (undertow.seastate)"
 WAVE_AUTO = "auto"
+# measurements filtered between two appends to a trajectory store (about 10 000 states)
+FILTER_ROWS = 12_000
 
 
 class MissingSensorError(ConfigError, MissingStreamError):
@@ -116,12 +120,21 @@ class Localizer:
         self.wave = wave
         self.extrapolate = outside_policy(extrapolate, default=PHYSICS)
 
-    def run(self, log: Log) -> Trajectory:
+    def run(self, log: Log, store: TrajectoryStore | None = None,
+            store_rows: int = FILTER_ROWS) -> Trajectory:  # fmt: skip
         """Filter the whole log; (x, P) at every processed measurement time (or output rate).
         The metadata records the wave condition used and where it came from, the states the
         log's sensors leave unobserved, and the innovations' consistency per sensor
-        (``consistency``, :mod:`undertow.estimation.consistency`)."""
+        (``consistency``, :mod:`undertow.estimation.consistency`).
+
+        With ``store`` (a :class:`~undertow.trajectory_chunks.TrajectoryStore`; no output rate)
+        the states go to it every ``store_rows`` measurements (:func:`filter_to_store`) and a
+        :class:`~undertow.trajectory_chunks.StoredTrajectory` is returned: the same states, on
+        disk."""
         cfg = self.config
+        if store is not None and cfg.output_rate_hz is not None:
+            raise ConfigError("Localizer: a trajectory store takes every state (output_rate_hz "
+                              "None); a decimated trajectory fits in memory")  # fmt: skip
         unobserved, held = sensor_coverage(log, cfg)
         check_mounting(log.mounting)
         noise, wave_meta = self.wave_noise(log)
@@ -131,11 +144,14 @@ class Localizer:
         x0, P0 = initial_state(log, cfg)
         r_adapted = np.zeros((len(model.KIND_NAMES), 3, 3))
         whitened = np.full((meas.size, 3), np.nan)  # each row's innovation, for the report
-        out_t, out_x, out_P, counts, nis = filter_loop.run_filter(
-            meas, float(meas["t"][0]), x0, P0, cfg.process_model(held=held),
-            cfg.sensor_model(log.mounting), _output_times(meas["t"], cfg.output_rate_hz),
-            r_adapted, whitened,
-        )  # fmt: skip
+        records = (meas, x0, P0, cfg.process_model(held=held), cfg.sensor_model(log.mounting))
+        if store is None:
+            out_t, out_x, out_P, counts, nis = filter_loop.run_filter(
+                meas, float(meas["t"][0]), *records[1:],
+                _output_times(meas["t"], cfg.output_rate_hz), r_adapted, whitened,
+            )  # fmt: skip
+        else:
+            counts, nis = filter_to_store(*records, r_adapted, whitened, store, store_rows)
         counts = {**rejected, **dict(zip(filter_loop.COUNT_NAMES, counts.tolist(), strict=True))}
         _warn_if_frozen(counts, int(meas.size))
         rows = np.bincount(meas["kind"], minlength=len(model.KIND_NAMES))
@@ -156,6 +172,8 @@ class Localizer:
         }
         if cfg.adapts_r:
             metadata["adaptive_r"] = adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)
+        if store is not None:
+            return StoredTrajectory(store, variant=cfg.variant, metadata=metadata)
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
 
     def wave_noise(self, log: Log):
@@ -196,6 +214,21 @@ class Localizer:
         return noise, meta
 
 
+def filter_to_store(meas, x0, P0, process, sensors, r_adapted, innovations, store,
+                    rows: int = FILTER_ROWS) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """:func:`~undertow.estimation.filter_loop.run_filter` (every state, no output rate) with
+    its states appended to ``store`` after each ``rows`` measurements
+    (:func:`~undertow.estimation.filter_loop.resume_filter`: the same states bit for bit).
+    Returns (counts, nis)."""
+    state = filter_loop.start_state(float(meas["t"][0]), x0, P0, process, r_adapted)
+    for k0 in range(0, meas.size, rows):
+        k1 = min(k0 + rows, meas.size)
+        out = filter_loop.resume_filter(meas[k0:k1], state, process, sensors, k1 == meas.size,
+                                        innovations[k0:k1])  # fmt: skip
+        store.append(*out)
+    return state.counts, state.nis
+
+
 def localize(
     log: Log,
     variant: str | None = None,
@@ -204,10 +237,14 @@ def localize(
     calibration: Calibration | str | Path | None = None,
     extrapolate: bool = False,
     smooth: bool = False,
+    store: TrajectoryStore | None = None,
     **params,
 ) -> Trajectory:
     """Run the UKF ``variant`` on ``log`` (optionally URTS-smoothed); see the module docstring
-    for what it fills from the log and ``calibration`` (a Calibration or its YAML file)."""
+    for what it fills from the log and ``calibration`` (a Calibration or its YAML file).
+    With ``store`` the states are filtered into it and smoothed there, backward chunk by chunk
+    (:func:`~undertow.estimation.smoother.smooth_store`), and a
+    :class:`~undertow.trajectory_chunks.StoredTrajectory` is returned."""
     if variant is not None:
         params["variant"] = variant
     config = check_options(smooth, params)
@@ -220,8 +257,11 @@ def localize(
         filled["water_density_kg_m3"] = float(log.metadata["water_density_kg_m3"])
     localizer = Localizer(profile=profile, wave=wave, extrapolate=extrapolate,
                           **{**filled, **params})  # fmt: skip
-    trajectory = localizer.run(log)
-    if smooth:
+    trajectory = localizer.run(log, store=store)
+    if smooth and store is not None:
+        meta = smooth_store(store, trajectory.metadata, localizer.config)
+        trajectory = trajectory.replace(metadata=meta)
+    elif smooth:
         trajectory = urts_smooth(trajectory, localizer.config)
     if calibration is not None:
         trajectory.metadata["calibration"] = calibration.to_dict()

@@ -30,6 +30,7 @@ from numba import njit
 from .._util.validate import validate
 from ..errors import ConfigError, DataError
 from ..trajectory import Trajectory
+from ..trajectory_chunks import CHUNK_STATES, TrajectoryStore
 from . import model
 from .config import LocalizerConfig
 from .ukf import (
@@ -153,6 +154,51 @@ def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Tra
     ``metadata["smoothed"] = True`` and ``metadata["smoother_counts"]``.
     """
     meta = trajectory.metadata or {}
+    process = _process_model(meta, config)
+    _check_times(trajectory.t)
+    x, P = np.ascontiguousarray(trajectory.x), np.ascontiguousarray(trajectory.P)
+    xs, Ps, counts = _run_smoother(trajectory.t, x, P, *process)
+    return trajectory.replace(x=xs, P=Ps, metadata=smoothed_metadata(meta, counts))
+
+
+def smooth_store(store: TrajectoryStore, metadata: dict, config: LocalizerConfig | None = None,
+                 chunk: int = CHUNK_STATES) -> dict:  # fmt: skip
+    """:func:`smooth` of the filtered states in ``store`` (a
+    :class:`~undertow.trajectory_chunks.TrajectoryStore`), rewritten in place backward chunk by
+    chunk: the chunk [k0, k1) is smoothed with the state k1 already smoothed (the previous
+    chunk's first), which is all step k1 - 1 needs of the states after it, so the states are
+    those of :func:`smooth` bit for bit, with at most ``chunk`` + 1 states in memory.
+    ``metadata``: the trajectory's (config, held bias); returns it as :func:`smooth` would."""
+    meta = metadata or {}
+    process = _process_model(meta, config)
+    t_all, x_all, P_all = store.arrays("r+")
+    t_all = np.array(t_all)
+    _check_times(t_all)
+    counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
+    n = len(store)
+    for k0, k1 in store.chunks(chunk, reverse=True):
+        end = min(k1 + 1, n)  # the next chunk's first state, smoothed already
+        x, P = np.array(x_all[k0:end]), np.array(P_all[k0:end])
+        xs, Ps, c = _run_smoother(t_all[k0:end], x, P, *process)
+        x_all[k0:k1], P_all[k0:k1] = xs[: k1 - k0], Ps[: k1 - k0]
+        counts += c
+    x_all.flush()
+    P_all.flush()
+    return smoothed_metadata(meta, counts)
+
+
+def smoothed_metadata(meta: dict, counts: np.ndarray) -> dict:
+    """The metadata of a smoothed trajectory: ``smoothed`` and the ``smoother_counts``."""
+    return {
+        **meta,
+        "smoothed": True,
+        "smoother_counts": dict(zip(SMOOTHER_COUNT_NAMES, counts.tolist(), strict=True)),
+    }
+
+
+def _process_model(meta: dict, config: LocalizerConfig | None):
+    """The filter's process model for smoothing a trajectory of metadata ``meta`` (the config
+    given, else the one it records), refusing a smoothed or decimated trajectory."""
     if meta.get("smoothed"):
         raise ConfigError("smooth: the trajectory is already smoothed")
     if config is None:
@@ -164,15 +210,9 @@ def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Tra
     if rate is not None or config.output_rate_hz is not None:
         raise ConfigError(f"smooth: the trajectory was decimated (output_rate_hz={rate}); run the "
                           "Localizer with output_rate_hz=None to smooth it")  # fmt: skip
-    t = trajectory.t
+    return config.process_model(held=meta.get("held_bias") or ())
+
+
+def _check_times(t: np.ndarray) -> None:
     if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
         raise DataError("smooth: trajectory times must be finite and strictly increasing")
-    x, P = np.ascontiguousarray(trajectory.x), np.ascontiguousarray(trajectory.P)
-    held = meta.get("held_bias") or ()
-    xs, Ps, counts = _run_smoother(t, x, P, *config.process_model(held=held))
-    metadata = {
-        **meta,
-        "smoothed": True,
-        "smoother_counts": dict(zip(SMOOTHER_COUNT_NAMES, counts.tolist(), strict=True)),
-    }
-    return trajectory.replace(x=xs, P=Ps, metadata=metadata)

@@ -28,19 +28,55 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import DataError, ReaderError
 from ..log import GroundTruth
 from ..rotations import matrix_to_rpy, rpy_to_matrix, world_to_body, wrap_angle
 from ..trajectory import Trajectory
+from ..trajectory_chunks import CHUNK_STATES, npz_header, npz_rows
 
 MIN_SAMPLES = 10  # estimates inside the ground truth needed for an RMSE
 AXES = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz")
 UNITS = ("m", "m", "m", "rad", "rad", "rad", "m_s", "m_s", "m_s")
+
+
+@dataclass(frozen=True, eq=False)
+class PoseStates:
+    """What the evaluation reads of a trajectory: times (N,), the pose and body velocity
+    x[:, :9] and the pose covariance P[:, :6, :6], with the variant and metadata (a tenth of
+    a state's numbers); :meth:`from_npz` reads a trajectory.npz chunk by chunk."""
+
+    t: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    variant: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.x[:, :3]
+
+    def replace(self, **changes) -> PoseStates:
+        return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def from_npz(cls, path, chunk: int = CHUNK_STATES) -> PoseStates:
+        variant, metadata = npz_header(path)
+        t = np.concatenate([*npz_rows(path, "t", chunk), np.empty(0)])
+        x = np.concatenate([*(x[:, :9] for x in npz_rows(path, "x", chunk)), np.empty((0, 9))])
+        P = [P[:, :6, :6] for P in npz_rows(path, "P", chunk)]
+        P = np.concatenate([*P, np.empty((0, 6, 6))])
+        if not (len(t) == len(x) == len(P)):
+            raise ReaderError(f"{path}: t, x and P differ in length")
+        return cls(t, x, P, variant, metadata)
 
 
 @dataclass(frozen=True)
@@ -81,7 +117,7 @@ def _align_origin(pos: np.ndarray, rpy: np.ndarray, gt_pos0, gt_rpy0, P: np.ndar
 
 
 def trajectory_rmse(
-    est: Trajectory,
+    est: Trajectory | PoseStates,
     gt: GroundTruth,
     align: str = "none",
     smoothing_s: float = 0.05,

@@ -1,0 +1,108 @@
+"""Soak: long missions (issue 27, section 4). `make bench ONLY=soak` prints JSON.
+
+Offline (:func:`bench_offline`): a simulated survey of ``hours`` of sensor time (the
+field-survey scenario's lawnmower repeated, one bag, in a temporary folder, not kept) is
+localized with the smoother and mapped, each step in its own process, whose peak RSS
+(``ru_maxrss``) is reported, for the states kept on disk (``chunked``, what `localize` does
+above 200 000 filter rows) and, when ``today`` is set, for the states in memory (the path
+before issue 27), with whether the two wrote the same files (TUM and config.yaml bytes, npz
+arrays). Target: peak RSS under 2 GB at 24 hours. The hours are ``UNDERTOW_SOAK_HOURS``
+(default 24; the generation alone takes about 90 s per simulated hour on this machine).
+
+Live (``bench_live``): to come, in this module.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+#: the field survey's one pass of its lawnmower, s (laps repeat it)
+LAP_S = 649.0
+
+_STEP = r"""
+import json, resource, sys, time, warnings
+warnings.simplefilter("ignore")
+step, log, out, chunked = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4] == "1"
+t0 = time.perf_counter()
+if step == "localize":
+    from undertow.commands.localization import localize_file
+    r = localize_file(log, smooth=True, out_dir=out, chunked=chunked)
+    extra = {"states": len(r.trajectory)}
+else:
+    from undertow.commands.mapping import map_file
+    r = map_file(log, out, out_dir=out + "-map")
+    extra = {"cells": len(r.map)}
+print(json.dumps({"wall_s": round(time.perf_counter() - t0, 1),
+                  "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
+                  **extra}))
+"""
+
+
+def simulate_hours(hours: float, folder: Path) -> Path:
+    """The field survey repeated over ``hours`` (whole laps), written as a bag into
+    ``folder``; returns its log folder."""
+    from undertow.sim import load_scenario, simulate, write_simulation
+
+    s = load_scenario("field-survey")
+    laps = max(1, math.ceil(hours * 3600.0 / LAP_S))
+    route = s.motion.waypoints.model_copy(update={"laps": laps})
+    s = s.model_copy(update={"motion": s.motion.model_copy(update={"waypoints": route})})
+    write_simulation(simulate(s), folder, overwrite=True)
+    return folder / "log"
+
+
+def _step(step: str, log: Path, out: Path, chunked: bool) -> dict:
+    """One step in a fresh process; its JSON line (peak RSS of that process)."""
+    done = subprocess.run(
+        [sys.executable, "-c", _STEP, step, str(log), str(out), "1" if chunked else "0"],
+        capture_output=True, text=True, check=False,
+    )  # fmt: skip
+    if done.returncode:
+        return {"error": done.stderr.strip().splitlines()[-1:]}
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _same_files(a: Path, b: Path) -> bool:
+    import numpy as np
+
+    for name in ("trajectory.tum", "config.yaml"):
+        if (a / name).read_bytes() != (b / name).read_bytes():
+            return False
+    with np.load(a / "trajectory.npz") as x, np.load(b / "trajectory.npz") as y:
+        return x.files == y.files and all(np.array_equal(x[k], y[k]) for k in x.files)
+
+
+def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
+    """Localize (smoothed) and map ``hours`` of simulated survey; peak RSS per step (module
+    doc). ``today`` (default: up to 2 hours) also runs the in-memory path to compare."""
+    today = hours <= 2.0 if today is None else today
+    with tempfile.TemporaryDirectory(prefix="undertow-soak-") as tmp:
+        root = Path(tmp)
+        start = time.perf_counter()
+        log = simulate_hours(hours, root / "sim")
+        out = {"hours": hours, "generate_s": round(time.perf_counter() - start, 1),
+               "log_mb": round(sum(p.stat().st_size for p in log.rglob("*")) / 1e6)}  # fmt: skip
+        for mode in ("chunked", "memory") if today else ("chunked",):
+            folder = root / mode
+            out[mode] = {
+                "localize": _step("localize", log, folder, mode == "chunked"),
+                "map": _step("map", log, folder, mode == "chunked"),
+            }
+        if today:
+            out["same_files"] = _same_files(root / "chunked", root / "memory")
+    return out
+
+
+def main() -> dict:
+    return {"offline": bench_offline(float(os.environ.get("UNDERTOW_SOAK_HOURS", "24")))}
+
+
+if __name__ == "__main__":
+    print(json.dumps(main(), indent=2))

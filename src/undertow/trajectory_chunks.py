@@ -1,0 +1,262 @@
+"""A trajectory too long for memory: the filter's states on disk in chunks, read back lazily.
+
+Three pieces, for a log of any length (a day-long log at 100 states/s has 8.6 million states;
+their 18x18 covariances alone are 22 GB):
+
+- :class:`TrajectoryStore`: the working store the filter appends to and the smoother rewrites
+  backward, a folder of three raw float64 files (``t.f8`` (N,), ``x.f8`` (N, 18), ``P.f8``
+  (N, 18, 18), C order, little-endian) read through ``numpy.memmap``: appending is a write at
+  the end, a chunk anywhere is a slice, and only the chunks in use are in memory;
+- :func:`write_npz`: the user's ``trajectory.npz`` streamed from such chunks, the same archive
+  :meth:`~undertow.trajectory.Trajectory.save_npz` writes (the same members, dtypes and
+  ``.npy`` headers; each member deflated as a stream), so
+  :meth:`~undertow.trajectory.Trajectory.load_npz` reads either;
+- :func:`npz_rows` and :class:`PoseTrack`: a ``trajectory.npz`` read chunk by chunk (each
+  member decompressed as a stream), keeping only what a consumer needs: the mapper takes the
+  times, poses and position variances (10 of the 342 numbers of a state).
+
+Why raw files and not zarr: the store is a scratch space for one forward and one backward
+pass (uncompressed, so that a chunk is a slice with no codec), and the published format stays
+the ``trajectory.npz`` every reader of undertow already takes; no new dependency.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ._util.atomic import atomic_path
+from ._util.plain import to_plain
+from .errors import ReaderError
+from .trajectory import (
+    ORIENTATION,
+    POSITION,
+    STATE_NAMES,
+    Trajectory,
+    check_npz,
+    wave_arrays,
+)
+
+N_STATE = len(STATE_NAMES)
+#: the shape of one state's row in each stored array
+ROW_SHAPES = {"t": (), "x": (N_STATE,), "P": (N_STATE, N_STATE)}
+#: states per chunk read or written at once (about 26 MB of covariances)
+CHUNK_STATES = 10_000
+
+
+class TrajectoryStore:
+    """States (t, x, P) in a folder of raw float64 files (module doc), appended in time order.
+
+    ``TrajectoryStore(folder)`` starts an empty store (the folder is created; files left there
+    are replaced). :meth:`arrays` maps the files (``mode="r+"`` to rewrite them in place, as the
+    smoother does); :meth:`chunks` gives the chunk bounds."""
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.n = 0
+        for name in ROW_SHAPES:
+            self._path(name).write_bytes(b"")
+
+    def _path(self, name: str) -> Path:
+        return self.folder / f"{name}.f8"
+
+    def __len__(self) -> int:
+        return self.n
+
+    def append(self, t: np.ndarray, x: np.ndarray, P: np.ndarray) -> None:
+        """Append states (k,), (k, 18), (k, 18, 18) at the end."""
+        k = len(t)
+        for name, value in (("t", t), ("x", x), ("P", P)):
+            a = np.ascontiguousarray(value, dtype="<f8")
+            if a.shape != (k, *ROW_SHAPES[name]):
+                raise ValueError(f"TrajectoryStore: {name} {a.shape} for {k} states")
+            with open(self._path(name), "ab") as fh:
+                fh.write(a.tobytes())
+        self.n += k
+
+    def arrays(self, mode: str = "r") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(t, x, P) memory-mapped (``mode`` "r" or "r+"); empty arrays for an empty store."""
+        if self.n == 0:
+            return tuple(np.empty((0, *ROW_SHAPES[n])) for n in ROW_SHAPES)
+        return tuple(
+            np.memmap(self._path(n), dtype="<f8", mode=mode, shape=(self.n, *ROW_SHAPES[n]))
+            for n in ROW_SHAPES
+        )
+
+    def chunks(self, size: int = CHUNK_STATES, reverse: bool = False) -> list[tuple[int, int]]:
+        """The bounds [k0, k1) of consecutive chunks of at most ``size`` states."""
+        bounds = [(k, min(k + size, self.n)) for k in range(0, self.n, size)]
+        return bounds[::-1] if reverse else bounds
+
+    def trajectory(self, variant: str = "", metadata: dict | None = None) -> Trajectory:
+        """The whole store as an in-memory Trajectory (for a store that fits)."""
+        t, x, P = (np.array(a) for a in self.arrays())
+        return Trajectory(t, x, P, variant=variant, metadata=metadata or {})
+
+    def remove(self) -> None:
+        """Delete the folder and its files."""
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def write_npz(path: str | Path, store: TrajectoryStore, variant: str, metadata: dict,
+              chunk: int = CHUNK_STATES) -> Path:  # fmt: skip
+    """``trajectory.npz`` of the states in ``store`` (module doc), written chunk by chunk:
+    the members of :meth:`Trajectory.save_npz` in its order, t, x and P streamed (their
+    ``.npy`` header first, from the store's length, then the chunks' bytes); atomic."""
+    path = Path(path)
+    arrays = store.arrays()
+    small = {
+        "state_names": np.array(STATE_NAMES),
+        "variant": np.array(variant),
+        "metadata_json": np.array(json.dumps(to_plain(metadata), default=str)),
+        **wave_arrays(metadata),
+    }
+    with (
+        atomic_path(path) as tmp,
+        zipfile.ZipFile(tmp, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as zf,
+    ):
+        for name, a in zip(ROW_SHAPES, arrays, strict=True):
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as fid:
+                header = {"descr": "<f8", "fortran_order": False, "shape": a.shape}
+                np.lib.format.write_array_header_1_0(fid, header)
+                for k0, k1 in store.chunks(chunk):
+                    fid.write(np.ascontiguousarray(a[k0:k1]).tobytes())
+        for name, value in small.items():
+            with zf.open(f"{name}.npy", "w", force_zip64=True) as fid:
+                np.lib.format.write_array(fid, value, allow_pickle=False)
+    return path
+
+
+def npz_path(path: str | Path) -> Path:
+    """``path``, or ``path/trajectory.npz`` for a folder, checked to be a zip archive."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "trajectory.npz"
+    check_npz(path)
+    return path
+
+
+def npz_rows(path: str | Path, name: str, chunk: int = CHUNK_STATES) -> Iterator[np.ndarray]:
+    """The rows of member ``name`` (t, x or P) of a trajectory.npz, ``chunk`` at a time,
+    decompressed as a stream (never the whole array in memory)."""
+    path = npz_path(path)
+    try:
+        with zipfile.ZipFile(path) as zf, zf.open(f"{name}.npy") as fp:
+            version = np.lib.format.read_magic(fp)
+            read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0)  # fmt: skip
+            shape, fortran, dtype = read(fp)
+            if fortran or len(shape) == 0:
+                raise ValueError(f"{name} is not a C-order array of rows")
+            row = int(np.prod(shape[1:], dtype=np.int64))
+            for k0 in range(0, shape[0], chunk):
+                m = min(chunk, shape[0] - k0)
+                data = fp.read(m * row * dtype.itemsize)
+                yield np.frombuffer(data, dtype=dtype).reshape((m, *shape[1:]))
+    except (KeyError, ValueError, OSError, zipfile.BadZipFile) as exc:
+        raise ReaderError(f"{path}: cannot read {name} ({exc})") from exc
+
+
+def npz_header(path: str | Path) -> tuple[str, dict]:
+    """(variant, metadata) of a trajectory.npz, without reading its arrays."""
+    path = npz_path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            metadata = json.loads(str(data["metadata_json"])) if "metadata_json" in data else {}
+            return str(data["variant"]), metadata if isinstance(metadata, dict) else {}
+    except (KeyError, ValueError, OSError, zipfile.BadZipFile) as exc:
+        raise ReaderError(f"{path}: cannot read the trajectory's metadata ({exc})") from exc
+
+
+@dataclass(frozen=True, eq=False)
+class PoseTrack:
+    """What the mapper reads of a trajectory: times (N,), positions and roll-pitch-yaw (N, 3)
+    and the per-axis position variance (N, 3) (the diagonal of P's position block), with the
+    variant and metadata; the same values as the Trajectory's properties of those names."""
+
+    t: np.ndarray
+    position: np.ndarray
+    orientation: np.ndarray
+    position_variance: np.ndarray
+    variant: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    @classmethod
+    def from_npz(cls, path: str | Path, chunk: int = CHUNK_STATES) -> PoseTrack:
+        """The pose track of a trajectory.npz, its P read chunk by chunk (module doc)."""
+        variant, metadata = npz_header(path)
+        t = np.concatenate([*npz_rows(path, "t", chunk), np.empty(0)])
+        pose = np.concatenate([*(x[:, :6] for x in npz_rows(path, "x", chunk)), np.empty((0, 6))])
+        var = [np.einsum("nii->ni", P[:, POSITION, POSITION]) for P in npz_rows(path, "P", chunk)]
+        var = np.concatenate([*var, np.empty((0, 3))])
+        if not (len(pose) == len(t) == len(var)):
+            raise ReaderError(f"{npz_path(path)}: t, x and P differ in length")
+        return cls(t, np.ascontiguousarray(pose[:, POSITION]),
+                   np.ascontiguousarray(pose[:, ORIENTATION]), var, variant, metadata)  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class StoredTrajectory:
+    """A trajectory whose states are in a :class:`TrajectoryStore` (what the filter and the
+    smoother give for a log too long for memory): its variant and metadata, its times, and
+    :meth:`load` for the whole Trajectory of one that fits."""
+
+    store: TrajectoryStore
+    variant: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.store)
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.array(self.store.arrays()[0])
+
+    def load(self) -> Trajectory:
+        return self.store.trajectory(self.variant, self.metadata)
+
+    def replace(self, **changes) -> StoredTrajectory:
+        return dataclasses.replace(self, **changes)
+
+    def save_npz(self, path: str | Path, chunk: int = CHUNK_STATES) -> Path:
+        """The trajectory.npz of :meth:`Trajectory.save_npz`, streamed (:func:`write_npz`)."""
+        return write_npz(path, self.store, self.variant, self.metadata, chunk)
+
+
+@dataclass(frozen=True, eq=False)
+class NpzTrajectory:
+    """A trajectory.npz on disk, read lazily: its variant and metadata at once, the rest when
+    asked (:meth:`pose_track` chunk by chunk, :meth:`load` whole)."""
+
+    path: Path
+    variant: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    @classmethod
+    def open(cls, path: str | Path) -> NpzTrajectory:
+        path = npz_path(path)
+        return cls(path, *npz_header(path))
+
+    @property
+    def t(self) -> np.ndarray:
+        return np.concatenate([*npz_rows(self.path, "t"), np.empty(0)])
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+    def pose_track(self, chunk: int = CHUNK_STATES) -> PoseTrack:
+        return PoseTrack.from_npz(self.path, chunk)
+
+    def load(self) -> Trajectory:
+        return Trajectory.load_npz(self.path)
