@@ -102,9 +102,6 @@ def _assert_same_stream(name: str, read, expected) -> None:
     assert np.array_equal(_bits(read.t), _bits(expected.t)), f"{name}: t"
     for field in RECORD_FIELDS[name]:
         a, b = getattr(read, field), getattr(expected, field)
-        if field == "confidence":  # sensor_msgs/Range has no confidence
-            assert a is None and b is None
-            continue
         assert (a is None) == (b is None), f"{name}.{field}: {a is None} vs {b is None}"
         if a is not None:
             assert np.array_equal(_bits(a), _bits(b)), f"{name}.{field} differs"
@@ -215,7 +212,9 @@ def test_quantization_rules_on_single_records(tmp_path):
     with Recorder(tmp_path / "q") as rec:
         sonar = rec.write_record(Record("sonar", 10.0, {"range": 0.1, "confidence": 0.5}))
         assert sonar.data["range"] == float(np.float32(0.1)) != 0.1
-        assert "confidence" not in sonar.data
+        assert sonar.data["confidence"] == 0.5  # float64 beside the Range: as given
+        missing = rec.write_record(Record("sonar", 10.1, {"range": 0.1}))
+        assert math.isnan(missing.data["confidence"])  # a record without one: NaN
         dvl = rec.write_record(
             Record("dvl", 10.5, {"velocity": (0.1, np.nan, 0.0), "covariance": np.eye(3),
                                  "altitude": -1.0, "beam_range": (1, 2, 3, 4),
