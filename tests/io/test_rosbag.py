@@ -177,9 +177,15 @@ def test_sonar_confidence_is_matched_to_its_range_by_stamp(tmp_path):
         return rng_t(header=header(t), radiation_type=0, field_of_view=0.4, min_range=0.3,
                      max_range=30.0, range=r)  # fmt: skip
 
-    msgs = [("/ping_sonar/confidence", "undertow_msgs/msg/RangeConfidence", i,
-             conf_t(header=header(t), confidence=c))
-            for i, (t, c) in enumerate([(stamps[2], 0.25), (stamps[0], 0.5), (stamps[1], 0.75)])]
+    msgs = [
+        (
+            "/ping_sonar/confidence",
+            "undertow_msgs/msg/RangeConfidence",
+            i,
+            conf_t(header=header(t), confidence=c),
+        )
+        for i, (t, c) in enumerate([(stamps[2], 0.25), (stamps[0], 0.5), (stamps[1], 0.75)])
+    ]
     msgs += [("/ping_sonar/range", "sensor_msgs/msg/Range", 10 + i, sonar(t, 1.0 + i))
              for i, t in enumerate(stamps)]  # fmt: skip
     write_raw_bag(tmp_path / "bag", msgs)

@@ -20,7 +20,6 @@ from .rosbag_streams import Rows
 from .topic_guess import propose_topics
 from .topics import LIVE_WAVE_TOPIC, TopicMap
 
-
 #: topics whose messages take no part in the time base: the DVL's raw JSON (unless it stands in
 #: for a stream), the mounting, the sonar's confidence (matched to its range by stamp) and a
 #: live session's wave decisions

@@ -25,8 +25,8 @@ The estimates, on topics of their own (the readers ignore them):
 - ``/undertow/wave_condition`` (:data:`~undertow.io.topics.LIVE_WAVE_TOPIC`): ``std_msgs/String``,
   one JSON object per wave condition the filter was given (``--wave auto``): ``t`` (the update's
   time), ``from_t`` (the rows it applies to: those at or after it; null: every row, the filter
-  had not started), ``condition`` ("calm" or [a m, f Hz], floats as they were) and
-  ``extrapolate`` (the filter's policy). The reader keeps them (``metadata["live_wave"]``) and the
+  had not started) and ``condition`` ("calm" or [a m, f Hz], floats as they were; JSON keeps
+  a float's digits exactly). The reader keeps them (``metadata["live_wave"]``) and the
   offline filter replays them (:mod:`undertow.estimation.wave_schedule`);
 - ``/undertow/status``: ``std_msgs/String``, one JSON object (rates, counters, filter health);
 - ``/undertow/late/<stream>``: records that arrived after the reorder horizon (not given to the
@@ -207,14 +207,13 @@ class Recorder:
             msg = b.T[msgtype](header=h, vector=b.vec((amplitude_m, frequency_hz, 0.0)))
             self._write_all([(WAVE_TOPIC, ns, msgtype, msg)])
 
-    def write_wave_condition(self, t: float, from_t: float | None, condition,
-                             extrapolate) -> None:  # fmt: skip
+    def write_wave_condition(self, t: float, from_t: float | None, condition) -> None:
         """A wave condition the filter was given on ``/undertow/wave_condition`` (module
         docstring): at the update time ``t``, for the rows at or after ``from_t`` (None: all)."""
         if condition != "calm":
             condition = [float(condition[0]), float(condition[1])]
         entry = {"t": float(t), "from_t": None if from_t is None else float(from_t),
-                 "condition": condition, "extrapolate": extrapolate}  # fmt: skip
+                 "condition": condition}  # fmt: skip
         self.write_status(t, entry, LIVE_WAVE_TOPIC)
 
     def write_status(self, t: float, status: dict, topic: str = STATUS_TOPIC) -> None:
