@@ -330,3 +330,18 @@ def test_abort_crash_and_misuse(tmp_path, monkeypatch):
     Recorder(tmp_path / "ok").close()
     with pytest.raises(ConfigError, match="already exists"):
         Recorder(tmp_path / "ok")
+
+
+def test_wave_conditions_are_read_back_as_the_filter_took_them(tmp_path):
+    """/undertow/wave_condition: JSON floats keep their digits, null for 'every row'."""
+    a, f = 0.1 + 1e-17 * 3, 1.0 / 3.0
+    with Recorder(tmp_path / "w") as rec:
+        rec.declare(["pressure"], wave=True)
+        rec.write_record(Record("pressure", 1.0, {"pressure": 101325.0}))
+        rec.write_wave_condition(1.5, None, (a, f))
+        rec.write_wave_condition(2.5, 2.25, "calm")
+    log = read_log(tmp_path / "w")
+    assert log.metadata["live_wave"] == [
+        {"t": 1.5, "from_t": None, "condition": [a, f]},
+        {"t": 2.5, "from_t": 2.25, "condition": "calm"},
+    ]
