@@ -54,6 +54,8 @@ def full_log(n: int = 40, seed: int = 0) -> Log:
     sonar = SonarRange(
         t=t + 0.002,
         range=rng.uniform(1, 3, n).astype(np.float32).astype(np.float64),
+        # the Ping's confidence (% / 100, NaN unknown); its own generator: the draws above stay
+        confidence=_confidence(np.random.default_rng(seed + 1), n),
         field_of_view=float(np.float32(0.5)),
         min_range=0.5,
         max_range=50.0,
@@ -78,6 +80,10 @@ def full_log(n: int = 40, seed: int = 0) -> Log:
         source="unit-test",
         metadata={"scenario": "roundtrip", "seed": seed},
     )
+
+
+def _confidence(rng, n: int) -> np.ndarray:
+    return np.where(rng.random(n) < 0.1, np.nan, rng.integers(0, 101, n) / 100.0)
 
 
 def write_raw_bag(path, messages, storage=StoragePlugin.MCAP) -> None:

@@ -78,6 +78,7 @@ def _assert_logs_equal(a: Log, b: Log, flavor: str) -> None:
     np.testing.assert_array_equal(b.imu.orientation, a.imu.orientation)
     np.testing.assert_array_equal(b.pressure.pressure, a.pressure.pressure)
     np.testing.assert_array_equal(b.sonar.range, a.sonar.range)
+    np.testing.assert_array_equal(b.sonar.confidence, a.sonar.confidence)  # NaN where unknown
     assert b.sonar.field_of_view == a.sonar.field_of_view
     assert (b.sonar.min_range, b.sonar.max_range) == (a.sonar.min_range, a.sonar.max_range)
     np.testing.assert_array_equal(b.wave_probe.elevation, a.wave_probe.elevation)
@@ -164,6 +165,35 @@ def _pressure_msgs(times, values, topic="/fluid_pressure"):
         )
         for i, (t, v) in enumerate(zip(times, values, strict=True))
     ]
+
+
+def test_sonar_confidence_is_matched_to_its_range_by_stamp(tmp_path):
+    """Two ranges of one stamp take that stamp's confidences in order, whatever the order of the
+    topics in the file; a range without one gets NaN (counted); the time base ignores them."""
+    rng_t, conf_t = T["sensor_msgs/msg/Range"], T["undertow_msgs/msg/RangeConfidence"]
+    stamps = [T0 + 0.5, T0 + 0.5, T0 + 1.25, T0 + 2.0]
+
+    def sonar(t, r):
+        return rng_t(header=header(t), radiation_type=0, field_of_view=0.4, min_range=0.3,
+                     max_range=30.0, range=r)  # fmt: skip
+
+    msgs = [
+        (
+            "/ping_sonar/confidence",
+            "undertow_msgs/msg/RangeConfidence",
+            i,
+            conf_t(header=header(t), confidence=c),
+        )
+        for i, (t, c) in enumerate([(stamps[2], 0.25), (stamps[0], 0.5), (stamps[1], 0.75)])
+    ]
+    msgs += [("/ping_sonar/range", "sensor_msgs/msg/Range", 10 + i, sonar(t, 1.0 + i))
+             for i, t in enumerate(stamps)]  # fmt: skip
+    write_raw_bag(tmp_path / "bag", msgs)
+    with pytest.warns(UserWarning, match="sonar_confidence: ranges without a confidence.*: 1"):
+        log = read_log(tmp_path / "bag")
+    np.testing.assert_array_equal(log.sonar.range, [1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_array_equal(log.sonar.confidence, [0.5, 0.75, 0.25, np.nan])
+    assert log.metadata["topics"]["sonar_confidence"] == "/ping_sonar/confidence"
 
 
 def test_unknown_type_on_mapped_topic_and_missing_topics(tmp_path):

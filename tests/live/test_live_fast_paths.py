@@ -45,28 +45,29 @@ def test_cdr_templates_are_the_bytes_rosbags_writes(tmp_path, late):
     rng = np.random.default_rng(5)
     b = MessageBuilder()
     rec = Recorder(tmp_path / ("late" if late else "rec"))
+    enc = rec.encoder  # the records' messages
     try:
         for parts in [(False, True), (True, True), (False, False), (True, False)]:
-            rec._imu_parts = parts  # the session's IMU parts (fixed by its first record)
+            enc._imu_parts = parts  # the session's IMU parts (fixed by its first record)
             for _ in range(200):
                 t = float(rng.uniform(0.0, 2.0**31 - 1.0))
                 if rng.random() < 0.1:  # stamps at the rounding edges of the nanoseconds
                     t = math.floor(t) + 1.0 - 1e-10 * rng.random()
                 data = {"angular_velocity": _vec(rng, 3), "linear_acceleration": _vec(rng, 3),
                         "orientation": _vec(rng, 4)}  # fmt: skip
-                _, [(topic, ns, msgtype, payload)] = rec._imu(t, Record("imu", t, data), late)
+                _, [(topic, ns, msgtype, payload)] = enc._imu(t, Record("imu", t, data), late)
                 has_a, has_q = parts if not late else (True, True)
                 acc = data["linear_acceleration"] if has_a else (0.0,) * 3
                 q = data["orientation"] if has_q else (0.0,) * 4
-                ns_ref, msg = imu_message(b, t, rec._frame["imu"], data["angular_velocity"],
+                ns_ref, msg = imu_message(b, t, enc._frame["imu"], data["angular_velocity"],
                                           acc, q, has_a, has_q)  # fmt: skip
                 assert ns == ns_ref
                 assert bytes(payload) == bytes(b.store.serialize_cdr(msg, msgtype))
         for _ in range(300):
             t, p = float(rng.uniform(0.0, 2.0**31 - 1.0)), _value(rng)
             record = Record("pressure", t, {"pressure": p})
-            _, [(_, ns, msgtype, payload)] = rec._pressure(t, record, late)
-            ns_ref, msg = pressure_message(b, t, rec._frame["barometer"], p)
+            _, [(_, ns, msgtype, payload)] = enc._pressure(t, record, late)
+            ns_ref, msg = pressure_message(b, t, enc._frame["barometer"], p)
             assert ns == ns_ref
             assert bytes(payload) == bytes(b.store.serialize_cdr(msg, msgtype))
         for _ in range(300):
@@ -76,7 +77,7 @@ def test_cdr_templates_are_the_bytes_rosbags_writes(tmp_path, late):
                 rpy = (rpy[0], _value(rng), rpy[2])
             data = {"position": _vec(rng, 3), "orientation": rpy, "std": _value(rng)}
             record = Record("dead_reckoning", t, data)
-            _, [(_, ns, msgtype, payload)] = rec._dead_reckoning(t, record, late)
+            _, [(_, ns, msgtype, payload)] = enc._dead_reckoning(t, record, late)
             std = np.float64(data["std"])
             ns_ref, msg = dead_reckoning_message(b, t, data["position"], np.array(rpy), std)
             assert ns == ns_ref
@@ -93,7 +94,7 @@ def test_cdr_templates_are_the_bytes_rosbags_writes(tmp_path, late):
                     del data[key]
             sensor_time = t - 0.003 if rng.random() < 0.5 else math.nan
             record = Record("dvl", t, data, t, sensor_time)
-            _, [(_, ns, msgtype, payload), (_, ns_j, type_j, text)] = rec._dvl(t, record, late)
+            _, [(_, ns, msgtype, payload), (_, ns_j, type_j, text)] = enc._dvl(t, record, late)
             obj = json.loads(bytes(text)[8:-1])  # the report line in the std_msgs/String
             dvl = Dvl.from_velocity([t], [data["velocity"]])
             beams = ("beam_range", "beam_valid", "beam_velocity")
@@ -101,14 +102,14 @@ def test_cdr_templates_are_the_bytes_rosbags_writes(tmp_path, late):
                 k: np.array([data[k]]) for k in ("fom", "altitude", "covariance", *beams)
                 if k in data})  # fmt: skip
             tov = sensor_time if math.isfinite(sensor_time) else t
-            ns_ref, msg = dvl_driver_message(b, dvl, 0, rec._frame["dvl"], obj["time"])
+            ns_ref, msg = dvl_driver_message(b, dvl, 0, enc._frame["dvl"], obj["time"])
             assert ns == ns_j == ns_ref
             assert bytes(payload) == bytes(b.store.serialize_cdr(msg, msgtype))
             line = velocity_report_line(dvl, 0, obj["time"], tov)
             string = b.T["std_msgs/msg/String"](data=line)
             assert bytes(text) == bytes(b.store.serialize_cdr(string, type_j))
-        assert all(template is not None for template in rec._templates.values())
-        assert rec._string_template  # the JSON lines' template reproduced rosbags' bytes
+        assert all(template is not None for template in enc._templates.values())
+        assert enc._string_template  # the JSON lines' template reproduced rosbags' bytes
     finally:
         rec.abort()
 
@@ -140,7 +141,7 @@ def test_pose_template_is_the_bytes_rosbags_writes(tmp_path):
             msg = b.T[msgtype](header=h, pose=b.pose_cov(x[0:3], x[3:6], cov))
             assert ns == ns_ref
             assert data == bytes(b.store.serialize_cdr(msg, msgtype))
-        assert rec._templates[("/undertow/pose",)] is not None  # the template was used
+        assert rec.encoder._templates[("/undertow/pose",)] is not None  # the template was used
     finally:
         rec.abort()
 

@@ -102,9 +102,6 @@ def _assert_same_stream(name: str, read, expected) -> None:
     assert np.array_equal(_bits(read.t), _bits(expected.t)), f"{name}: t"
     for field in RECORD_FIELDS[name]:
         a, b = getattr(read, field), getattr(expected, field)
-        if field == "confidence":  # sensor_msgs/Range has no confidence
-            assert a is None and b is None
-            continue
         assert (a is None) == (b is None), f"{name}.{field}: {a is None} vs {b is None}"
         if a is not None:
             assert np.array_equal(_bits(a), _bits(b)), f"{name}.{field} differs"
@@ -215,7 +212,9 @@ def test_quantization_rules_on_single_records(tmp_path):
     with Recorder(tmp_path / "q") as rec:
         sonar = rec.write_record(Record("sonar", 10.0, {"range": 0.1, "confidence": 0.5}))
         assert sonar.data["range"] == float(np.float32(0.1)) != 0.1
-        assert "confidence" not in sonar.data
+        assert sonar.data["confidence"] == 0.5  # float64 beside the Range: as given
+        missing = rec.write_record(Record("sonar", 10.1, {"range": 0.1}))
+        assert math.isnan(missing.data["confidence"])  # a record without one: NaN
         dvl = rec.write_record(
             Record("dvl", 10.5, {"velocity": (0.1, np.nan, 0.0), "covariance": np.eye(3),
                                  "altitude": -1.0, "beam_range": (1, 2, 3, 4),
@@ -331,3 +330,18 @@ def test_abort_crash_and_misuse(tmp_path, monkeypatch):
     Recorder(tmp_path / "ok").close()
     with pytest.raises(ConfigError, match="already exists"):
         Recorder(tmp_path / "ok")
+
+
+def test_wave_conditions_are_read_back_as_the_filter_took_them(tmp_path):
+    """/undertow/wave_condition: JSON floats keep their digits, null for 'every row'."""
+    a, f = 0.1 + 1e-17 * 3, 1.0 / 3.0
+    with Recorder(tmp_path / "w") as rec:
+        rec.declare(["pressure"], wave=True)
+        rec.write_record(Record("pressure", 1.0, {"pressure": 101325.0}))
+        rec.write_wave_condition(1.5, None, (a, f))
+        rec.write_wave_condition(2.5, 2.25, "calm")
+    log = read_log(tmp_path / "w")
+    assert log.metadata["live_wave"] == [
+        {"t": 1.5, "from_t": None, "condition": [a, f]},
+        {"t": 2.5, "from_t": 2.25, "condition": "calm"},
+    ]

@@ -146,8 +146,11 @@ def _wave_option(name: str | None, amplitude: float | None, frequency: float | N
 def _wave_source(result, by_name: str | None) -> str:
     """Where the wave condition of ``result`` came from, and the option that sets it."""
     from ..estimation.localizer import WAVE_DEFAULT, WAVE_GIVEN
+    from ..estimation.wave_schedule import WAVE_LIVE
 
-    if by_name is not None and by_name.strip().lower() == "auto":
+    if result.wave_source == WAVE_LIVE:  # a live --wave auto recording: its own decisions
+        how = f"{WAVE_LIVE}, replayed as the live filter took them; --wave NAME overrides"
+    elif by_name is not None and by_name.strip().lower() == "auto":
         how = "--wave auto: estimated over time from the log; config.yaml has wave_track"
     elif result.wave_source == WAVE_GIVEN:
         how = "--wave" if by_name is not None else "--wave-amplitude/--wave-frequency"

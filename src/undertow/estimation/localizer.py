@@ -16,7 +16,10 @@ Wave noise (variants ``an``, ``proposed``): a constant condition adds gamma^2 to
 (and DR) row; a condition that changes over time (a :class:`~undertow.wavetrack.WaveTrack`, a
 log whose ``metadata["wave"]`` is a track with ``t`` lists, or ``wave="auto"``: estimated from
 the log by :mod:`undertow.seastate`) adds each row's gamma(t)^2, gamma interpolated in
-time between the track's nodes (:class:`~undertow.estimation.noise.TrackNoise`). A condition
+time between the track's nodes (:class:`~undertow.estimation.noise.TrackNoise`); the recording
+of a live session with ``--wave auto`` replays the conditions that session gave its filter, in
+the steps it gave them (:mod:`~undertow.estimation.wave_schedule`; with ``wave`` None or
+``"auto"``: the replay gives the live trajectory). A condition
 (or track node) outside the characterized ones gets the ``extrapolate`` policy
 (:mod:`~undertow.estimation.noise`): ``"physics"`` by default (False): the nearest characterized
 condition scaled by the orbital velocity at the DVL's depth in the log
@@ -79,6 +82,7 @@ from .noise_physics import PHYSICS, REFUSE, extrapolation_note, outside_policy, 
 from .rows import depth_reference, initial_state, measurements, start_attitude
 from .smoother import smooth as urts_smooth
 from .smoother import smooth_store
+from .wave_schedule import WAVE_LIVE, recorded_schedule, schedule_noise
 
 # a run where more than this fraction of the processed measurements needed a covariance repair
 # or a reverted step (or were gated) is reported: the track is then mostly frozen
@@ -178,7 +182,18 @@ class Localizer:
 
     def wave_noise(self, log: Log):
         """(noise, metadata): the run's wave noise (:class:`WaveNoise` for a constant condition,
-        :class:`TrackNoise` for one that changes) and its metadata entries (module doc)."""
+        :class:`TrackNoise` for one that changes; for a live recording asked for no condition or
+        "auto", the live session's own decisions: :mod:`.wave_schedule`) and its metadata
+        entries (module doc)."""
+        schedule = recorded_schedule(self.wave, log)
+        if schedule is not None:
+            noise = schedule_noise(self.profile, schedule, self.extrapolate)
+            return noise, {
+                "wave_noise": noise.to_dict() if self.config.adds_wave_noise else None,
+                "wave_condition": noise.condition,
+                "wave_condition_source": WAVE_LIVE,
+                "wave_schedule": schedule,
+            }
         wave, source = wave_condition(self.wave, log)
         meta = {}
         estimated = False

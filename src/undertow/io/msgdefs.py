@@ -13,6 +13,11 @@
   whose DVL message is "extracted from UUV Simulator": the same fields).
 - ``ds_sensor_msgs/msg/Dvl`` with ``ds_core_msgs/msg/DsHeader``: WHOI Deep Submergence Lab's
   ``ds_msgs``.
+- ``undertow_msgs/msg/RangeConfidence``: undertow's own, the confidence (0..1, NaN unknown) of the
+  ``sensor_msgs/Range`` with the same header stamp (the Ping1D's ``distance`` message carries a
+  confidence in %, Blue Robotics' ping-protocol; ``sensor_msgs/Range`` has no field for it):
+  written by :func:`undertow.io.rosbag_write.write_log` and the live recorder on
+  ``/ping_sonar/confidence`` beside the range, read back into ``SonarRange.confidence``.
 
 ROS 1 bags and ROS 2 mcap files carry each topic's own definition, which rosbags registers and
 which wins over these; they serve ROS 2 sqlite3 bags (before Iron), which carry none.
@@ -30,6 +35,12 @@ from rosbags.typesys.store import Typestore
 A50_DVL = "waterlinked_a50_ros_driver/msg/DVL"
 A50_BEAM = "waterlinked_a50_ros_driver/msg/DVLBeam"
 MARINE_DVL = "marine_acoustic_msgs/msg/Dvl"
+RANGE_CONFIDENCE = "undertow_msgs/msg/RangeConfidence"
+
+RANGE_CONFIDENCE_MSG = """\
+std_msgs/Header header
+float64 confidence
+"""
 
 A50_DVL_MSG = """\
 std_msgs/Header header
@@ -163,12 +174,13 @@ CUSTOM_MSGDEFS = {
     COLA2_DVL: UUV_DVL_MSG,
     DS_HEADER: DS_HEADER_MSG,
     DS_DVL: DS_DVL_MSG,
+    RANGE_CONFIDENCE: RANGE_CONFIDENCE_MSG,
 }
 
 
 @cache
 def dvl_typestore() -> Typestore:
-    """A ROS 2 Humble typestore that also knows the DVL types of :data:`CUSTOM_MSGDEFS`."""
+    """A ROS 2 Humble typestore that also knows the types of :data:`CUSTOM_MSGDEFS`."""
     store = get_typestore(Stores.ROS2_HUMBLE)
     types: dict = {}
     for name, text in CUSTOM_MSGDEFS.items():

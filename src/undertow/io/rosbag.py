@@ -254,6 +254,8 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap
               options: LogOptions, beside: Path) -> Log:  # fmt: skip
     metadata: dict = {"format": "rosbag", "topics": {s: t for t, s in used.items()}}
     metadata["time_base"] = apply_time_base(rows, notes, used, options)
+    if rows.live_wave:  # a live session's wave decisions (estimation.wave_schedule replays them)
+        metadata["live_wave"] = rows.live_wave
     dvl = _dvl(rows, notes, metadata)
     dead_reckoning = None
     if rows.rows["dead_reckoning"]:

@@ -18,7 +18,12 @@ from .collect import Notes
 from .read_options import LogOptions
 from .rosbag_streams import Rows
 from .topic_guess import propose_topics
-from .topics import TopicMap
+from .topics import LIVE_WAVE_TOPIC, TopicMap
+
+#: topics whose messages take no part in the time base: the DVL's raw JSON (unless it stands in
+#: for a stream), the mounting, the sonar's confidence (matched to its range by stamp) and a
+#: live session's wave decisions
+UNTIMED = ("tf_static", "dvl_json", "sonar_confidence", "live_wave")
 
 
 def resolve_topics(topics: TopicMap, available: dict, notes: Notes) -> tuple[dict, dict]:
@@ -39,6 +44,8 @@ def resolve_topics(topics: TopicMap, available: dict, notes: Notes) -> tuple[dic
             f"{listing}; `undertow check LOG --write-config FILE` writes them to a settings file"
         )
     mapped.update({s: c.topic for s, c in guessed.items()})
+    if LIVE_WAVE_TOPIC in available:
+        mapped["live_wave"] = LIVE_WAVE_TOPIC
     return mapped, {s: c.topic for s, c in guessed.items()}
 
 
@@ -46,7 +53,7 @@ def apply_time_base(rows: Rows, notes: Notes, used: dict, options: LogOptions) -
     """Put every row on one clock (:func:`~undertow.io.clock.choose_time_base`); the choice
     is stated in one line when the log mixes clocks or the user chose, and returned as a dict.
     The raw JSON topic (no stamps) takes part only where it stands in for a missing stream."""
-    streams = {s for s in used.values() if s not in ("tf_static", "dvl_json")}
+    streams = {s for s in used.values() if s not in UNTIMED}
     if (rows.json_velocity and not len(rows.dvl)) or (
         rows.json_position and not rows.rows["dead_reckoning"]
     ):

@@ -13,6 +13,12 @@ by the reader) or a ``std_msgs/Float64``/``Float32`` (positive down); position f
 ``sensor_msgs/NavSatFix`` (status < 0 and non-finite fixes dropped and counted; projected to
 local metres, :mod:`undertow.io.geo`) or a ``nav_msgs/Odometry`` in a local frame (east-north-up
 as REP-103 says, made north-east-down about the first fix).
+
+The sonar's confidence (``undertow_msgs/RangeConfidence``, :mod:`undertow.io.msgdefs`) is matched
+to the range of the same header stamp (the n-th confidence of a stamp to the n-th range of it);
+a range without one gets NaN (counted). A live session's wave decisions (``live_wave``: one JSON
+object per ``std_msgs/String`` on :data:`~undertow.io.topics.LIVE_WAVE_TOPIC`) are kept as
+written, in order.
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ from .a50_json import add_velocity_report, is_position_report, is_velocity_repor
 from .clock import ClockTable
 from .collect import MALFORMED, DvlRows, Notes, count_nan_rows, time_order
 from .geo import local_ned
-from .msgdefs import WL_DVLDR
+from .msgdefs import RANGE_CONFIDENCE, WL_DVLDR
 from .ros_dvl import DVL_TYPES, dvl_report
 
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
@@ -48,6 +54,8 @@ ACCEPTED = {
     "pressure": ("sensor_msgs/msg/FluidPressure",),
     "depth": (POSE_COV, POSE, *FLOAT_TYPES),
     "sonar": ("sensor_msgs/msg/Range",),
+    "sonar_confidence": (RANGE_CONFIDENCE,),
+    "live_wave": ("std_msgs/msg/String",),
     "wave_probe": ("geometry_msgs/msg/PointStamped",),
     "ground_truth": (ODOMETRY,),
     "gps": (NAVSATFIX, ODOMETRY),
@@ -60,6 +68,12 @@ HPA_THRESHOLD = 20_000.0  # an absolute pressure below this (Pa) is a log in hPa
 def ns_to_s(ns: int) -> float:
     """Integer nanoseconds to float seconds, as sec + nanosec * 1e-9 (like header stamps)."""
     return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
+
+
+def _stamp_ns(msg, record_ns: int) -> int:
+    """A message's header stamp in ns (its record time when the stamp is zero)."""
+    sec, nanosec = msg.header.stamp.sec, msg.header.stamp.nanosec
+    return int(sec) * 1_000_000_000 + int(nanosec) if sec or nanosec else int(record_ns)
 
 
 def _xyz(v) -> tuple[float, float, float]:
@@ -128,6 +142,12 @@ class Rows:
         self.json_position: list[tuple] = []
         self.rows: dict[str, list] = {k: [] for k in ACCEPTED}
         self.sonar_limits: tuple | None = None
+        #: the header stamp (ns) of each sonar row and the (stamp, confidence) of the
+        #: confidence topic, in arrival order
+        self.sonar_stamps: list[int] = []
+        self.confidences: list[tuple[int, float]] = []
+        #: a live session's wave decisions, as written
+        self.live_wave: list[dict] = []
         self.probe_x: float | None = None
         #: (parent frame, child frame, translation, quaternion x y z w) of /tf_static
         self.transforms: list[tuple] = []
@@ -208,6 +228,14 @@ class Rows:
             value = float(msg.range)
             self.sonar_limits = self.sonar_limits or limits
             self.rows[stream].append((self.stamp(stream, msg, record_ns), value))
+            self.sonar_stamps.append(_stamp_ns(msg, record_ns))
+        elif stream == "sonar_confidence":
+            self.confidences.append((_stamp_ns(msg, record_ns), float(msg.confidence)))
+        elif stream == "live_wave":
+            try:
+                self.live_wave.append(dict(json.loads(msg.data)))
+            except MALFORMED:
+                self.notes.add("live_wave: malformed JSON messages skipped")
         elif stream == "wave_probe":
             x, z = float(msg.point.x), float(msg.point.z)
             self.probe_x = x if self.probe_x is None else self.probe_x
@@ -312,9 +340,12 @@ class Rows:
 
     # -- builders ---------------------------------------------------------------------------
 
-    def _table(self, stream: str, width: int) -> np.ndarray | None:
-        """The rows of ``stream`` with a finite time, time-ordered (None, noted, if none)."""
+    def _table(self, stream: str, width: int, extra=None) -> np.ndarray | None:
+        """The rows of ``stream`` with a finite time, time-ordered (None, noted, if none);
+        ``extra``: one more column, a value per row in arrival order."""
         arr = self.array(stream, width)
+        if extra is not None:
+            arr = np.column_stack([arr, extra])
         arr = arr[time_order(arr[:, 0], stream, self.notes)]
         if not len(arr):
             self.notes.add(f"{stream}: no message with a finite time (stream dropped)")
@@ -355,14 +386,33 @@ class Rows:
     def sonar(self) -> SonarRange | None:
         if not self.rows["sonar"]:
             return None
-        a = self._table("sonar", 2)
+        confidence = self._sonar_confidence()
+        a = self._table("sonar", 2, confidence)
         if a is None:
             return None
         count_nan_rows(self.notes, "sonar", a[:, 1])
         fov, rmin, rmax = (float(x) for x in self.sonar_limits)
         return SonarRange(
-            t=a[:, 0], range=a[:, 1], field_of_view=fov, min_range=rmin, max_range=rmax
-        )
+            t=a[:, 0], range=a[:, 1], confidence=None if confidence is None else a[:, 2],
+            field_of_view=fov, min_range=rmin, max_range=rmax,
+        )  # fmt: skip
+
+    def _sonar_confidence(self) -> np.ndarray | None:
+        """Each sonar row's confidence (arrival order): the n-th confidence of its header stamp
+        for the n-th range of it, NaN (counted) without one; None without a confidence topic."""
+        if not self.confidences:
+            return None
+        by_stamp: dict[int, list[float]] = {}
+        for key, value in reversed(self.confidences):  # popped from the end: first one first
+            by_stamp.setdefault(key, []).append(value)
+        out = np.full(len(self.sonar_stamps), np.nan)
+        for i, key in enumerate(self.sonar_stamps):
+            values = by_stamp.get(key)
+            if values:
+                out[i] = values.pop()
+            else:
+                self.notes.add("sonar_confidence: ranges without a confidence of their stamp (NaN)")
+        return out
 
     def wave_probe(self) -> WaveProbe | None:
         if not self.rows["wave_probe"]:

@@ -4,7 +4,9 @@
 -1, invalid beam distance as -1, as the driver does) plus the raw json_v3 line on the DVL JSON
 topic; ``flavor="standard"`` writes ``marine_acoustic_msgs/msg/Dvl`` (unknown covariance -1,
 ``velocity_mode`` 0 for an invalid velocity, invalid beam range NaN; no fom). Other streams use
-standard types: Imu, FluidPressure, Range, PoseWithCovarianceStamped (dead reckoning, std^2 on
+standard types: Imu, FluidPressure, Range (the sonar's confidence, when the log has it, beside it
+as ``undertow_msgs/RangeConfidence`` of the same stamp, :mod:`undertow.io.msgdefs`),
+PoseWithCovarianceStamped (dead reckoning, std^2 on
 the position diagonal), PointStamped (wave probe: x = probe x, z = elevation up), Odometry
 (ground truth, twist in the body frame as ROS requires), PointCloud2 (multibeam: one organized
 cloud of B points per ping, x y z float64 in the sensor frame, NaN for a beam without a
@@ -40,7 +42,7 @@ from ..errors import UndertowError
 from ..log import Log
 from ..rotations import rpy_to_quaternion, world_to_body
 from .a50_json import VelocityReport, velocity_report, velocity_report_line
-from .msgdefs import A50_BEAM, A50_DVL, MARINE_DVL, dvl_typestore
+from .msgdefs import A50_BEAM, A50_DVL, MARINE_DVL, RANGE_CONFIDENCE, dvl_typestore
 from .rosbag import SIDECAR
 from .rosbag_streams import POINTCLOUD2, TF_MESSAGE
 from .topics import ALL_SENSOR_NAMES, SENSOR_NAMES, TopicMap
@@ -288,11 +290,22 @@ def pressure_message(b: MessageBuilder, t, frame: str, pressure):
 
 
 def _sonar_messages(s, b: MessageBuilder, frame: str):
-    """``sensor_msgs/Range`` (radiation type 0: ultrasound)."""
+    """``sensor_msgs/Range`` (radiation type 0: ultrasound), and the confidence beside each
+    range when the stream has one."""
     limits = (s.field_of_view, s.min_range, s.max_range)
     for i in range(len(s)):
         ns, msg = sonar_message(b, s.t[i], frame, limits, s.range[i])
         yield "sonar", ns, "sensor_msgs/msg/Range", msg
+        if s.confidence is not None:
+            _, msg = confidence_message(b, s.t[i], frame, s.confidence[i])
+            yield "sonar_confidence", ns, RANGE_CONFIDENCE, msg
+
+
+def confidence_message(b: MessageBuilder, t, frame: str, confidence):
+    """(record time ns, ``undertow_msgs/RangeConfidence``): the confidence (0..1, NaN unknown,
+    float64) of the range of the same stamp."""
+    h, ns = b.header(t, frame)
+    return ns, b.T[RANGE_CONFIDENCE](header=h, confidence=float(confidence))
 
 
 def sonar_message(b: MessageBuilder, t, frame: str, limits, rng):

@@ -32,12 +32,17 @@ STREAM_FIELDS = (
     "pressure",
     "depth",
     "sonar",
+    "sonar_confidence",
     "wave_probe",
     "ground_truth",
     "gps",
     "multibeam",
 )
 
+
+#: a live session's wave decisions (``undertow live --wave auto``: std_msgs/String, one JSON
+#: object per decision; :mod:`undertow.live.recorder`), read into ``metadata["live_wave"]``
+LIVE_WAVE_TOPIC = "/undertow/wave_condition"
 
 SENSOR_NAMES = ("imu", "dvl", "sonar", "barometer")  # as in robot.Mounting; always in /tf_static
 #: every sensor with a tf frame: the multibeam's transform is written when the log has one
@@ -86,6 +91,8 @@ class TopicMap(BaseModel):
     pressure: list[str] = ["/fluid_pressure", "/BlueROV/pressure2_fluid", "/pressure"]
     depth: list[str] = ["/depth"]
     sonar: list[str] = ["/ping_sonar/range", "/ping_sonar/data", "/sonar/range"]
+    #: the sonar's confidence beside its range (undertow_msgs/RangeConfidence, io.msgdefs)
+    sonar_confidence: list[str] = ["/ping_sonar/confidence"]
     wave_probe: list[str] = ["/wave_probe"]
     ground_truth: list[str] = ["/ground_truth/odom", "/ground_truth"]
     gps: list[str] = ["/gps/fix", "/fix", "/mavros/global_position/raw/fix"]

@@ -311,8 +311,10 @@ class LiveSession:
             return True
         if self.sea is not None:
             update = self.sea.push(released)
-            if update is not None:
+            if update is not None:  # for this chunk's rows on (all of them before the start)
+                from_t = released[0].t if self.localizer.ready else None
                 self.localizer.set_wave(update.condition)
+                self.recorder.write_wave_condition(update.t, from_t, update.condition)
                 w = update.window
                 self.recorder.write_wave(update.t, w.amplitude_m, w.frequency_hz or math.nan)
                 if self.view is not None:

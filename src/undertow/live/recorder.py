@@ -22,41 +22,20 @@ The estimates, on topics of their own (the readers ignore them):
   the block is the filter's Euler-angle covariance as is, not rotated;
 - ``/undertow/wave``: ``geometry_msgs/Vector3Stamped`` in ``world``: vector.x = amplitude a (m),
   vector.y = frequency f (Hz), vector.z = 0;
+- ``/undertow/wave_condition`` (:data:`~undertow.io.topics.LIVE_WAVE_TOPIC`): ``std_msgs/String``,
+  one JSON object per wave condition the filter was given (``--wave auto``): ``t`` (the update's
+  time), ``from_t`` (the rows it applies to: those at or after it; null: every row, the filter
+  had not started) and ``condition`` ("calm" or [a m, f Hz], floats as they were; JSON keeps
+  a float's digits exactly). The reader keeps them (``metadata["live_wave"]``) and the
+  offline filter replays them (:mod:`undertow.estimation.wave_schedule`);
 - ``/undertow/status``: ``std_msgs/String``, one JSON object (rates, counters, filter health);
 - ``/undertow/late/<stream>``: records that arrived after the reorder horizon (not given to the
   filter), with their stream's message type (``/undertow/late/dvl_json`` for the DVL's line).
 
-The messages of fixed layout (``sensor_msgs/Imu``, ``sensor_msgs/FluidPressure``, the pose and
-dead reckoning, the A50 driver's ``DVL``) are not built and serialized one by one: their CDR
-bytes are a template of the first such message rosbags serializes, with the stamp and the fields
-after the header packed in place (:mod:`undertow.live.cdr`; kept only when it reproduces
-rosbags' bytes of that message: the same bytes, a fifth of the time); the DVL's JSON line goes
-into its ``std_msgs/String`` the same way. The messages are appended to the MCAP chunk by
-:mod:`undertow.live.mcap_append` (the file rosbags' writer makes, byte for byte).
-
-Header stamps are the record time t (s) as ``sec = floor(t)``, ``nanosec = round((t - sec) 1e9)``;
-the bag's record time is the same instant in ns.
-
-**What a replay reads back.** :meth:`Recorder.write_record` returns the record exactly as
-``read_log(recording)`` will give it (the promise the live pipeline relies on: the filter is fed
-what a replay sees): t = sec + nanosec 1e-9 as the reader computes it; values quantized by the
-message field types and the reader's conventions:
-
-- sonar: ``sensor_msgs/Range`` is float32 (range, field of view, min/max range); the limits of
-  the session's first sonar record are written on every message (the reader keeps the first);
-  the Ping's confidence has no field in the message and is not returned (no estimator uses it);
-- DVL: an altitude that is not a finite number >= 0 reads back NaN; an invalid beam's range NaN;
-  missing fields read back as NaN (fom, covariance, beam values) / False (beam_valid); the
-  covariance reads back NaN when a velocity component is NaN (the JSON match fails);
-- dead reckoning: the attitude passes through a quaternion (roll, pitch, yaw recomputed from
-  it), the std through its square (std = sqrt(std^2)), NaN when missing;
-- IMU: which optional parts (acceleration, orientation) the stream has is fixed by the session's
-  first IMU record (the reader keeps a part only when every message has it): a later record
-  missing such a part gets NaN there, a part the first record lacked is not recorded;
-- pressure is written in Pa as given; note that the reader converts a whole pressure stream whose
-  median is below 20 000 Pa from hPa (x100): live links deliver Pa (about 1e5 underwater).
-
-Same-time records of one stream come back in write order.
+The messages of each record, their CDR templates, and what a replay reads back of each record
+(:meth:`Recorder.write_record` returns it) are :mod:`undertow.live.record_encoder`'s; the
+messages are appended to the MCAP chunk by :mod:`undertow.live.mcap_append` (the file rosbags'
+writer makes, byte for byte).
 
 **Atomicity.** The bag is written in ``<name>.partial-XXXXXXXX/<name>`` next to the target and
 renamed into place by :meth:`Recorder.close` (after ``metadata.yaml`` and the sidecar
@@ -71,7 +50,6 @@ complete chunk (:mod:`undertow.io.mcap_recover`; the mounting from ``/tf_static`
 from __future__ import annotations
 
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -84,28 +62,16 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 from .._util.plain import json_safe, to_plain
 from ..errors import ConfigError, DataError
-from ..io.a50_json import MAX_REPORT_INTERVAL_MS, report_line, report_values
-from ..io.msgdefs import A50_DVL
 from ..io.rosbag import SIDECAR
 from ..io.rosbag_streams import TF_MESSAGE
-from ..io.rosbag_write import (
-    TF_STATIC_QOS,
-    MessageBuilder,
-    dead_reckoning_message,
-    driver_message,
-    imu_message,
-    pressure_message,
-    sonar_message,
-    tf_static_message,
-)
-from ..io.topics import SENSOR_NAMES, TopicMap
-from ..log import SonarRange
+from ..io.rosbag_write import TF_STATIC_QOS, MessageBuilder, tf_static_message
+from ..io.topics import LIVE_WAVE_TOPIC, TopicMap
 from ..records import RECORD_FIELDS, Record
 from ..robot import Mounting
-from ..rotations import quaternion_to_rpy_one, rpy_to_quaternion, rpy_to_quaternion_scalar
-from .cdr import DVL_FORM, DVL_TAIL, CdrTemplate, stamp, string_cdr
+from ..rotations import rpy_to_quaternion
 from .chunk_sync import ChunkSync
 from .mcap_append import MessageAppender
+from .record_encoder import POSE_TYPE, STREAM_TYPES, STRING_TYPE, RecordEncoder
 
 #: topics of the estimates (the raw streams use TopicMap's first names)
 POSE_TOPIC = "/undertow/pose"
@@ -114,52 +80,7 @@ STATUS_TOPIC = "/undertow/status"
 LATE_PREFIX = "/undertow/late/"
 #: builtin_interfaces/Time holds seconds in an int32 and the mcap record time is unsigned
 MAX_TIME_S = 2.0**31 - 1.0
-#: the message type of each raw stream's topic(s) (the DVL: its driver message and JSON line)
-_IMU_TYPE = "sensor_msgs/msg/Imu"
-_PRESSURE_TYPE = "sensor_msgs/msg/FluidPressure"
-_RANGE_TYPE = "sensor_msgs/msg/Range"
-_POSE_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"  # dead reckoning and the estimate
 _WAVE_TYPE = "geometry_msgs/msg/Vector3Stamped"
-_STRING_TYPE = "std_msgs/msg/String"  # the DVL's JSON line and the status
-_STREAM_TYPES: dict[str, tuple[tuple[str, str], ...]] = {
-    "imu": (("imu", _IMU_TYPE),),
-    "pressure": (("pressure", _PRESSURE_TYPE),),
-    "sonar": (("sonar", _RANGE_TYPE),),
-    "dead_reckoning": (("dead_reckoning", _POSE_TYPE),),
-    "dvl": (("dvl", A50_DVL), ("dvl_json", _STRING_TYPE)),
-}
-_SONAR_DEFAULTS = {
-    "field_of_view": SonarRange.field_of_view,
-    "min_range": SonarRange.min_range,
-    "max_range": SonarRange.max_range,
-}
-
-
-def _floats(value, n: int) -> tuple[float, ...]:
-    if value is None:
-        return (math.nan,) * n
-    if type(value) is tuple and len(value) == n:  # (what the links deliver)
-        try:
-            return tuple(map(float, value))
-        except (TypeError, ValueError):  # not numbers: the general path says so
-            pass
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
-    if arr.size != n:
-        raise ValueError(f"expected {n} values, got {arr.size}")
-    return tuple(float(v) for v in arr)
-
-
-def _float(value) -> float:
-    return math.nan if value is None else float(value)
-
-
-_ZEROS9 = (0.0,) * 9
-_NO_ESTIMATE9 = (-1.0,) + (0.0,) * 8  # sensor_msgs/Imu: covariance[0] = -1, no estimate
-
-
-def _f32(value: float) -> float:
-    with np.errstate(over="ignore"):
-        return float(np.float32(value))
 
 
 class Recorder:
@@ -189,7 +110,8 @@ class Recorder:
         self.flush_every_s = float(flush_every_s)
         self.counts: dict[str, int] = {}
         self._b = MessageBuilder()
-        self._frame = {s: getattr(self.topics.frames, s)[0] for s in SENSOR_NAMES}
+        #: the records' messages (and what a replay reads back of each)
+        self.encoder = RecordEncoder(self._b, self.topics)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._holder = Path(
             tempfile.mkdtemp(prefix=f"{self.path.name}.partial-", dir=self.path.parent)
@@ -206,33 +128,27 @@ class Recorder:
         self._mounting_written = False
         self._lock = threading.Lock()
         self._state = "open"
-        self._imu_parts: tuple[bool, bool] | None = None  # (acceleration, orientation)
-        self._sonar_limits: tuple[float, float, float] | None = None
-        self._dvl_last_t: float | None = None
-        self._dvl_keys: set[tuple] = set()
         self._last_flush: float | None = None
         self._sync = ChunkSync()  # each flushed chunk to the disk, in the background
-        self._templates: dict[tuple, CdrTemplate | None] = {}
-        self._string_template: bytes | bool | None = None  # std_msgs/String's encapsulation
-        self._by_stream = {stream: getattr(self, f"_{stream}") for stream in RECORD_FIELDS}
 
     def declare(self, streams, wave: bool = False) -> None:
         """Add the topics of ``streams`` (raw stream names) and of the estimates (pose, status;
-        the wave with ``wave``) now, before their first message: rosbags' ``add_connection``
-        takes milliseconds (the topic's QoS through a YAML dump), a stall the first record of
-        each stream would otherwise wait for. A declared topic without messages is an empty
-        topic of the bag (the readers skip it)."""
+        the wave and the wave conditions with ``wave``) now, before their first message:
+        rosbags' ``add_connection`` takes milliseconds (the topic's QoS through a YAML dump), a
+        stall the first record of each stream would otherwise wait for. A declared topic without
+        messages is an empty topic of the bag (the readers skip it)."""
         with self._lock:
             self._check_open()
             for stream in streams:
-                if stream not in _STREAM_TYPES:
-                    raise DataError(f"record stream '{stream}' is not one of {list(_STREAM_TYPES)}")
-                for name, msgtype in _STREAM_TYPES[stream]:
+                if stream not in STREAM_TYPES:
+                    raise DataError(f"record stream '{stream}' is not one of {list(STREAM_TYPES)}")
+                for name, msgtype in STREAM_TYPES[stream]:
                     self._connection(self.topics.first(name), msgtype)
-            self._connection(POSE_TOPIC, _POSE_TYPE)
-            self._connection(STATUS_TOPIC, _STRING_TYPE)
+            self._connection(POSE_TOPIC, POSE_TYPE)
+            self._connection(STATUS_TOPIC, STRING_TYPE)
             if wave:
                 self._connection(WAVE_TOPIC, _WAVE_TYPE)
+                self._connection(LIVE_WAVE_TOPIC, STRING_TYPE)
 
     # -- raw records --------------------------------------------------------------------------
     def write_record(self, record: Record) -> Record:
@@ -240,7 +156,7 @@ class Recorder:
         with self._lock:
             self._check_open()
             t = self._check_time(record)
-            data, messages = self._messages(t, record, "")
+            data, messages = self.encoder.messages(t, record, "")
             self._write_all(messages)
             t_read = self._t_read(messages[0][1])
             return Record(
@@ -252,7 +168,7 @@ class Recorder:
         with self._lock:
             self._check_open()
             t = self._check_time(record)
-            _, messages = self._messages(t, record, LATE_PREFIX)
+            _, messages = self.encoder.messages(t, record, LATE_PREFIX)
             self._write_all(messages)
 
     # -- estimates ----------------------------------------------------------------------------
@@ -268,7 +184,7 @@ class Recorder:
             self._check_open()
             t = self._time(t, "pose")
             cov = np.ascontiguousarray(P[:6, :6]).reshape(36)
-            msgtype = _POSE_TYPE
+            msgtype = POSE_TYPE
 
             def build():
                 h, ns = b.header(t, "world")
@@ -277,7 +193,7 @@ class Recorder:
             # the message's fields after the header: position, quaternion (as pose_cov makes
             # it), covariance: 43 float64
             values = (*x[0:3].tolist(), *rpy_to_quaternion(x[3:6]).tolist(), *cov.tolist())
-            message = self._templated((topic,), msgtype, t, values, build)
+            message = self.encoder.templated((topic,), msgtype, t, values, build)
             self._write_all([(topic, *message)])
 
     def write_wave(self, t: float, amplitude_m: float, frequency_hz: float) -> None:
@@ -291,6 +207,15 @@ class Recorder:
             msg = b.T[msgtype](header=h, vector=b.vec((amplitude_m, frequency_hz, 0.0)))
             self._write_all([(WAVE_TOPIC, ns, msgtype, msg)])
 
+    def write_wave_condition(self, t: float, from_t: float | None, condition) -> None:
+        """A wave condition the filter was given on ``/undertow/wave_condition`` (module
+        docstring): at the update time ``t``, for the rows at or after ``from_t`` (None: all)."""
+        if condition != "calm":
+            condition = [float(condition[0]), float(condition[1])]
+        entry = {"t": float(t), "from_t": None if from_t is None else float(from_t),
+                 "condition": condition}  # fmt: skip
+        self.write_status(t, entry, LIVE_WAVE_TOPIC)
+
     def write_status(self, t: float, status: dict, topic: str = STATUS_TOPIC) -> None:
         """``status`` as one JSON object (``std_msgs/String``) on ``/undertow/status`` (or
         ``topic``); NaN and infinities become null (strict JSON)."""
@@ -299,8 +224,8 @@ class Recorder:
             self._check_open()
             t = self._time(t, "status")
             _, ns = self._b.header(t, "")
-            msg = self._b.T[_STRING_TYPE](data=text)
-            self._write_all([(topic, ns, _STRING_TYPE, msg)])
+            msg = self._b.T[STRING_TYPE](data=text)
+            self._write_all([(topic, ns, STRING_TYPE, msg)])
 
     # -- finishing ----------------------------------------------------------------------------
     def flush(self) -> None:
@@ -404,194 +329,6 @@ class Recorder:
         elif t - self._last_flush >= self.flush_every_s:
             self.flush()
             self._last_flush = t
-
-    def _messages(self, t: float, record: Record, late: str):
-        try:
-            return self._by_stream[record.stream](t, record, late)
-        except (TypeError, ValueError) as exc:  # a field that is not numbers of its shape
-            raise DataError(f"{record.stream} record: malformed field ({exc})") from None
-
-    def _topic(self, stream: str, late: str) -> str:
-        return late + stream if late else self.topics.first(stream)
-
-    # -- one method per stream: (data as read back, [(topic, ns, msgtype, message)]) ----------
-    def _imu(self, t: float, record: Record, late: str):
-        d = record.data
-        parts = (d.get("linear_acceleration") is not None, d.get("orientation") is not None)
-        if late:
-            has_a, has_q = parts
-        else:
-            if self._imu_parts is None:
-                self._imu_parts = parts
-            has_a, has_q = self._imu_parts
-        w = _floats(d.get("angular_velocity"), 3)
-        acc = _floats(d.get("linear_acceleration"), 3) if has_a else (0.0,) * 3
-        q = _floats(d.get("orientation"), 4) if has_q else (0.0,) * 4
-        data = {"angular_velocity": w}
-        if has_a:
-            data["linear_acceleration"] = acc
-        if has_q:
-            data["orientation"] = q
-        topic = self._topic("imu", late)
-        values = q + (_ZEROS9 if has_q else _NO_ESTIMATE9) + w + _ZEROS9 + acc + (
-            _ZEROS9 if has_a else _NO_ESTIMATE9)  # fmt: skip
-
-        def build():
-            return imu_message(self._b, t, self._frame["imu"], w, acc, q, has_a, has_q)
-
-        message = self._templated((topic, has_a, has_q), _IMU_TYPE, t, values, build)
-        return data, [(topic, *message)]
-
-    def _pressure(self, t: float, record: Record, late: str):
-        p = _float(record.data.get("pressure"))
-        topic, msgtype = self._topic("pressure", late), _PRESSURE_TYPE
-
-        def build():
-            return pressure_message(self._b, t, self._frame["barometer"], p)
-
-        return {"pressure": p}, [(topic, *self._templated((topic,), msgtype, t, (p, 0.0), build))]
-
-    def _templated(self, key: tuple, msgtype: str, t: float, values: tuple, build, tail=None):
-        """(ns, msgtype, CDR bytes) of a message of fixed layout: packed on the key's template
-        (:class:`CdrTemplate`), made from the first such message rosbags serializes."""
-        template = self._templates.get(key)
-        if template is not None:
-            sec, nanosec, ns = stamp(t)
-            return ns, msgtype, template.pack(sec, nanosec, values)
-        ns, msg = build()
-        if key in self._templates:  # no template reproduces this type's bytes: rosbags
-            return ns, msgtype, msg
-        serialized = bytes(self._b.store.serialize_cdr(msg, msgtype))
-        self._templates[key] = CdrTemplate.make(serialized, t, values, tail)
-        return ns, msgtype, serialized
-
-    def _sonar(self, t: float, record: Record, late: str):
-        d = record.data
-        limits = None if late else self._sonar_limits
-        if limits is None:
-            limits = tuple(_f32(d.get(k, v)) for k, v in _SONAR_DEFAULTS.items())
-            if not late:
-                self._sonar_limits = limits
-        rng = _f32(_float(d.get("range")))
-        ns, msg = sonar_message(self._b, t, self._frame["sonar"], limits, rng)
-        data = {"range": rng, **dict(zip(_SONAR_DEFAULTS, limits, strict=True))}
-        return data, [(self._topic("sonar", late), ns, _RANGE_TYPE, msg)]
-
-    def _dead_reckoning(self, t: float, record: Record, late: str):
-        d = record.data
-        position = _floats(d.get("position"), 3)
-        rpy = _floats(d.get("orientation"), 3)
-        std = np.float64(_float(d.get("std")))
-        var = float(std**2)  # (numpy's power: not always the bits of std * std)
-        # the message's fields after the header as dead_reckoning_message makes them: position,
-        # the quaternion of the attitude, the covariance with std^2 at 0, 7 and 14 (43 float64)
-        try:
-            q = rpy_to_quaternion_scalar(*rpy)  # numpy's bits (tests/test_rotations.py)
-        except ValueError:  # an infinite angle: math.cos refuses it, numpy gives NaN
-            q = tuple(rpy_to_quaternion(np.array(rpy)).tolist())
-        cov = [0.0] * 36
-        cov[0] = cov[7] = cov[14] = var
-        topic = self._topic("dead_reckoning", late)
-
-        def build():
-            return dead_reckoning_message(self._b, t, position, np.array(rpy), std)
-
-        message = self._templated((topic,), _POSE_TYPE, t, (*position, *q, *cov), build)
-        data = {
-            "position": position,
-            "orientation": quaternion_to_rpy_one(q),  # the reader's: from this quaternion
-            "std": math.sqrt(var) if var >= 0 else math.nan,
-        }
-        return data, [(topic, *message)]
-
-    def _dvl(self, t: float, record: Record, late: str):
-        fields = _dvl_fields(record.data)
-        v, valid, fom, cov, altitude, rng, ok, bvel = fields
-        time_ms = self._dvl_interval_ms(t, late, v)
-        tov = record.sensor_time if math.isfinite(record.sensor_time) else t
-        beams = [(k, bvel[k], rng[k], ok[k]) for k in range(4)]
-        report = report_values(time_ms, v, fom, cov, altitude, beams, valid, tov)
-        topic, json_topic = self._topic("dvl", late), self._topic("dvl_json", late)
-        values = (report.time_ms, *v, fom, report.altitude, 4,
-                  *(x for bid, bv, dist, b_ok in report.beams
-                    for x in (bid, bv, dist, math.nan, math.nan, b_ok)),
-                  valid, 0, len(DVL_FORM), DVL_FORM)  # fmt: skip
-
-        def build():
-            return driver_message(self._b, t, self._frame["dvl"], report)
-
-        ns, _, msg = self._templated((topic,), A50_DVL, t, values, build, DVL_TAIL)
-        line = report_line(report)
-        string = self._string_template
-        if string is None:  # the first line: rosbags' bytes, kept as the template if equal
-            ours = string_cdr(b"\x00\x01\x00\x00", line)
-            ref = bytes(self._b.store.serialize_cdr(self._b.T[_STRING_TYPE](data=line),
-                                                    _STRING_TYPE))  # fmt: skip
-            self._string_template = string = ours[:4] if ours == ref else False
-        text = string_cdr(string, line) if string else self._b.T[_STRING_TYPE](data=line)
-        messages = [(topic, ns, A50_DVL, msg), (json_topic, ns, _STRING_TYPE, text)]
-        return _dvl_read_back(fields), messages
-
-    def _dvl_interval_ms(self, t: float, late: str, v: tuple) -> float:
-        """The driver's ``time`` field (ms since the previous report, in [0, a day]), made
-        unique with its velocity among the session's reports: the reader matches a report's
-        JSON line (its covariance) by (time, vx, vy, vz)."""
-        if late:
-            return 0.0
-        last, self._dvl_last_t = self._dvl_last_t, t
-        time_ms = 0.0 if last is None else min(max((t - last) * 1e3, 0.0), MAX_REPORT_INTERVAL_MS)
-        step_to = math.inf  # the reader keeps `time` in [0, MAX]: at the top, search downwards
-        while (time_ms, *v) in self._dvl_keys:
-            if time_ms >= MAX_REPORT_INTERVAL_MS:
-                step_to = 0.0
-            time_ms = float(np.nextafter(time_ms, step_to))
-        self._dvl_keys.add((time_ms, *v))
-        return time_ms
-
-
-def _dvl_fields(d: dict) -> tuple:
-    """(velocity, valid, fom, covariance (3 lists of 3), altitude, beam_range, beam_valid,
-    beam_velocity) of a DVL record's fields as plain values, missing ones as
-    ``Dvl.from_velocity`` fills them (valid True, NaN values, beams not valid)."""
-    valid, beam_valid = d.get("valid"), d.get("beam_valid")
-    cov = d.get("covariance")
-    return (
-        _floats(d.get("velocity"), 3),
-        True if valid is None else _bool(valid),
-        _float(d.get("fom")),
-        [[math.nan] * 3] * 3 if cov is None else np.asarray(cov, np.float64).reshape(3, 3).tolist(),
-        _float(d.get("altitude")),
-        _floats(d.get("beam_range"), 4),
-        (False,) * 4 if beam_valid is None else tuple(_bool(k) for k in _items(beam_valid, 4)),
-        _floats(d.get("beam_velocity"), 4),
-    )
-
-
-def _bool(value) -> bool:
-    return value if type(value) is bool else bool(np.asarray(value, np.bool_).reshape(()))
-
-
-def _items(value, n: int) -> list:
-    items = list(value) if isinstance(value, (tuple, list)) else np.asarray(value).reshape(-1)
-    if len(items) != n:
-        raise ValueError(f"expected {n} values, got {len(items)}")
-    return items
-
-
-def _dvl_read_back(fields: tuple) -> dict:
-    """The DVL fields as the bag reader gives them back (module docstring)."""
-    v, valid, fom, cov, alt, rng, ok, bvel = fields
-    nan_v = any(math.isnan(x) for x in v)  # NaN != NaN: no JSON match, no covariance
-    return {
-        "velocity": v,
-        "valid": valid,
-        "fom": fom,
-        "covariance": np.full((3, 3), np.nan) if nan_v else np.array(cov, dtype=np.float64),
-        "altitude": alt if math.isfinite(alt) and alt >= 0 else math.nan,
-        "beam_range": tuple(r if k else math.nan for r, k in zip(rng, ok, strict=True)),
-        "beam_valid": ok,
-        "beam_velocity": bvel,
-    }
 
 
 __all__ = ["Recorder", "POSE_TOPIC", "WAVE_TOPIC", "STATUS_TOPIC", "LATE_PREFIX"]
