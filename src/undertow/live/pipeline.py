@@ -39,7 +39,6 @@ import json
 import math
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +46,6 @@ import yaml
 
 from .._util.atomic import check_output_folder
 from .._util.clocks import ScaledClock
-from .._util.histogram import Durations
 from .._util.plain import to_plain
 from ..errors import ConfigError
 from ..estimation.calibration import Calibration
@@ -68,11 +66,17 @@ from .preview import PreviewCheckpoints
 from .recorder import Recorder
 from .reorder import ReorderBuffer
 from .sensors import expected_streams, open_links
+from .stats import (  # noqa: F401  (map_view_due, received_at: part of this module's API)
+    MAP_VIEW_SHARE,
+    STATUS_PERIOD_S,
+    LiveResult,
+    LiveStats,
+    map_view_due,
+    received_at,
+)
 from .view import PathTrail, newest_ranges
 from .warmup import warm_up
 
-#: wall seconds between status updates (status line, /undertow/status, the view's map)
-STATUS_PERIOD_S = 1.0
 #: wall seconds the main loop waits for a record before it checks the clock again, or
 #: POLL_SENSOR_S of sensor time when that is longer (real time: 0.1 s, a fifth of the commit
 #: interval; each turn has more to do and the turns' fixed costs, which run cold after a
@@ -81,42 +85,9 @@ POLL_S = 0.02
 POLL_SENSOR_S = 0.1
 #: every n-th committed state goes into the path shown in the view
 PATH_DECIMATION = 10
-#: the largest share of the loop's time the view's map may take: rebuilt from every cell, it is
-#: republished each STATUS_PERIOD_S, or less often once one rebuild takes longer than this share
-#: of that (a long survey's map), :func:`map_view_due`
-MAP_VIEW_SHARE = 0.05
 #: sensor seconds between online map updates (the chunks released meanwhile at once: the map
 #: is the same to rounding, module :mod:`undertow.mapping.online`, for a tenth of the calls)
 MAP_EVERY_S = 1.0
-
-
-@dataclass
-class LiveStats:
-    """What the session saw: records per stream, late records, latencies (wall s, DVL arrival
-    to its preview pose), states committed, pings mapped."""
-
-    records: dict = field(default_factory=dict)
-    late: int = 0
-    states: int = 0
-    pings: int = 0
-    latency: Durations = field(default_factory=Durations)  # bounded: a day of reports
-    started_filter_at: float | None = None
-    span_s: float = 0.0
-
-    def latency_summary(self) -> dict:
-        return self.latency.summary_ms()
-
-
-@dataclass
-class LiveResult:
-    """The session's output folder and its parts (None where nothing was made)."""
-
-    out_dir: Path
-    recording: Path | None
-    localization: Path | None
-    map: Path | None
-    summary: dict
-    warnings: list[str] = field(default_factory=list)
 
 
 class LiveSession:
@@ -537,26 +508,6 @@ class LiveSession:
             "notes": list(self.notes),
             **({} if self.autopilot is None else {"autopilot": self.autopilot.summary()}),
         })  # fmt: skip
-
-
-def map_view_due(start: float, cost: float, period: float = STATUS_PERIOD_S,
-                 share: float = MAP_VIEW_SHARE) -> float:  # fmt: skip
-    """When to rebuild the view's map next, after a rebuild that began at ``start`` and took
-    ``cost`` s: start + max(period, cost / share), so that it takes at most ``share`` of the
-    loop's time once it costs more than share x period."""
-    return start + max(period, cost / share)
-
-
-def received_at(clock: ScaledClock, arrival: float, queued: float) -> float:
-    """When (``time.perf_counter``) a link's thread received a record's bytes: its ``arrival``
-    (on the session's ``clock``, taken by that thread) brought back to perf_counter time;
-    ``queued`` (when the record was queued for the loop) if it has none or the clocks disagree.
-    A deferred link's data waits undecoded, so the queueing time alone would leave that wait
-    out of the latency."""
-    if not math.isfinite(arrival):
-        return queued
-    behind = clock.wall_seconds(clock() - arrival)
-    return min(queued, time.perf_counter() - max(behind, 0.0))
 
 
 def _filter_params(settings: Settings, calibration) -> dict:
