@@ -53,13 +53,15 @@ from ..estimation.config import LocalizerConfig
 from ..estimation.localizer import calibration_fields
 from ..estimation.online import OnlineLocalizer
 from ..estimation.rows import FILTER_STREAMS
-from ..io.results import save_map, save_trajectory
+from ..io.results import save_map
+from ..io.trajectory_stream import save_stored_trajectory
 from ..mapping.online import OnlineMapper
 from ..mapping.samples import rays_from_pose
 from ..records import Record, concat_logs, records_to_log
 from ..robot import Mounting
 from ..seastate.online import OnlineSeaState
 from ..settings import LIVE_VARIANCE_BOUNDS, Settings
+from ..trajectory_chunks import StoredTrajectory, TrajectoryStore
 from .autopilot import open_bridge
 from .map_cloud import MapCloud
 from .preview import PreviewCheckpoints
@@ -88,6 +90,8 @@ PATH_DECIMATION = 10
 #: sensor seconds between online map updates (the chunks released meanwhile at once: the map
 #: is the same to rounding, module :mod:`undertow.mapping.online`, for a tenth of the calls)
 MAP_EVERY_S = 1.0
+#: the folder (in the output folder) that holds the final states until the end of the session
+STATES_DIR = ".localization.states"
 
 
 class LiveSession:
@@ -138,6 +142,7 @@ class LiveSession:
         self._next_status = 0.0
         self._next_map_view = 0.0
         self._path = PathTrail()  # the positions shown, in bounded memory
+        self._store = None  # the final states on disk (TrajectoryStore), from the first one
         self._cloud = None  # the view's map (MapCloud), made at the first draw
         self._early: list = []  # chunks released before the filter started (for the map)
         self._first_t: float | None = None
@@ -298,12 +303,7 @@ class LiveSession:
             self._say_missing(released)
             return True
         # the states from the first one the recording or the map has not taken yet
-        since = (
-            self.stats.states
-            if self.mapper is None
-            else min(self.stats.states, self.mapper.states_used)
-        )
-        trajectory = self.localizer.committed(since)
+        trajectory = self.localizer.committed(self._taken())
         self._record_final(trajectory, final_only=not math.isinf(horizon))
         if self.mapper is not None:
             self._to_map += [*self._early, chunk]
@@ -313,7 +313,15 @@ class LiveSession:
         self._early = []
         if self.view is not None:
             self._show_rays(chunk, trajectory)
+        # the states both have taken are on disk: the filter lets go of them
+        self.localizer.release(self._taken())
         return True
+
+    def _taken(self) -> int:
+        """The states the recording (and the store) and the map have both taken."""
+        if self.mapper is None:
+            return self.stats.states
+        return min(self.stats.states, self.mapper.states_used)
 
     def _say_missing(self, released) -> None:
         """Once, when the filter still cannot start well after the first record: what is
@@ -350,6 +358,10 @@ class LiveSession:
             if t >= self._next_pose or k == n - first - 1 and not final_only:
                 self.recorder.write_pose(t, x_all[k], P_all[k])
                 self._next_pose = t + period
+        if self._store is None:
+            self._store = TrajectoryStore(self.out_dir / STATES_DIR)
+        part = slice(k0 - first, n - first)
+        self._store.append(t_all[part], x_all[part], P_all[part])
         self.stats.span_s = float(t_all[n - first - 1]) - self.stats.started_filter_at
         self._path.extend(trajectory.position[k0 - first : n - first : PATH_DECIMATION])
 
@@ -460,11 +472,9 @@ class LiveSession:
         self._commit(math.inf)
         localization = map_dir = None
         if self.localizer.ready:
-            trajectory = self.localizer.trajectory()
+            trajectory = self.localizer.trajectory(since=self._taken())
             self._record_final(trajectory, final_only=False)
-            trajectory.metadata["live"] = self.summary()
-            localization = save_trajectory(trajectory, self.out_dir / "localization",
-                                           self.overwrite)  # fmt: skip
+            localization = self._save_localization(trajectory)
             map_dir = self._save_map(trajectory)
             missing = trajectory.metadata.get("online", {}).get("started_without")
             if missing:
@@ -478,6 +488,19 @@ class LiveSession:
         _write_yaml(self.out_dir / "live.yaml", summary)
         return LiveResult(self.out_dir, recording, localization, map_dir, summary,
                           list(self.notes))  # fmt: skip
+
+    def _save_localization(self, trajectory) -> Path:
+        """``localization/`` from the states stored as they became final (all of them now),
+        with the metadata of the filter's run and the session's summary."""
+        meta = trajectory.metadata
+        online = {k: v for k, v in meta.get("online", {}).items() if k != "first_state"}
+        metadata = {**meta, "online": online, "live": self.summary()}
+        if self._store is None:  # (no state became final)
+            self._store = TrajectoryStore(self.out_dir / STATES_DIR)
+        stored = StoredTrajectory(self._store, trajectory.variant, metadata)
+        out = save_stored_trajectory(stored, self.out_dir / "localization", self.overwrite)
+        self._store.remove()
+        return out
 
     def _save_map(self, trajectory) -> Path | None:
         if self.mapper is None:
