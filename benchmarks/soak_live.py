@@ -4,7 +4,7 @@
 clocks continue: :mod:`undertow.sim.robot.player`) into a :class:`LiveSession` in this process
 with all three links (A50 TCP, Ping1D UDP, MAVLink UDP), the online map and the Foxglove view
 on (one client subscribed to every channel, in another process), until HOURS of sensor time
-have been served. A sampler thread records, every SAMPLE_S of wall time, the process's resident
+have been served (the survey's path closed, :data:`CLOSED`). A sampler thread records, every SAMPLE_S of wall time, the process's resident
 memory (VmRSS), its CPU time, the sensor time the filter has reached and how many DVL latencies
 have been measured; from these:
 
@@ -43,6 +43,9 @@ sys.path.insert(0, str(HERE))
 import bench_live  # noqa: E402  (the viewer stand-in and the port helpers)
 
 HOURS = 3.0
+#: the survey's lawnmower closed (back to its first waypoint), so that the laps of ``--loop``
+#: cover one site again and again: the map then holds the site, and what grows is not the map
+CLOSED = True
 RATE = 20.0
 SCENARIO = "field-survey"
 SAMPLE_S = 10.0  # wall seconds between samples
@@ -75,6 +78,25 @@ class _Sampler(threading.Thread):
             self.sample()
 
 
+def closed_survey(scenario: str, folder: Path) -> str:
+    """A copy of the built-in ``scenario`` (YAML) whose waypoints end at the first one, or
+    ``scenario`` itself when it has no waypoints."""
+    import yaml
+
+    src = Path(__file__).resolve().parents[1] / "src/undertow/data/scenarios" / f"{scenario}.yaml"
+    if not src.is_file():
+        return scenario
+    doc = yaml.safe_load(src.read_text())
+    points = doc.get("motion", {}).get("waypoints", {}).get("points")
+    if not points:
+        return scenario
+    points.append(list(points[0]))
+    doc["name"] = f"{doc['name']}-closed"
+    path = folder / f"{doc['name']}.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return str(path)
+
+
 def _serve(scenario: str, rate: float, dvl: int, ping: int, mav: int) -> subprocess.Popen:
     return subprocess.Popen(
         [str(bench_live.UNDERTOW), "serve", scenario, "--rate", str(rate), "--loop",
@@ -105,7 +127,9 @@ def run(hours: float = HOURS, rate: float = RATE, scenario: str = SCENARIO,
 
     free = bench_live._free_port
     dvl, ping, mav = free(), free(socket.SOCK_DGRAM), free(socket.SOCK_DGRAM)
-    server = _serve(scenario, rate, dvl, ping, mav)
+    scratch = tempfile.TemporaryDirectory()
+    served = closed_survey(scenario, Path(scratch.name)) if CLOSED else scenario
+    server = _serve(served, rate, dvl, ping, mav)
     live = LiveSettings(dvl=f"tcp://127.0.0.1:{dvl}", sonar=f"udp://127.0.0.1:{ping}",
                         mavlink=f"udpin:127.0.0.1:{mav}", time_scale=rate, idle_stop_s=2.0,
                         view=True, view_port=0, map=True)  # fmt: skip
@@ -117,13 +141,20 @@ def run(hours: float = HOURS, rate: float = RATE, scenario: str = SCENARIO,
         sampler = _Sampler(session, sample_s)
         sampler.sample()
         sampler.start()
+        finish = session.finish
+
+        def sampled_finish():  # the samples end with the data: writing the results is apart
+            sampler.stop.set()
+            sampler.join()
+            sampler.sample()
+            return finish()
+
+        session.finish = sampled_finish
         stopper = threading.Timer(hours * 3600.0 / rate, server.terminate)
         stopper.start()
         cpu0 = time.process_time()
         result = session.run()
         cpu = time.process_time() - cpu0
-        sampler.stop.set()
-        sampler.join()
         stopper.cancel()
         map_info = _map_info(session)
         latency = session.stats.latency
@@ -132,7 +163,11 @@ def run(hours: float = HOURS, rate: float = RATE, scenario: str = SCENARIO,
         client.wait(timeout=10)
     except subprocess.TimeoutExpired:
         client.kill()
-    return summarize(sampler.samples, latency, result.summary, cpu, map_info, rate, scenario)
+    scratch.cleanup()
+    out = summarize(sampler.samples, latency, result.summary, cpu, map_info, rate, scenario)
+    out["closed_path"] = served != scenario
+    out["forced_commits"] = result.summary.get("forced_commits")
+    return out
 
 
 def _map_info(session) -> dict:

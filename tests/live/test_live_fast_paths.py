@@ -392,3 +392,23 @@ def test_latency_counts_from_the_links_receipt():
         assert abs((queued - got) - 0.030) < 0.005
     assert received_at(clock, math.nan, queued) == queued
     assert received_at(clock, clock() + 10.0, queued) == queued  # an arrival in the future
+
+
+def test_a_commit_waits_for_a_preview_at_most_the_buffers_length():
+    """A preview that reached a time far ahead (a record stamped ahead of the others) must not
+    hold the commits back for ever: the buffer, and the session's memory, would grow."""
+    from undertow.live.preview import PreviewCheckpoints
+
+    c = PreviewCheckpoints()
+    assert c.commit_to(10.0, 9.5, 1.0) == (10.0, False)  # none kept: up to the horizon
+    c.reached(9.7, "s9.7", fresh=True)
+    at, forced = c.commit_to(10.0, 9.5, 1.0)
+    assert at == math.nextafter(9.7, math.inf) and not forced  # to the preview's end
+    c.released(at, continued=True)
+    c.reached(500.0, "far", fresh=False)  # far ahead of every horizon to come
+    assert c.commit_to(10.2, at, 1.0) == (None, False)  # waits, at most 1 s
+    assert c.commit_to(at + 1.0, at, 1.0) == (None, False)
+    assert c.commit_to(at + 1.01, at, 1.0) == (at + 1.01, True)  # then commits without it
+    assert c.start() is None  # and the next preview starts afresh
+    c.reached(600.0, "far", fresh=True)
+    assert c.commit_to(5.0, -math.inf, 1.0) == (None, False)  # before any release: waits

@@ -276,11 +276,11 @@ class LiveSession:
         states; when every preview kept is ahead of the horizon, not yet (False: the next
         step tries again; the wait is at most the buffer's length)."""
         if not math.isinf(horizon):
-            boundary = self._checkpoints.boundary(horizon)
-            if boundary is not None:
-                horizon = math.nextafter(boundary, math.inf)
-            elif self._checkpoints.start() is not None:
+            horizon, forced = self._checkpoints.commit_to(horizon, self.buffer.horizon,
+                                                          self.live.reorder_s)  # fmt: skip
+            if horizon is None:
                 return False
+            self.stats.forced_commits += forced
         released = self.buffer.release(horizon)
         if not released:
             self._checkpoints.released(self.buffer.horizon, continued=True)
@@ -522,6 +522,7 @@ class LiveSession:
             "late": self.stats.late,
             "states": self.stats.states,
             "pings_mapped": self.stats.pings,
+            "forced_commits": self.stats.forced_commits,
             "filter_started_at": self.stats.started_filter_at,
             "filter_span_s": self.stats.span_s,
             "latency": self.stats.latency_summary(),

@@ -26,6 +26,7 @@ horizon (:meth:`PreviewCheckpoints.boundary`), so that it can take those preview
 from __future__ import annotations
 
 import collections
+import math
 
 
 class PreviewCheckpoints:
@@ -54,6 +55,23 @@ class PreviewCheckpoints:
         """The latest time before ``horizon`` a kept preview reached (None: none)."""
         before = [t for t, _ in self._kept if t < horizon]
         return before[-1] if before else None
+
+    def commit_to(self, horizon: float, last: float, max_wait: float) -> tuple[float | None, bool]:
+        """(where a commit at ``horizon`` releases up to, forced): just after the latest time
+        a kept preview reached before it (:meth:`boundary`), or ``horizon`` when none is kept;
+        None (wait) when every kept preview is ahead of it, unless the last release (``last``)
+        is more than ``max_wait`` behind ``horizon`` (a preview reached a time far ahead, e.g.
+        of a record stamped ahead of the others): then the previews are dropped and the commit
+        goes to ``horizon`` (forced: True). So a commit waits at most ``max_wait``."""
+        boundary = self.boundary(horizon)
+        if boundary is not None:
+            return math.nextafter(boundary, math.inf), False
+        if not self._kept:
+            return horizon, False
+        if not math.isfinite(last) or horizon - last <= max_wait:  # (-inf: none released yet)
+            return None, False
+        self._kept.clear()
+        return horizon, True
 
     def start(self) -> tuple[float, object] | None:
         """(T, state) to continue from, or None for a fresh preview (none kept)."""

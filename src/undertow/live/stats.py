@@ -29,6 +29,7 @@ class LiveStats:
     late: int = 0
     states: int = 0
     pings: int = 0
+    forced_commits: int = 0  # commits that could not wait for a preview's end any longer
     latency: Durations = field(default_factory=Durations)  # bounded: a day of reports
     started_filter_at: float | None = None
     span_s: float = 0.0
