@@ -4,9 +4,10 @@
 clocks continue: :mod:`undertow.sim.robot.player`) into a :class:`LiveSession` in this process
 with all three links (A50 TCP, Ping1D UDP, MAVLink UDP), the online map and the Foxglove view
 on (one client subscribed to every channel, in another process), until HOURS of sensor time
-have been served (the survey's path closed, :data:`CLOSED`). A sampler thread records, every SAMPLE_S of wall time, the process's resident
-memory (VmRSS), its CPU time, the sensor time the filter has reached and how many DVL latencies
-have been measured; from these:
+have been served (the survey's path closed, :data:`CLOSED`, so that the laps map one site). A
+sampler thread records, every SAMPLE_S of wall time until the data ends, the process's resident
+memory (VmRSS), its CPU time, the sensor time the filter has reached and the DVL latencies so
+far (a histogram); from these:
 
 - ``rss_growth_mb_per_sensor_hour``: the slope of RSS against sensor time (least squares) over
   the samples after the first WARMUP_S of sensor time. Target: <= 50 MB per hour;
