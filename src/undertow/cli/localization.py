@@ -69,6 +69,14 @@ def localize(
         typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
     ] = None,
     smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
+    estimator: Annotated[
+        str,
+        typer.Option(
+            help="ukf (the paper's filter) | factor-graph (GTSAM batch smoother) | isam2 "
+            "(GTSAM incremental, online) | inekf (invariant EKF); the peers read the same "
+            "sensors and noise, plus the accelerometer; needs undertow[peers]."
+        ),
+    ] = "ukf",
     gate: Annotated[
         str | None,
         typer.Option(
@@ -100,12 +108,13 @@ def localize(
         "initial_position": parse_triple(initial_position, "--initial-position"),
     }
     with progress_bar(quiet) as progress:
-        progress.add_task(f"localizing{f' ({variant})' if variant else ''}", total=None)
+        what = ", ".join(v for v in (variant, None if estimator == "ukf" else estimator) if v)
+        progress.add_task(f"localizing{f' ({what})' if what else ''}", total=None)
         result = localize_file(
             log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
             overwrite=overwrite,
             profile=profile, calibration=calibration, extrapolate=extrapolate, smooth=smooth,
-            wave=condition,
+            wave=condition, estimator=estimator,
             **{name: value for name, value in options.items() if value is not None},
             **gate_option(gate),
         )  # fmt: skip

@@ -22,7 +22,7 @@ from ..errors import ConfigError
 from ..estimation.calibration import Calibration, calibrate
 from ..estimation.config import DEFAULT_GATE
 from ..estimation.consistency import ConsistencyReport
-from ..estimation.localizer import check_options, localize
+from ..estimation.localizer import check_options
 from ..estimation.noise import NoiseProfile
 from ..estimation.noise_physics import PHYSICS, outside_policy
 from ..evaluation.drift import (
@@ -36,6 +36,8 @@ from ..evaluation.drift import (
 from ..evaluation.trajectory import TrajectoryErrors, trajectory_rmse
 from ..io.results import save_trajectory
 from ..io.tum import read_tum
+from ..peers import UKF
+from ..peers import resolve as resolve_estimator
 from ..settings import Settings
 from ..trajectory import Trajectory
 from .common import as_settings, collect_warnings, load_log
@@ -70,7 +72,7 @@ class LocalizationResult:
 def localize_file(path: str | Path, settings: Settings | str | Path | None = None, *,
                   topics: str | Path | None = None, out_dir: str | Path | None = None,
                   overwrite: bool = False, profile=None, wave=None, calibration=None,
-                  extrapolate: bool = False, smooth: bool = False,
+                  extrapolate: bool = False, smooth: bool = False, estimator: str = UKF,
                   **overrides) -> LocalizationResult:  # fmt: skip
     """Localize the log at ``path`` with the paper's UKF (see
     :func:`~undertow.estimation.localizer.localize` for what it takes from the log and the
@@ -83,12 +85,16 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     default the paper's Table I); ``wave``: condition name or (amplitude, frequency), default
     the one the log records, else calm; ``"auto"`` estimates it over time from the log's own
     sensors (:mod:`undertow.seastate`); ``calibration``: a Calibration or its YAML file.
+    ``estimator``: ``"ukf"`` (the paper's filter) or a peer of :data:`undertow.peers.ESTIMATORS`
+    (``factor-graph``, ``isam2``, ``inekf``: the same sensors, noise and settings; no
+    ``smooth``), recorded as ``estimator`` in the metadata.
     The options are checked before the log is read; with ``out_dir`` the folder is checked too
     and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``)."""
     settings_path = None if isinstance(settings, Settings) else settings
     settings = as_settings(settings)
     params = {**settings.localizer_params(), **overrides}
     check_options(smooth, params)
+    run = _estimator(estimator, smooth)
     if out_dir is not None:
         inputs = [path, _path_or_none(profile), _path_or_none(calibration), settings_path, topics]
         check_output_folder(out_dir, overwrite, inputs=inputs)
@@ -96,8 +102,11 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(path, topics, settings)
-        trajectory = localize(log, profile=profile, wave=wave, calibration=calibration,
-                              extrapolate=extrapolate, smooth=smooth, **params)  # fmt: skip
+        if smooth:
+            params["smooth"] = True
+        trajectory = run(log, profile=profile, wave=wave, calibration=calibration,
+                         extrapolate=extrapolate, **params)  # fmt: skip
+    trajectory.metadata.setdefault("estimator", estimator)
     if out_dir is not None:
         save_trajectory(trajectory, out_dir, overwrite)
     meta = trajectory.metadata
@@ -110,6 +119,17 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
         warnings=tuple(caught),
         out_dir=None if out_dir is None else Path(out_dir),
     )
+
+
+def _estimator(name: str, smooth: bool):
+    """The function of the estimator ``name`` (one ConfigError line: unknown, not importable,
+    or a peer asked to smooth: the smoother is the UKF's)."""
+    if name != UKF and smooth:
+        raise ConfigError(
+            f"--smooth smooths the UKF's output (URTS); the estimator {name} has no smoother "
+            "option (factor-graph is itself a batch smoother): drop --smooth or use --estimator ukf"
+        )
+    return resolve_estimator(name)
 
 
 def is_auto(wave) -> bool:
