@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e ".[test,dask,view,export]"
+	$(BIN)/pip install -q -e ".[test,dask,view,export,peers]"
 	touch $(STAMP)
 
 install: $(STAMP)

@@ -36,6 +36,7 @@ STAGE_OF = {
     "sim": "sim",
     "estimation": "estimation",
     "seastate": "estimation",
+    "peers": "peers",
     "mapping": "mapping",
     "settings": "settings",
     "evaluation": "evaluation",
@@ -48,7 +49,7 @@ STAGE_OF = {
 RANK = {
     stage: rank
     for rank, stage in enumerate(
-        ("core", "io", "sim", "estimation", "mapping", "settings", "evaluation", "report",
+        ("core", "io", "sim", "estimation", "peers", "mapping", "settings", "evaluation", "report",
          "study", "live", "commands", "cli")
     )
 }  # fmt: skip

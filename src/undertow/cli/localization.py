@@ -29,6 +29,15 @@ QuietOption = Annotated[
     bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
 ]
 
+EstimatorOption = Annotated[
+    str,
+    typer.Option(
+        help="ukf (the paper's filter) | factor-graph (GTSAM batch smoother) | isam2 (GTSAM "
+        "incremental, online) | inekf (invariant EKF); the peers read the same sensors and "
+        "noise, plus the accelerometer; needs undertow[peers]."
+    ),
+]
+
 
 @app.command()
 @user_errors
@@ -69,6 +78,7 @@ def localize(
         typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
     ] = None,
     smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
+    estimator: EstimatorOption = "ukf",
     gate: Annotated[
         str | None,
         typer.Option(
@@ -100,18 +110,23 @@ def localize(
         "initial_position": parse_triple(initial_position, "--initial-position"),
     }
     with progress_bar(quiet) as progress:
-        progress.add_task(f"localizing{f' ({variant})' if variant else ''}", total=None)
+        progress.add_task(_task_label(variant, estimator), total=None)
         result = localize_file(
             log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
-            overwrite=overwrite,
-            profile=profile, calibration=calibration, extrapolate=extrapolate, smooth=smooth,
-            wave=condition,
+            overwrite=overwrite, profile=profile, calibration=calibration,
+            extrapolate=extrapolate, smooth=smooth, wave=condition, estimator=estimator,
             **{name: value for name, value in options.items() if value is not None},
             **gate_option(gate),
         )  # fmt: skip
     print_warnings(result.warnings)
     if not quiet:
         _print_localized(result, out_dir, wave)
+
+
+def _task_label(variant: str | None, estimator: str) -> str:
+    """The progress line: 'localizing (variant, estimator)' (the default ukf left out)."""
+    what = ", ".join(v for v in (variant, estimator) if v and v != "ukf")
+    return f"localizing{f' ({what})' if what else ''}"
 
 
 def _print_localized(result, out_dir: Path, wave: str | None) -> None:

@@ -38,6 +38,8 @@ from ..evaluation.trajectory import PoseStates, TrajectoryErrors, trajectory_rms
 from ..io.results import save_trajectory
 from ..io.trajectory_stream import save_stored_trajectory
 from ..io.tum import read_tum
+from ..peers import UKF
+from ..peers import resolve as resolve_estimator
 from ..settings import Settings
 from ..trajectory import Trajectory
 from ..trajectory_chunks import NpzTrajectory, TrajectoryStore
@@ -74,7 +76,8 @@ class LocalizationResult:
 def localize_file(path: str | Path, settings: Settings | str | Path | None = None, *,
                   topics: str | Path | None = None, out_dir: str | Path | None = None,
                   overwrite: bool = False, profile=None, wave=None, calibration=None,
-                  extrapolate: bool = False, smooth: bool = False, chunked: bool | None = None,
+                  extrapolate: bool = False, smooth: bool = False, estimator: str = UKF,
+                  chunked: bool | None = None,
                   **overrides) -> LocalizationResult:  # fmt: skip
     """Localize the log at ``path`` with the paper's UKF (see
     :func:`~undertow.estimation.localizer.localize` for what it takes from the log and the
@@ -87,6 +90,9 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     default the paper's Table I); ``wave``: condition name or (amplitude, frequency), default
     the one the log records, else calm; ``"auto"`` estimates it over time from the log's own
     sensors (:mod:`undertow.seastate`); ``calibration``: a Calibration or its YAML file.
+    ``estimator``: ``"ukf"`` (the paper's filter) or a peer of :data:`undertow.peers.ESTIMATORS`
+    (``factor-graph``, ``isam2``, ``inekf``: the same sensors, noise and settings; no
+    ``smooth``), recorded as ``estimator`` in the metadata.
     The options are checked before the log is read; with ``out_dir`` the folder is checked too
     and then written (``trajectory.tum``, ``trajectory.npz``, ``config.yaml``).
 
@@ -99,6 +105,7 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     settings = as_settings(settings)
     params = {**settings.localizer_params(), **overrides}
     check_options(smooth, params)
+    run = _estimator(estimator, smooth)
     if out_dir is not None:
         inputs = [path, _path_or_none(profile), _path_or_none(calibration), settings_path, topics]
         check_output_folder(out_dir, overwrite, inputs=inputs)
@@ -106,11 +113,16 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     caught: list[str] = []
     with collect_warnings(caught):
         log = load_log(path, topics, settings)
-        store = _store(chunked, log, params, out_dir)
+        store = _store(chunked, log, params, out_dir) if estimator == UKF else None
         try:
-            trajectory = localize(log, profile=profile, wave=wave, calibration=calibration,
-                                  extrapolate=extrapolate, smooth=smooth, store=store,
-                                  **params)  # fmt: skip
+            if estimator == UKF:
+                trajectory = localize(log, profile=profile, wave=wave, calibration=calibration,
+                                      extrapolate=extrapolate, smooth=smooth, store=store,
+                                      **params)  # fmt: skip
+            else:
+                trajectory = run(log, profile=profile, wave=wave, calibration=calibration,
+                                 extrapolate=extrapolate, **params)  # fmt: skip
+            trajectory.metadata.setdefault("estimator", estimator)
             if store is not None:
                 del log  # the log's arrays are not needed to write the folder
                 save_stored_trajectory(trajectory, out_dir, overwrite)
@@ -153,6 +165,17 @@ def _store(chunked: bool | None, log, params: dict, out_dir) -> TrajectoryStore 
     out = Path(out_dir).absolute()
     out.parent.mkdir(parents=True, exist_ok=True)
     return TrajectoryStore(tempfile.mkdtemp(prefix=f".{out.name}.states-", dir=out.parent))
+
+
+def _estimator(name: str, smooth: bool):
+    """The function of the estimator ``name`` (one ConfigError line: unknown, not importable,
+    or a peer asked to smooth: the smoother is the UKF's)."""
+    if name != UKF and smooth:
+        raise ConfigError(
+            f"--smooth smooths the UKF's output (URTS); the estimator {name} has no smoother "
+            "option (factor-graph is itself a batch smoother): drop --smooth or use --estimator ukf"
+        )
+    return resolve_estimator(name)
 
 
 def is_auto(wave) -> bool:
