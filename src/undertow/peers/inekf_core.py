@@ -326,7 +326,8 @@ def run_kernel(imu_t, gyro, accel, dvl_t, dvl_y, dvl_cov, dep_t, dep_d, dep_var,
         o_t[n], o_R[n], o_v[n], o_p[n], o_b[n], o_P[n] = t, R, v, p, b, P
         o_w[n], o_nis[n], o_ok[n] = omega_m - b[0:3], nis, ok
         n += 1
-    return o_t[:n], o_k[:n], o_R[:n], o_v[:n], o_p[:n], o_b[:n], o_P[:n], o_w[:n], o_nis[:n], o_ok[:n]
+    return (o_t[:n], o_k[:n], o_R[:n], o_v[:n], o_p[:n], o_b[:n], o_P[:n], o_w[:n], o_nis[:n],
+            o_ok[:n])  # fmt: skip
 
 
 def run_inekf(imu_t, gyro, accel, dvl_t, dvl_y, dvl_cov, depth_t, depth, depth_var, *,
