@@ -61,7 +61,7 @@ def _straight_log(accel=True, T=30.0):
     return Log(imu=imu, dvl=dvl, pressure=pressure), R, v_body
 
 
-@pytest.mark.filterwarnings("ignore:Localizer: no DVL dead reckoning")
+@pytest.mark.filterwarnings("ignore:Localizer. no DVL dead reckoning")
 def test_inekf_on_a_synthetic_straight_run_follows_the_line():
     log, R, v_body = _straight_log()
     traj = inekf(log, initial_state=[0, 0, 2.0, 0, 0, 0.3] + [0.4, 0, 0] + [0] * 9)
@@ -77,7 +77,7 @@ def test_inekf_on_a_synthetic_straight_run_follows_the_line():
     assert summary["dvl_gated"] == 0
 
 
-@pytest.mark.filterwarnings("ignore:Localizer: no DVL dead reckoning")
+@pytest.mark.filterwarnings("ignore:Localizer. no DVL dead reckoning")
 def test_inekf_refuses_a_log_without_accelerometer_in_one_line():
     log, _, _ = _straight_log(accel=False, T=2.0)
     with pytest.raises(MissingStreamError, match="accelerometer") as info:
