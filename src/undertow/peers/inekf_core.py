@@ -42,8 +42,8 @@ DVL (velocity y in the DVL frame, mounting R_d body <- DVL, lever arm r, body):
     y = R_d^T (R^T v + omega x r) + n,    omega = omega_m - b_g - n_g.
 
 With y_b = R_d y - (omega_m - b_g_hat) x r the reading has the form Y = X^-1 (y_b, -1, 0),
-which Barrau and Bonnabel call a right-invariant observation (Potokar et al. and Hartley et al.
-the same; some texts name it after the body frame it is expressed in, "left"): its innovation
+which Barrau and Bonnabel (and Hartley et al.) call a right-invariant observation (other
+texts name it after the body frame it is expressed in, "left-invariant"): its innovation
 in the world, z = R_hat y_b - v_hat, depends on the error alone,
 
     z = xi_v + R_hat [r]x db_g + R_hat (R_d n + [r]x n_g),   H = [0, I, 0, R_hat [r]x, 0],
