@@ -3,11 +3,12 @@
 Offline (:func:`bench_offline`): a simulated survey of ``hours`` of sensor time (the
 field-survey scenario's lawnmower repeated, one bag, in a temporary folder, not kept) is
 localized with the smoother and mapped, each step in its own process, whose peak RSS
-(``ru_maxrss``) is reported, for the states kept on disk (``chunked``, what `localize` does
+(``VmHWM``) is reported, for the states kept on disk (``chunked``, what `localize` does
 above 200 000 filter rows) and, when ``today`` is set, for the states in memory (the path
 before issue 27), with whether the two wrote the same files (TUM and config.yaml bytes, npz
 arrays). Target: peak RSS under 2 GB at 24 hours. The hours are ``UNDERTOW_SOAK_HOURS``
-(default 24; the generation alone takes about 90 s per simulated hour on this machine).
+(default 1 for now: the log is simulated in one piece, about 2 GB and 140 s per hour, and the
+bag reader holds the whole log, about 0.8 GB per hour at its peak, so 24 hours does not run yet).
 
 Live (``bench_live``): to come, in this module.
 """
@@ -20,18 +21,23 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 #: the field survey's one pass of its lawnmower, s (laps repeat it)
 LAP_S = 649.0
 
 _STEP = r"""
-import json, resource, sys, time, warnings
+import json, sys, time, warnings
+from pathlib import Path
 warnings.simplefilter("ignore")
 step, log, out, chunked = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4] == "1"
 t0 = time.perf_counter()
-if step == "localize":
+if step == "generate":
+    sys.path.insert(0, sys.argv[5])
+    from bench_soak import simulate_hours
+    simulate_hours(float(out), Path(log))
+    extra = {}
+elif step == "localize":
     from undertow.commands.localization import localize_file
     r = localize_file(log, smooth=True, out_dir=out, chunked=chunked)
     extra = {"states": len(r.trajectory)}
@@ -39,9 +45,10 @@ else:
     from undertow.commands.mapping import map_file
     r = map_file(log, out, out_dir=out + "-map")
     extra = {"cells": len(r.map)}
+# VmHWM: this process's peak RSS (ru_maxrss would keep the parent's peak across fork + exec)
+hwm = next(ln for ln in open("/proc/self/status") if ln.startswith("VmHWM"))
 print(json.dumps({"wall_s": round(time.perf_counter() - t0, 1),
-                  "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024),
-                  **extra}))
+                  "peak_rss_mb": round(int(hwm.split()[1]) / 1024), **extra}))
 """
 
 
@@ -58,12 +65,11 @@ def simulate_hours(hours: float, folder: Path) -> Path:
     return folder / "log"
 
 
-def _step(step: str, log: Path, out: Path, chunked: bool) -> dict:
+def _step(step: str, log: Path, out, chunked: bool = False) -> dict:
     """One step in a fresh process; its JSON line (peak RSS of that process)."""
-    done = subprocess.run(
-        [sys.executable, "-c", _STEP, step, str(log), str(out), "1" if chunked else "0"],
-        capture_output=True, text=True, check=False,
-    )  # fmt: skip
+    args = [step, str(log), str(out), "1" if chunked else "0", str(Path(__file__).parent)]
+    done = subprocess.run([sys.executable, "-c", _STEP, *args], capture_output=True, text=True,
+                          check=False)  # fmt: skip
     if done.returncode:
         return {"error": done.stderr.strip().splitlines()[-1:]}
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -85,10 +91,9 @@ def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
     today = hours <= 2.0 if today is None else today
     with tempfile.TemporaryDirectory(prefix="undertow-soak-") as tmp:
         root = Path(tmp)
-        start = time.perf_counter()
-        log = simulate_hours(hours, root / "sim")
-        out = {"hours": hours, "generate_s": round(time.perf_counter() - start, 1),
-               "log_mb": round(sum(p.stat().st_size for p in log.rglob("*")) / 1e6)}  # fmt: skip
+        out = {"hours": hours, "generate": _step("generate", root / "sim", hours)}
+        log = root / "sim" / "log"
+        out["log_mb"] = round(sum(p.stat().st_size for p in log.rglob("*")) / 1e6)
         for mode in ("chunked", "memory") if today else ("chunked",):
             folder = root / mode
             out[mode] = {
@@ -101,7 +106,7 @@ def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
 
 
 def main() -> dict:
-    return {"offline": bench_offline(float(os.environ.get("UNDERTOW_SOAK_HOURS", "24")))}
+    return {"offline": bench_offline(float(os.environ.get("UNDERTOW_SOAK_HOURS", "1")))}
 
 
 if __name__ == "__main__":

@@ -5,8 +5,9 @@ their 18x18 covariances alone are 22 GB):
 
 - :class:`TrajectoryStore`: the working store the filter appends to and the smoother rewrites
   backward, a folder of three raw float64 files (``t.f8`` (N,), ``x.f8`` (N, 18), ``P.f8``
-  (N, 18, 18), C order, little-endian) read through ``numpy.memmap``: appending is a write at
-  the end, a chunk anywhere is a slice, and only the chunks in use are in memory;
+  (N, 18, 18), C order, little-endian): appending is a write at the end, a chunk anywhere is
+  a read at its offset (plain reads: a memory map would count every page it touched in the
+  process's resident set), and only the chunks in use are in memory;
 - :func:`write_npz`: the user's ``trajectory.npz`` streamed from such chunks, the same archive
   :meth:`~undertow.trajectory.Trajectory.save_npz` writes (the same members, dtypes and
   ``.npy`` headers; each member deflated as a stream), so
@@ -55,8 +56,8 @@ class TrajectoryStore:
     """States (t, x, P) in a folder of raw float64 files (module doc), appended in time order.
 
     ``TrajectoryStore(folder)`` starts an empty store (the folder is created; files left there
-    are replaced). :meth:`arrays` maps the files (``mode="r+"`` to rewrite them in place, as the
-    smoother does); :meth:`chunks` gives the chunk bounds."""
+    are replaced). :meth:`read` reads a chunk, :meth:`rewrite` overwrites one (the smoother),
+    :meth:`chunks` gives the chunk bounds."""
 
     def __init__(self, folder: str | Path) -> None:
         self.folder = Path(folder)
@@ -82,14 +83,28 @@ class TrajectoryStore:
                 fh.write(a.tobytes())
         self.n += k
 
-    def arrays(self, mode: str = "r") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(t, x, P) memory-mapped (``mode`` "r" or "r+"); empty arrays for an empty store."""
-        if self.n == 0:
-            return tuple(np.empty((0, *ROW_SHAPES[n])) for n in ROW_SHAPES)
-        return tuple(
-            np.memmap(self._path(n), dtype="<f8", mode=mode, shape=(self.n, *ROW_SHAPES[n]))
-            for n in ROW_SHAPES
-        )
+    def read(self, k0: int = 0, k1: int | None = None) -> tuple[np.ndarray, ...]:
+        """(t, x, P) of states k0..k1-1 (default: to the end), read from the files (plain
+        reads, not a memory map: the pages read stay in the page cache, not in this process)."""
+        return tuple(self.read_array(name, k0, k1) for name in ROW_SHAPES)
+
+    def read_array(self, name: str, k0: int = 0, k1: int | None = None) -> np.ndarray:
+        """Rows k0..k1-1 of the array ``name`` (t, x or P)."""
+        k1 = self.n if k1 is None else min(k1, self.n)
+        m, shape = max(k1 - k0, 0), ROW_SHAPES[name]
+        row = int(np.prod(shape, dtype=np.int64))
+        a = np.fromfile(self._path(name), dtype="<f8", count=m * row, offset=k0 * row * 8)
+        return a.reshape((m, *shape))
+
+    def rewrite(self, k0: int, x: np.ndarray, P: np.ndarray) -> None:
+        """Overwrite the states x and P from row k0 on (the smoother's backward pass)."""
+        for name, value in (("x", x), ("P", P)):
+            a = np.ascontiguousarray(value, dtype="<f8")
+            if k0 < 0 or k0 + len(a) > self.n or a.shape[1:] != ROW_SHAPES[name]:
+                raise ValueError(f"TrajectoryStore: {name} rows {k0}..{k0 + len(a)} of {self.n}")
+            with open(self._path(name), "r+b") as fh:
+                fh.seek(k0 * a[0].size * 8 if len(a) else 0)
+                fh.write(a.tobytes())
 
     def chunks(self, size: int = CHUNK_STATES, reverse: bool = False) -> list[tuple[int, int]]:
         """The bounds [k0, k1) of consecutive chunks of at most ``size`` states."""
@@ -98,7 +113,7 @@ class TrajectoryStore:
 
     def trajectory(self, variant: str = "", metadata: dict | None = None) -> Trajectory:
         """The whole store as an in-memory Trajectory (for a store that fits)."""
-        t, x, P = (np.array(a) for a in self.arrays())
+        t, x, P = self.read()
         return Trajectory(t, x, P, variant=variant, metadata=metadata or {})
 
     def remove(self) -> None:
@@ -112,7 +127,6 @@ def write_npz(path: str | Path, store: TrajectoryStore, variant: str, metadata: 
     the members of :meth:`Trajectory.save_npz` in its order, t, x and P streamed (their
     ``.npy`` header first, from the store's length, then the chunks' bytes); atomic."""
     path = Path(path)
-    arrays = store.arrays()
     small = {
         "state_names": np.array(STATE_NAMES),
         "variant": np.array(variant),
@@ -123,12 +137,12 @@ def write_npz(path: str | Path, store: TrajectoryStore, variant: str, metadata: 
         atomic_path(path) as tmp,
         zipfile.ZipFile(tmp, mode="w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as zf,
     ):
-        for name, a in zip(ROW_SHAPES, arrays, strict=True):
+        for name, shape in ROW_SHAPES.items():
             with zf.open(f"{name}.npy", "w", force_zip64=True) as fid:
-                header = {"descr": "<f8", "fortran_order": False, "shape": a.shape}
+                header = {"descr": "<f8", "fortran_order": False, "shape": (len(store), *shape)}
                 np.lib.format.write_array_header_1_0(fid, header)
                 for k0, k1 in store.chunks(chunk):
-                    fid.write(np.ascontiguousarray(a[k0:k1]).tobytes())
+                    fid.write(store.read_array(name, k0, k1).tobytes())
         for name, value in small.items():
             with zf.open(f"{name}.npy", "w", force_zip64=True) as fid:
                 np.lib.format.write_array(fid, value, allow_pickle=False)
@@ -221,7 +235,7 @@ class StoredTrajectory:
 
     @property
     def t(self) -> np.ndarray:
-        return np.array(self.store.arrays()[0])
+        return self.store.read_array("t")
 
     def load(self) -> Trajectory:
         return self.store.trajectory(self.variant, self.metadata)

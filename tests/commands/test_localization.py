@@ -348,3 +348,14 @@ def test_a_log_localized_on_disk_gives_the_files_map_and_metrics_of_one_in_memor
             np.testing.assert_array_equal(getattr(got, key), getattr(today, key))
     assert (evaluate_trajectory_file(tmp_path / "disk", gt).to_dict()
             == evaluate_trajectory_file(tmp_path / "mem", gt).to_dict())  # fmt: skip
+
+
+def test_chunked_without_a_folder_or_with_an_output_rate_is_refused_before_reading(tmp_path):
+    from undertow.commands.localization import localize_file
+    from undertow.errors import ConfigError
+
+    missing = tmp_path / "no-such-log"  # not read: the options fail first
+    with pytest.raises(ConfigError, match="chunked: needs an output folder"):
+        localize_file(missing, chunked=True)
+    with pytest.raises(ConfigError, match="no output rate"):
+        localize_file(missing, chunked=True, out_dir=tmp_path / "o", output_rate_hz=10.0)

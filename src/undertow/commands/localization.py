@@ -106,6 +106,8 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     params = {**settings.localizer_params(), **overrides}
     check_options(smooth, params)
     run = _estimator(estimator, smooth)
+    if chunked and (out_dir is None or params.get("output_rate_hz") is not None):
+        raise ConfigError("chunked: needs an output folder and every state (no output rate)")
     if out_dir is not None:
         inputs = [path, _path_or_none(profile), _path_or_none(calibration), settings_path, topics]
         check_output_folder(out_dir, overwrite, inputs=inputs)
@@ -154,8 +156,6 @@ def _store(chunked: bool | None, log, params: dict, out_dir) -> TrajectoryStore 
     them in memory: ``chunked`` as given, else by the log's filter rows (STORE_ABOVE_ROWS);
     never without ``out_dir`` or for a decimated output."""
     if out_dir is None or params.get("output_rate_hz") is not None:
-        if chunked:
-            raise ConfigError("chunked: needs an output folder and every state (no output rate)")
         return None
     if chunked is None:
         streams = (log.imu, log.dvl, log.dead_reckoning, log.pressure)

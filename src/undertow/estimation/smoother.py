@@ -171,19 +171,13 @@ def smooth_store(store: TrajectoryStore, metadata: dict, config: LocalizerConfig
     ``metadata``: the trajectory's (config, held bias); returns it as :func:`smooth` would."""
     meta = metadata or {}
     process = _process_model(meta, config)
-    t_all, x_all, P_all = store.arrays("r+")
-    t_all = np.array(t_all)
-    _check_times(t_all)
+    _check_times(store.read_array("t"))
     counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
-    n = len(store)
     for k0, k1 in store.chunks(chunk, reverse=True):
-        end = min(k1 + 1, n)  # the next chunk's first state, smoothed already
-        x, P = np.array(x_all[k0:end]), np.array(P_all[k0:end])
-        xs, Ps, c = _run_smoother(t_all[k0:end], x, P, *process)
-        x_all[k0:k1], P_all[k0:k1] = xs[: k1 - k0], Ps[: k1 - k0]
+        t, x, P = store.read(k0, k1 + 1)  # and the next chunk's first state, smoothed already
+        xs, Ps, c = _run_smoother(t, x, P, *process)
+        store.rewrite(k0, xs[: k1 - k0], Ps[: k1 - k0])
         counts += c
-    x_all.flush()
-    P_all.flush()
     return smoothed_metadata(meta, counts)
 
 

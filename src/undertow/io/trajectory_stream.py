@@ -23,13 +23,12 @@ def write_tum_chunks(path: str | Path, store: TrajectoryStore, chunk: int = CHUN
     """The TUM file of :func:`~undertow.io.tum.write_tum` (t, position, quaternion of the
     roll-pitch-yaw; ``repr`` of each value), written ``chunk`` states at a time; atomic."""
     path = Path(path)
-    t_all, x_all, _ = store.arrays()
     with atomic_path(path) as tmp, open(tmp, "w") as fh:
         fh.write(f"# {' '.join(TUM_COLUMNS)}\n")
         for k0, k1 in store.chunks(chunk):
-            x = np.asarray(x_all[k0:k1])
+            t, x, _ = store.read(k0, k1)
             quat = rpy_to_quaternion(x[:, ORIENTATION]).reshape(k1 - k0, 4)
-            rows = np.column_stack([np.asarray(t_all[k0:k1]), x[:, POSITION], quat])
+            rows = np.column_stack([t, x[:, POSITION], quat])
             fh.write("".join(" ".join(repr(float(v)) for v in row) + "\n" for row in rows))
     return path
 
