@@ -10,7 +10,11 @@ arrays). Target: peak RSS under 2 GB at 24 hours. The hours are ``UNDERTOW_SOAK_
 (default 1 for now: the log is simulated in one piece, about 2 GB and 140 s per hour, and the
 bag reader holds the whole log, about 0.8 GB per hour at its peak, so 24 hours does not run yet).
 
-Live (``bench_live``): to come, in this module.
+Live (:func:`bench_live`, :mod:`soak_live`): ``serve`` plays the closed field survey again and
+again at 20x into `live` (all three links, view and map on) for ``UNDERTOW_SOAK_LIVE_HOURS`` of
+sensor time (default 3); RSS growth per sensor hour after the first ten minutes, CPU per
+sensor-second by hour, p99 latency by hour. Targets: <= 50 MB per hour, the last hour's CPU
+within 10 % of the first ten minutes', p99 < 10 ms.
 """
 
 from __future__ import annotations
@@ -105,8 +109,21 @@ def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
     return out
 
 
+def bench_live(hours: float = 3.0) -> dict:
+    """The live soak (:mod:`soak_live`): ``hours`` of sensor time at 20x into `live`."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import soak_live
+
+    return soak_live.run(hours=hours)
+
+
 def main() -> dict:
-    return {"offline": bench_offline(float(os.environ.get("UNDERTOW_SOAK_HOURS", "1")))}
+    """``UNDERTOW_SOAK_HOURS`` (offline, default 1) and ``UNDERTOW_SOAK_LIVE_HOURS`` (live,
+    default 3; 0 skips it)."""
+    live_hours = float(os.environ.get("UNDERTOW_SOAK_LIVE_HOURS", "3"))
+    out = {"live": bench_live(live_hours)} if live_hours > 0 else {}
+    out["offline"] = bench_offline(float(os.environ.get("UNDERTOW_SOAK_HOURS", "1")))
+    return out
 
 
 if __name__ == "__main__":
