@@ -244,6 +244,24 @@ def filter_to_store(meas, x0, P0, process, sensors, r_adapted, innovations, stor
     return state.counts, state.nis
 
 
+def resolved_localizer(log: Log, profile, wave, calibration, extrapolate, params: dict,
+                       smooth: bool = False) -> tuple[Localizer, Calibration | None]:  # fmt: skip
+    """(the Localizer :func:`localize` runs on ``log``, the calibration read): the options
+    checked, and the fields filled from the calibration (a Calibration or its YAML file) and
+    the log (the start position from its ground truth, its water density)."""
+    config = check_options(smooth, params)
+    if calibration is not None and not isinstance(calibration, Calibration):
+        calibration = Calibration.from_yaml(calibration)
+    filled = {} if calibration is None else calibration_fields(calibration, config)
+    if log.ground_truth is not None and len(log.ground_truth):
+        filled["initial_position"] = tuple(float(v) for v in log.ground_truth.position[0])
+    if "water_density_kg_m3" in log.metadata:
+        filled["water_density_kg_m3"] = float(log.metadata["water_density_kg_m3"])
+    localizer = Localizer(profile=profile, wave=wave, extrapolate=extrapolate,
+                          **{**filled, **params})  # fmt: skip
+    return localizer, calibration
+
+
 def localize(
     log: Log,
     variant: str | None = None,
@@ -262,16 +280,8 @@ def localize(
     :class:`~undertow.trajectory_chunks.StoredTrajectory` is returned."""
     if variant is not None:
         params["variant"] = variant
-    config = check_options(smooth, params)
-    if calibration is not None and not isinstance(calibration, Calibration):
-        calibration = Calibration.from_yaml(calibration)
-    filled = {} if calibration is None else calibration_fields(calibration, config)
-    if log.ground_truth is not None and len(log.ground_truth):
-        filled["initial_position"] = tuple(float(v) for v in log.ground_truth.position[0])
-    if "water_density_kg_m3" in log.metadata:
-        filled["water_density_kg_m3"] = float(log.metadata["water_density_kg_m3"])
-    localizer = Localizer(profile=profile, wave=wave, extrapolate=extrapolate,
-                          **{**filled, **params})  # fmt: skip
+    localizer, calibration = resolved_localizer(log, profile, wave, calibration, extrapolate,
+                                                params, smooth)  # fmt: skip
     trajectory = localizer.run(log, store=store)
     if smooth and store is not None:
         meta = smooth_store(store, trajectory.metadata, localizer.config)

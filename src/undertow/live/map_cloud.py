@@ -23,22 +23,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..occupancy import OCCUPIED_THRESHOLD
+from .view import scale_colors
 
 #: the most points a map message carries (16 bytes each: 3.2 MB)
 MAX_MAP_POINTS = 200_000
 TILE = 4  # chunks per tile edge
 POINT = np.dtype([("xyz", "<f4", 3), ("rgba", "u1", 4)])
-
-
-def scale_colors(s: np.ndarray) -> np.ndarray:
-    """RGBA uint8 (N, 4) of s in [0, 1]: blue (0) to red (1), linear; NaN as the middle."""
-    s = np.nan_to_num(np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0), nan=0.5)
-    rgba = np.empty((s.size, 4), np.uint8)
-    rgba[:, 0] = np.round(255 * s)
-    rgba[:, 1] = np.round(255 * (1 - np.abs(2 * s - 1)) * 0.6)
-    rgba[:, 2] = np.round(255 * (1 - s))
-    rgba[:, 3] = 255
-    return rgba
 
 
 class MapCloud:

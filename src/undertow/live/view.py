@@ -123,9 +123,13 @@ def _colors(values: np.ndarray) -> np.ndarray:
     """RGBA uint8 (N, 4): blue (lowest value) to red (highest), linear in the value."""
     v = np.asarray(values, dtype=np.float64)
     lo, hi = (float(np.nanmin(v)), float(np.nanmax(v))) if v.size else (0.0, 1.0)
-    s = np.clip((v - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.full(v.shape, 0.5)
-    s = np.nan_to_num(s, nan=0.5)
-    rgba = np.empty((v.size, 4), np.uint8)
+    return scale_colors((v - lo) / (hi - lo) if hi > lo else np.full(v.shape, 0.5))
+
+
+def scale_colors(s: np.ndarray) -> np.ndarray:
+    """RGBA uint8 (N, 4) of s in [0, 1]: blue (0) to red (1), linear; NaN as the middle."""
+    s = np.nan_to_num(np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0), nan=0.5)
+    rgba = np.empty((s.size, 4), np.uint8)
     rgba[:, 0] = np.round(255 * s)
     rgba[:, 1] = np.round(255 * (1 - np.abs(2 * s - 1)) * 0.6)
     rgba[:, 2] = np.round(255 * (1 - s))

@@ -42,12 +42,7 @@ import numpy as np
 
 from ..estimation.calibration import Calibration
 from ..estimation.config import LocalizerConfig
-from ..estimation.localizer import (
-    Localizer,
-    calibration_fields,
-    check_options,
-    sensor_coverage,
-)
+from ..estimation.localizer import resolved_localizer, sensor_coverage
 from ..estimation.rows import dr_rows, dvl_rows, imu_rows, initial_state, pressure_rows
 from ..io.units import reading_record
 from ..log import Log
@@ -128,8 +123,8 @@ def peer_inputs(
     """The run's :class:`PeerInputs`, resolved as :func:`~undertow.estimation.localizer.localize`
     resolves it (``params``: LocalizerConfig fields, e.g. ``variant``); the accelerometer's
     settings are the peers' own (module doc)."""
-    localizer, calibration = _resolved_localizer(log, profile, wave, calibration, extrapolate,
-                                                 params)  # fmt: skip
+    localizer, calibration = resolved_localizer(log, profile, wave, calibration, extrapolate,
+                                                params)  # fmt: skip
     cfg = localizer.config
     unobserved, held = sensor_coverage(log, cfg)
     noise, wave_meta = localizer.wave_noise(log)
@@ -175,22 +170,6 @@ def peer_inputs(
         dr_bias_drift_rad_s=np.array(cfg.dr_bias_drift_rad_s, float) if bias else np.zeros(3),
         held=tuple(held), metadata=metadata,
     )  # fmt: skip
-
-
-def _resolved_localizer(log, profile, wave, calibration, extrapolate, params):
-    """The Localizer :func:`~undertow.estimation.localizer.localize` would build (its filled
-    fields), and the calibration read."""
-    config = check_options(False, params)
-    if calibration is not None and not isinstance(calibration, Calibration):
-        calibration = Calibration.from_yaml(calibration)
-    filled = {} if calibration is None else calibration_fields(calibration, config)
-    if log.ground_truth is not None and len(log.ground_truth):
-        filled["initial_position"] = tuple(float(v) for v in log.ground_truth.position[0])
-    if "water_density_kg_m3" in log.metadata:
-        filled["water_density_kg_m3"] = float(log.metadata["water_density_kg_m3"])
-    localizer = Localizer(profile=profile, wave=wave, extrapolate=extrapolate,
-                          **{**filled, **params})  # fmt: skip
-    return localizer, calibration
 
 
 def _floored(R: np.ndarray, floor: float) -> np.ndarray:
