@@ -14,7 +14,7 @@ from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
 from undertow.mapping.grid import points_extent
 from undertow.mapping.samples import RaySamples, Samples, expand
-from undertow.mapping.tpu import _wavenumbers, tpu_training
+from undertow.mapping.tpu import tpu_training, wavenumbers
 from undertow.mapping.tpuscatter import tpu_extent, tpu_hits
 from undertow.sim.waves import wavenumber
 
@@ -124,8 +124,8 @@ def test_the_hits_and_the_extent_are_the_written_training_samples():
     assert np.array_equal(hi, want[1])
 
 
-def test_the_compiled_wavenumbers_are_wavenumbers_bit_for_bit():
+def test_the_compiledwavenumbers_arewavenumbers_bit_for_bit():
     depths = np.array([0.1, 0.7, 6.3, 6.8, 40.0, 400.0])
     omega = 2.0 * np.pi * 0.2
     want = np.array([float(wavenumber(omega, float(h))) for h in depths])
-    assert np.array_equal(_wavenumbers(omega, depths), want)
+    assert np.array_equal(wavenumbers(omega, depths), want)

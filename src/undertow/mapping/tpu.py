@@ -123,7 +123,7 @@ def wave_std(d, z, wave, resolution: float) -> np.ndarray:
     amplitude, frequency = wave
     h = np.maximum(np.round(z / resolution) * resolution, resolution)
     depths, index = np.unique(h, return_inverse=True)
-    k = _wavenumbers(2.0 * np.pi * frequency, depths)[index]
+    k = wavenumbers(2.0 * np.pi * frequency, depths)[index]
     d = np.clip(d, 0.0, h)
     # K_s = sinh(k (h - d)) / sinh(k h) as a ratio of exponentials (no overflow when deep)
     k_s = (np.exp(-k * d) - np.exp(-k * (2.0 * h - d))) / -np.expm1(-2.0 * k * h)
@@ -131,7 +131,7 @@ def wave_std(d, z, wave, resolution: float) -> np.ndarray:
 
 
 @njit(cache=True)
-def _wavenumbers(omega, depths):
+def wavenumbers(omega, depths):
     """:func:`~undertow.sim.waves.wavenumber` of one omega in each of ``depths`` (g the
     standard gravity, its default), in one compiled loop."""
     w = np.array([omega])

@@ -9,11 +9,11 @@ resolution) with the hit's own across-floor lengths l_x, l_y and weights sigma_0
 :mod:`undertow.mapping.tpu`'s). Here:
 
 - :func:`hit_lattice` computes, per hit, its sigmas (pose, footprint, range noise, and the
-  wave's s_w, which numpy computes: :func:`~undertow.mapping.tpu.wave_std`, so that its
-  exponentials are numpy's), lengths, three cells and weights in one compiled pass, with the
-  floating-point operations of :func:`~undertow.mapping.tpu.hit_sigmas` and
-  :func:`~undertow.mapping.tpu.tpu_training` in the same order (||m - o|| summed as
-  (x^2 + y^2) + z^2, as numpy's norm does);
+  wave's s_w, whose three exponentials numpy computes, as :func:`~undertow.mapping.tpu.wave_std`
+  does: numba's exp differs from numpy's in the last bit), lengths, three cells and weights in
+  one compiled pass, with the floating-point operations of
+  :func:`~undertow.mapping.tpu.hit_sigmas` and :func:`~undertow.mapping.tpu.tpu_training` in
+  the same order (||m - o|| summed as (x^2 + y^2) + z^2, as numpy's norm does);
 - :func:`tpu_scatter_slab` scatters those samples in that order with the block kernels of
   :mod:`undertow.mapping.rayscatter` (:func:`~undertow.mapping.rayscatter.block_weights`,
   :func:`~undertow.mapping.rayscatter.block_cells`), which compute each sample's support and
@@ -38,7 +38,7 @@ from numba import njit, prange
 from .chunks import CHUNK_SHIFT, find_or_insert, same_box, set_box
 from .rayscatter import BLOCK, block_cells, block_weights, ray_meets
 from .samples import SENSOR_SONAR
-from .tpu import KERNEL_STD, wave_std
+from .tpu import KERNEL_STD, wavenumbers
 
 _TWO_PI = 2.0 * np.pi
 
@@ -65,21 +65,58 @@ def tpu_hits(rays, *, resolution: float, base_length: float, max_length: float, 
     cap = max(float(max_length), res / 2)
     s0 = np.asarray(range_std, float)
     fraction = np.array([0.0, range_std_fraction, range_std_fraction])
-    z = rays.origin[:, 2] + rays.r * rays.direction[:, 2]  # the hits' depths, as written
-    s_w = wave_std(rays.origin[:, 2], z, wave, res)
+    if wave is None:
+        e, m, amplitude = np.zeros((2, 0)), np.zeros(0), 0.0
+    else:  # the exponentials by numpy, as wave_std takes them (numba's differ in the last bit)
+        amplitude, frequency = float(wave[0]), float(wave[1])
+        args = wave_arguments(rays.origin, rays.direction, rays.r, 2.0 * np.pi * frequency, res)
+        e, m = np.exp(args[:2]), np.expm1(args[2])
     tan_half = float(np.tan(np.deg2rad(sonar_beam_width_deg) / 2.0))
     l_free = (np.array([base_length, base_length, res / 2]) / cap) * cap
-    out = hit_lattice(rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor, s_w,
-                      s0, fraction, int(np.argmax(s0)), tan_half, float(base_length),
+    out = hit_lattice(rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor, e, m,
+                      amplitude, s0, fraction, int(np.argmax(s0)), tan_half, float(base_length),
                       float(max_length), cap, res)  # fmt: skip
     return TpuHits(*out, l_free)
 
 
 @njit(cache=True, error_model="numpy")
-def hit_lattice(origin, direction, r, var, sig, sensor, s_w, s0, fraction, unknown, tan_half,
-                base, max_length, cap, res):  # fmt: skip
+def wave_arguments(origin, direction, r, omega, res):
+    """(3, R): per hit the arguments of :func:`~undertow.mapping.tpu.wave_std`'s exponentials,
+    -k d, -k (2 h - d) and -2 k h, with h its depth rounded to the grid (at least one cell),
+    d the sensor's depth clipped to [0, h], k the wavenumber of omega in depth h (computed
+    once per depth met in a row)."""
+    n = r.shape[0]
+    out = np.empty((3, n))
+    last_h, k = np.nan, 0.0
+    for i in range(n):
+        z = origin[i, 2] + r[i] * direction[i, 2]  # the hit's depth, as written
+        h = max(np.rint(z / res) * res, res)
+        if h != last_h:
+            last_h, k = h, wavenumbers(omega, np.array([h]))[0]
+        d = min(max(origin[i, 2], 0.0), h)
+        out[0, i], out[1, i], out[2, i] = -k * d, -k * (2.0 * h - d), -2.0 * k * h
+    return out
+
+
+@njit(cache=True, inline="always")
+def _wave_std(e1, e2, m, amplitude):
+    """s_w = a K_s / sqrt(2), K_s = (e1 - e2) / -m, NaN read as 0 and infinities as the
+    largest floats (numpy's nan_to_num)."""
+    k_s = (e1 - e2) / -m
+    if k_s != k_s:
+        k_s = 0.0
+    elif np.isinf(k_s):
+        k_s = np.finfo(np.float64).max if k_s > 0 else -np.finfo(np.float64).max
+    return amplitude * k_s / np.sqrt(2.0)
+
+
+@njit(cache=True, error_model="numpy")
+def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fraction, unknown,
+                tan_half, base, max_length, cap, res):  # fmt: skip
     """(x, y, l (R, 2), z (R, 3), w (R, 3)) of :class:`TpuHits`: per ray the hit m = o + r v,
-    its range ||m - o||, s_r' = hypot(s_0 + f ||m - o||, s_w), the footprint s_b (the sonar:
+    the wave's s_w (:func:`_wave_std` of the exponentials ``e`` (2, R) and ``m`` (R,) of
+    :func:`wave_arguments`' arguments; 0 where ``e`` is empty: no wave), its range ||m - o||,
+    s_r' = hypot(s_0 + f ||m - o||, s_w), the footprint s_b (the sonar:
     ||m - o|| tan(b / 2) / 2), sigma_x,y = sqrt(s_x,y^2 + s_b^2), sigma_v = sqrt(s_z^2 +
     s_r'^2), l_x,y = clip(sigma / c, l_0, l_cap), the weight and the lattice of
     :mod:`undertow.mapping.tpu` (``unknown``: the sensor taken for a code outside 0 .. 2)."""
@@ -94,7 +131,8 @@ def hit_lattice(origin, direction, r, var, sig, sensor, s_w, s0, fraction, unkno
         rng = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
         s = np.int64(sensor[i])
         s = s if 0 <= s < 3 else unknown
-        s_r = np.hypot(s0[s] + fraction[s] * rng, s_w[i])
+        s_w = _wave_std(e[0, i], e[1, i], m[i], amplitude) if e.shape[1] == n else 0.0
+        s_r = np.hypot(s0[s] + fraction[s] * rng, s_w)
         s_b2 = 0.0
         if s == SENSOR_SONAR:
             s_b = rng * tan_half / 2.0
