@@ -18,7 +18,8 @@ parameters of ``eq:alpha_param`` / ``eq:beta_param``:
   incrementally (online). Where max == min on an axis, s~ = 0 there, i.e. l_min is used.
 - ``tpu``: the product kernel with each hit's own length scales from its pose's standard
   deviation (not normalized over the session), its mass kept and its vertical placement exact
-  (:mod:`undertow.mapping.tpu`).
+  (:mod:`undertow.mapping.tpu`; samples kept as rays scattered straight from them,
+  :mod:`undertow.mapping.tpuscatter`).
 
 The kernel is evaluated at cell centres; sums are scattered into a sparse chunked grid by numba
 kernels (see :mod:`undertow.mapping.kernels`).
