@@ -14,12 +14,15 @@ lawnmower survey built here (no simulator needed); ranges are exact ray/floor in
 Multibeam (``per_ping.multibeam``): pings of a 256-beam fan (120 deg swath across track) at
 the same altitude over a seabed heightfield, each beam a hit plus free samples, built from the
 detections (world rays, computed outside the timing as OctoMap's end points are) and integrated
-one call per ping, on all numba threads and on one; OctoMap inserts the same end points. Threads
+one call per ping, on all numba threads and on one, by the adaptive mapper and by the default
+``tpu`` (also with a wave, whose term each hit adds); OctoMap inserts the same end points. Threads
 (``per_ping.threads``): the adaptive figures with numba limited to 1 and to 2 threads.
 
 Targets (``four_beam_target_met``, ``multibeam_target_met`` at the top, from the figures of the
 same run): the 4-beam ping at least 2x faster than OctoMap (``per_ping.headline``), the 256-beam
-ping no slower than OctoMap (``multibeam_adaptive_over_octomap`` <= 1).
+ping no slower than OctoMap (``multibeam_adaptive_over_octomap`` <= 1); the same for the default
+mapper ``tpu`` (``four_beam_tpu_target_met``, ``multibeam_tpu_over_octomap``,
+``multibeam_tpu_target_met``).
 
 Km-scale (``km_survey``): a lawnmower of 256-beam pings (>= 10^7 rays) over a 1 km x 1 km seabed
 heightfield 10 m below, mapped at 1 m (length scales and free spacing scaled with the cell),
@@ -55,7 +58,7 @@ import numpy as np  # noqa: E402
 from undertow.log import Dvl, Log, SonarRange  # noqa: E402
 from undertow.mapping.config import MappingConfig  # noqa: E402
 from undertow.mapping.mappers import make_mapper  # noqa: E402
-from undertow.mapping.samples import Samples, build_samples  # noqa: E402
+from undertow.mapping.samples import SENSOR_MULTIBEAM, Samples, build_samples  # noqa: E402
 from undertow.mapping.tiled import Tiling  # noqa: E402
 from undertow.robot import Mounting  # noqa: E402
 from undertow.rotations import rpy_to_matrix  # noqa: E402
@@ -138,7 +141,7 @@ def bench_per_ping(n_pings: int, area: float, repeats: int = 5) -> dict:
     out = {"pings": n_pings, "area_m": area, "samples_per_ping": len(samples) / n_pings,
            "build_samples_ms_per_ping": build_ms, "mappers": {}}  # fmt: skip
     warm = Samples.from_points(np.zeros((1, 3)), [1.0])
-    for method in ("csm", "bki", "adaptive"):
+    for method in ("csm", "bki", "adaptive", "tpu"):
         _mapper(method).integrate(warm)  # numba compile / cache load outside the timing
         batch = stream = float("inf")
         for _ in range(repeats):  # best of `repeats`: the machine is shared
@@ -178,6 +181,9 @@ def bench_per_ping(n_pings: int, area: float, repeats: int = 5) -> dict:
         "octomap_insert_ms_per_ping": octo,
         "adaptive_over_octomap": None if octo is None else headline / octo,
     }
+    tpu = out["mappers"]["tpu"]["build_plus_integrate_ms_per_ping_batched"]
+    out["headline"]["tpu_build_plus_integrate_ms_per_ping"] = tpu
+    out["headline"]["tpu_over_octomap"] = None if octo is None else tpu / octo
     return out
 
 
@@ -246,6 +252,7 @@ def bench_survey(n_pings: int, area: float, batch: int = 10_000) -> dict:
 # --- multibeam fans over a seabed heightfield ------------------------------------------------
 
 BEAMS, SWATH_DEG = 256, 120.0
+FAN_WAVE = (0.25, 0.2)  # amplitude m, frequency Hz: the tpu mapper's wave term, timed
 
 
 def seabed(x, y, depth, relief=1.0):
@@ -341,25 +348,46 @@ def fan_samples(k: np.ndarray, g: dict, f: float, sigma0: float = 0.9, box=None)
     return samples_from_rays(origin, v, r, var, f, sigma0)
 
 
-def samples_from_rays(origin, v, r, var, f: float, sigma0: float = 0.9) -> Samples:
+def samples_from_rays(origin, v, r, var, f: float, sigma0: float = 0.9,
+                      sensor: int = 0) -> Samples:  # fmt: skip
     """Training samples of world rays (origins, unit directions, ranges, pose variances; one
     row per beam): a hit per beam and free samples every f from the origin, through the same
-    numba expansion as ``samples_from_config``."""
+    numba expansion as ``samples_from_config``; ``sensor`` the code every ray carries (0 DVL,
+    2 multibeam: the tpu mapper's range noise)."""
     from undertow.mapping.samples import expand
 
     n = r.size
-    return expand(origin, v, r, var, np.full(n, sigma0), np.zeros(n, np.int8), f, {})
+    return expand(origin, v, r, var, np.full(n, sigma0), np.full(n, sensor, np.int8), f, {})
+
+
+def _fan_ms(mapper_of, rays, whole) -> tuple[float, float]:
+    """(ms per ping one call per ping, ms per ping all pings in one call) of a fresh mapper
+    ``mapper_of()`` building the samples of the multibeam rays and integrating them."""
+    mapper = mapper_of()
+    t0 = time.perf_counter()
+    for ray in rays:
+        mapper.integrate(samples_from_rays(*ray, 0.1, sensor=SENSOR_MULTIBEAM))
+    ping_ms = (time.perf_counter() - t0) * 1e3 / len(rays)
+    mapper = mapper_of()
+    t0 = time.perf_counter()
+    mapper.integrate(samples_from_rays(*whole, 0.1, sensor=SENSOR_MULTIBEAM))
+    return ping_ms, (time.perf_counter() - t0) * 1e3 / len(rays)
 
 
 def bench_multibeam(n_pings: int = 2000, altitude: float = ALTITUDE, repeats: int = 5) -> dict:
     """One 256-beam fan per call (build the samples from the rays + integrate) vs OctoMap
-    inserting the same end points, res 0.1 m, free samples every 0.1 m. Each repeat times our
-    mapper (on all numba threads, then on one) and then OctoMap, so that a machine shared with
-    other work slows both alike; every figure is the best of its repeats."""
+    inserting the same end points, res 0.1 m, free samples every 0.1 m, for the paper's
+    adaptive mapper and the default ``tpu`` (without a wave, and with :data:`FAN_WAVE`, whose
+    term each hit adds). Each repeat times our mappers (on all numba threads, then on one)
+    and then OctoMap, so that a machine shared with other work slows all alike; every figure
+    is the best of its repeats."""
     g = fan_geometry(30.0, altitude, n_pings)
     k = np.arange(n_pings)
     fan_samples(k[:1], g, 0.1)  # compile / cache load
-    _mapper("adaptive").integrate(fan_samples(k[:1], g, 0.1))
+    mappers = {"adaptive": lambda: _mapper("adaptive"), "tpu": lambda: _mapper("tpu"),
+               "tpu_wave": lambda: make_mapper("tpu", wave=FAN_WAVE)}  # fmt: skip
+    for make in mappers.values():
+        make().integrate(fan_samples(k[:1], g, 0.1))
     o, v, r = fan_rays(k, g)
     var = ping_variance(k, g)
     # the detections (rays) come from the sensor, outside the timing, as OctoMap's end points
@@ -369,7 +397,8 @@ def bench_multibeam(n_pings: int = 2000, altitude: float = ALTITUDE, repeats: in
     samples = len(samples_from_rays(*whole, 0.1)) / n_pings
     all_threads = numba.get_num_threads()
     out = {"beams": BEAMS, "swath_deg": SWATH_DEG, "altitude_m": altitude, "pings": n_pings,
-           "samples_per_ping": samples, "numba_threads": all_threads}  # fmt: skip
+           "samples_per_ping": samples, "numba_threads": all_threads,
+           "tpu_wave": {"amplitude_m": FAN_WAVE[0], "frequency_hz": FAN_WAVE[1]}}  # fmt: skip
     try:
         import octomap
     except ImportError:
@@ -386,30 +415,28 @@ def bench_multibeam(n_pings: int = 2000, altitude: float = ALTITUDE, repeats: in
             numba.set_num_threads(threads)
             names = [""] if threads == all_threads else []
             names += ["_1_thread"] if threads == 1 else []
-            mapper = _mapper("adaptive")
-            t0 = time.perf_counter()
-            for ray in rays:
-                mapper.integrate(samples_from_rays(*ray, 0.1))
-            ping_ms = (time.perf_counter() - t0) * 1e3 / n_pings
-            mapper = _mapper("adaptive")
-            t0 = time.perf_counter()
-            mapper.integrate(samples_from_rays(*whole, 0.1))
-            whole_ms = (time.perf_counter() - t0) * 1e3 / n_pings
-            for suffix in names:
-                keep(f"adaptive_build_plus_integrate_ms_per_ping{suffix}", ping_ms)
-                keep(f"adaptive_whole_set_ms_per_ping{suffix}", whole_ms)
+            for method, make in mappers.items():
+                if method == "tpu_wave" and threads != all_threads:
+                    continue
+                ping_ms, whole_ms = _fan_ms(make, rays, whole)
+                for suffix in names:
+                    keep(f"{method}_build_plus_integrate_ms_per_ping{suffix}", ping_ms)
+                    keep(f"{method}_whole_set_ms_per_ping{suffix}", whole_ms)
         numba.set_num_threads(all_threads)
         if octomap is not None:
             keep("octomap_insert_ms_per_ping", _octomap_ms_per_ping(octomap, clouds, 1)[0])
     out.update(best)
     if octomap is None:
         return {**out, "octomap": {"skipped": "pip install octomap-python"}}
-    ms, one = out["adaptive_build_plus_integrate_ms_per_ping"], best[
-        "adaptive_build_plus_integrate_ms_per_ping_1_thread"]  # fmt: skip
     octo = out["octomap_insert_ms_per_ping"]
-    return {**out, "adaptive_over_octomap": ms / octo, "adaptive_over_octomap_1_thread": one / octo,
-            "target": "adaptive_over_octomap <= 1: a ping no slower than OctoMap's insert",
-            "met": ms <= octo}  # fmt: skip
+    for method in mappers:
+        out[f"{method}_over_octomap"] = out[f"{method}_build_plus_integrate_ms_per_ping"] / octo
+        if method != "tpu_wave":
+            out[f"{method}_over_octomap_1_thread"] = out[
+                f"{method}_build_plus_integrate_ms_per_ping_1_thread"] / octo  # fmt: skip
+    return {**out, "target": "X_over_octomap <= 1: a ping no slower than OctoMap's insert",
+            "met": out["adaptive_over_octomap"] <= 1.0,
+            "tpu_met": out["tpu_over_octomap"] <= 1.0}  # fmt: skip
 
 
 def bench_threads(n_pings: int, area: float, repeats: int = 5) -> dict:
@@ -637,6 +664,11 @@ def main(pings: int = 20_000, area: float = 30.0, survey_pings: int = 1_000_000,
     result["four_beam_target_met"] = None if four_beam is None else bool(four_beam <= 0.5)
     result["multibeam_adaptive_over_octomap"] = multibeam.get("adaptive_over_octomap")
     result["multibeam_target_met"] = multibeam.get("met")
+    # the same targets for the default mapper, tpu
+    tpu_four = result["per_ping"]["headline"]["tpu_over_octomap"]
+    result["four_beam_tpu_target_met"] = None if tpu_four is None else bool(tpu_four <= 0.5)
+    result["multibeam_tpu_over_octomap"] = multibeam.get("tpu_over_octomap")
+    result["multibeam_tpu_target_met"] = multibeam.get("tpu_met")
     result["per_ping"]["threads"] = bench_threads(pings, area)
     if survey:
         result["survey"] = bench_survey(survey_pings, survey_area)

@@ -34,6 +34,7 @@ from .rayscatter import (
     ray_slab_splits,
 )
 from .threads import parallel_slot
+from .tpuscatter import tpu_insert_chunks, tpu_scatter_parallel, tpu_scatter_slab
 
 
 def points_extent(points: np.ndarray):
@@ -201,6 +202,44 @@ class ChunkedGrid:
                                      parts, *extent[:2])  # fmt: skip
             ray_scatter_parallel(*splits, *geometry, rays.sig, rays.rows, rays.f, lo, hi, l_min,
                                  l_max, res, *self._tables())  # fmt: skip
+
+    def scatter_tpu(self, rays, hits, cap: float, extent, n: int) -> None:
+        """:meth:`scatter` in product mode of the ``tpu`` mapper's n samples of ``rays``
+        (:class:`~undertow.mapping.samples.Rays`) and ``hits``
+        (:class:`~undertow.mapping.tpuscatter.TpuHits`) straight from them
+        (:mod:`undertow.mapping.tpuscatter`): the same chunks in the same order and the same
+        map, bit for bit, as :meth:`scatter` of the written samples with l_min 0, l_max ``cap``.
+        ``extent``: of the samples (:func:`~undertow.mapping.tpuscatter.tpu_extent`)."""
+        self._check_extent(extent)
+        if n < RAY_PARALLEL_MIN_SAMPLES:  # (no thread slot to take)
+            self._scatter_tpu(rays, hits, cap, extent, 1)
+            return
+        with parallel_slot(n, RAY_PARALLEL_MIN_SAMPLES) as parts:
+            self._scatter_tpu(rays, hits, cap, extent, parts)
+
+    def _scatter_tpu(self, rays, hits, cap: float, extent, parts: int) -> None:
+        """:meth:`scatter_tpu` on ``parts`` threads."""
+        res, start = self.resolution, int(rays.rows[0])
+        lattice = (hits.x, hits.y, hits.l, hits.z, hits.w)
+        end = int(rays.rows[-1]) + 3 * len(hits.x)
+        while start < end:
+            if parts > 1:
+                start = tpu_insert_chunks(start, rays.origin, rays.direction, rays.rows, rays.f,
+                                          hits.l_free, *lattice, res,
+                                          *self._tables()[:4])  # fmt: skip
+            else:
+                start = tpu_scatter_slab(start, 0, -ALL_CELLS, ALL_CELLS, rays.origin,
+                                         rays.direction, rays.rows, rays.f, rays.sig,
+                                         hits.l_free, *lattice, res, cap, *self._tables(),
+                                         True)  # fmt: skip
+            if start < end:
+                self._grow()
+        if parts > 1:
+            splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows, rays.f, res,
+                                     parts, *extent[:2])  # fmt: skip
+            tpu_scatter_parallel(*splits, rays.origin, rays.direction, rays.rows, rays.f,
+                                 rays.sig, hits.l_free, *lattice, res, cap,
+                                 *self._tables())  # fmt: skip
 
     def _check_extent(self, extent) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range (and

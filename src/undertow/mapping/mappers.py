@@ -18,7 +18,8 @@ parameters of ``eq:alpha_param`` / ``eq:beta_param``:
   incrementally (online). Where max == min on an axis, s~ = 0 there, i.e. l_min is used.
 - ``tpu``: the product kernel with each hit's own length scales from its pose's standard
   deviation (not normalized over the session), its mass kept and its vertical placement exact
-  (:mod:`undertow.mapping.tpu`).
+  (:mod:`undertow.mapping.tpu`; samples kept as rays scattered straight from them,
+  :mod:`undertow.mapping.tpuscatter`).
 
 The kernel is evaluated at cell centres; sums are scattered into a sparse chunked grid by numba
 kernels (see :mod:`undertow.mapping.kernels`).
@@ -40,6 +41,7 @@ from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
 from .rayscatter import ray_extent
 from .samples import RaySamples, Samples
 from .tpu import tpu_training
+from .tpuscatter import tpu_extent, tpu_hits
 
 DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
 
@@ -110,12 +112,7 @@ class Mapper:
         if need is None:  # the written samples (when a bound does not settle it: counted)
             need = self.grid.estimate_bytes(mode, samples.points, samples.pose_variance, bounds,
                                             l_min, l_max, limit_gb * 1e9, extent)  # fmt: skip
-        if need > limit_gb * 1e9:
-            raise ConfigError(
-                f"mapping {len(samples)} samples at resolution {self.resolution:g} m would need "
-                f"an estimated {need / 1e9:.3g} GB or more (limit {limit_gb:.3g} GB, "
-                "mapping.max_memory_gb): use a coarser resolution or raise the limit"
-            )
+        self._check_need(need, len(samples), limit_gb)
         try:
             if rays is None:
                 self.grid.scatter(mode, samples.points, samples.label, samples.sigma0,
@@ -124,6 +121,15 @@ class Mapper:
                 self.grid.scatter_rays(rays, bounds, l_min, l_max, extent)
         except MemoryError:
             raise out_of_memory(self.resolution) from None
+
+    def _check_need(self, need: float, n: int, limit_gb: float) -> None:
+        """The one-line refusal when the estimated storage ``need`` exceeds the limit."""
+        if need > limit_gb * 1e9:
+            raise ConfigError(
+                f"mapping {n} samples at resolution {self.resolution:g} m would need "
+                f"an estimated {need / 1e9:.3g} GB or more (limit {limit_gb:.3g} GB, "
+                "mapping.max_memory_gb): use a coarser resolution or raise the limit"
+            )
 
     def seed(self, prior: OccupancyMap | str | Path) -> None:
         """Add a saved map's evidence (alpha - alpha_0, beta - beta_0 per cell) to this map."""
@@ -251,13 +257,41 @@ class TpuBkiMapper(Mapper):
         self.range_std = tuple(float(v) for v in range_std)  # DVL, sonar, multibeam
         self.range_std_fraction = float(range_std_fraction)
 
+    def _settings(self) -> dict:
+        return {"resolution": self.resolution, "base_length": self.base_length,
+                "max_length": self.max_length, "range_std": self.range_std,
+                "range_std_fraction": self.range_std_fraction,
+                "sonar_beam_width_deg": self.sonar_beam_width_deg, "wave": self.wave}  # fmt: skip
+
     def _scatter(self, samples: Samples) -> None:
-        points, label, weight, lengths = tpu_training(
-            samples, resolution=self.resolution, base_length=self.base_length,
-            max_length=self.max_length, range_std=self.range_std,
-            range_std_fraction=self.range_std_fraction,
-            sonar_beam_width_deg=self.sonar_beam_width_deg, wave=self.wave,
-        )  # fmt: skip
+        """Samples kept as rays are scattered straight from them
+        (:mod:`~undertow.mapping.tpuscatter`, the same map bit for bit) unless only counting
+        their chunks can settle the memory estimate; the others by :meth:`_scatter_written`."""
+        if isinstance(samples, RaySamples):
+            rays = samples.rays
+            hits = tpu_hits(rays, **self._settings())
+            lo, hi, finite, n = tpu_extent(rays.origin, rays.direction, rays.rows, rays.f,
+                                           hits.x, hits.y, hits.z, hits.w)  # fmt: skip
+            if n == 0:
+                return
+            cap = max(self.max_length, self.resolution / 2)
+            limit_gb = self.max_memory_gb or default_max_memory_gb()
+            need = self.grid.bound_bytes(MODE_PRODUCT, n, np.zeros(3), np.full(3, cap),
+                                         limit_gb * 1e9, (lo, hi, finite))  # fmt: skip
+            if need is not None:
+                self._check_need(need, n, limit_gb)
+                try:
+                    self.grid.scatter_tpu(rays, hits, cap, (lo, hi, finite), n)
+                except MemoryError:
+                    raise out_of_memory(self.resolution) from None
+                return
+        self._scatter_written(samples)
+
+    def _scatter_written(self, samples: Samples) -> None:
+        """:meth:`integrate`'s scatter through the written training samples of
+        :func:`~undertow.mapping.tpu.tpu_training` and the generic product-kernel scatter
+        (the reference of the scatter from the rays)."""
+        points, label, weight, lengths = tpu_training(samples, **self._settings())
         # the product kernel's l_j = s_j (l_max_j - l_min_j) + l_min_j with bounds (0, 1):
         # s_j = l_j / cap gives each sample its own lengths (cap fixed by the settings, so
         # a sample's lengths do not depend on the batch: tiles map as the whole)

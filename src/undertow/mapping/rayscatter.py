@@ -100,7 +100,7 @@ def _ray_scales(i, var, var_lo, var_hi, l_min, l_max, res, lengths, rot):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _ray_meets(i, k0, m, origin, direction, f, lj, axis, res, first, stop):
+def ray_meets(i, k0, m, origin, direction, f, lj, axis, res, first, stop):
     """Whether the supports of ray i's free samples k0 .. k0 + m - 1 reach the cells [first,
     stop) along ``axis``: their coordinates along it are monotone in k, so their supports span
     the first sample's to the last sample's."""
@@ -172,7 +172,7 @@ def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi,
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _block_weights(n, pts, scales, res, span, first_cell, count, w, offsets, scratch):
+def block_weights(n, pts, scales, res, span, first_cell, count, w, offsets, scratch):
     """Supports (first cell, cells per axis) and unit kernel weights of the n samples of a
     block (coordinates ``pts[j, b]``; ``scales[:, j, b]``: the cosine and sine of the step
     2 pi res / l, l / res and 1 / l, l the sample's length scale along axis j), as
@@ -221,14 +221,14 @@ def _block_weights(n, pts, scales, res, span, first_cell, count, w, offsets, scr
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, offsets, chunks, span,
+def block_cells(n, hit, sig, axis, first, stop, first_cell, count, w, offsets, chunks, span,
                  box, place, table_keys, table_vals, chunk_keys, n_chunks, alpha,
                  beta):  # fmt: skip
     """Add each of the block's n samples' weight sigma_0 w_x w_y w_z to alpha (hits) or beta
     (free samples, both flat: cell offset o of chunk c at c CHUNK^3 + o) of its support's cells
     in the slab [first, stop) along ``axis``, skipping the cells whose weights are not positive
     (as ``scatter_slab``). The chunks of the support box (``chunks``, span^3, flat) are looked
-    up once per box, and placed first with ``place``; ``offsets`` as :func:`_block_weights`
+    up once per box, and placed first with ``place``; ``offsets`` as :func:`block_weights`
     (unsigned: no negative-index handling in the loop). Returns -1, or the first sample whose
     chunks did not fit (nothing of it added)."""
     cube = np.uint64(CHUNK**3)
@@ -334,7 +334,7 @@ def ray_scatter_slab(start, axis, first, stop, origin, direction, r, var, sig, r
             k0 = row - rows[ray]
             m = min(BLOCK - n, rows[ray + 1] - row)
             row += m
-            if not _ray_meets(ray, k0, m, origin, direction, f, lengths[axis], axis, res, first,
+            if not ray_meets(ray, k0, m, origin, direction, f, lengths[axis], axis, res, first,
                               stop):  # fmt: skip
                 continue  # (a slab thread: none of these samples reaches its cells)
             for j in range(3):  # o + (k f) v
@@ -347,8 +347,8 @@ def ray_scatter_slab(start, axis, first, stop, origin, direction, r, var, sig, r
             n += m
         if n == 0:
             continue
-        _block_weights(n, pts, scales, res, span, first_cell, count, w, offsets, scratch)
-        b = _block_cells(n, hit, sigs, axis, first, stop, first_cell, count, w, offsets, chunks,
+        block_weights(n, pts, scales, res, span, first_cell, count, w, offsets, scratch)
+        b = block_cells(n, hit, sigs, axis, first, stop, first_cell, count, w, offsets, chunks,
                          span, box, place, table_keys, table_vals, chunk_keys, n_chunks, alpha,
                          beta)  # fmt: skip
         if b >= 0:  # (one thread, everything its slab: the block's rows are row - n ..)

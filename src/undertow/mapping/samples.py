@@ -116,8 +116,9 @@ class Rays(NamedTuple):
 class RaySamples(Samples):
     """:class:`Samples` of checked rays (finite, sigma_0 > 0, variance >= 0) kept as the rays
     (``rays``, :class:`Rays`): the per-sample arrays are written on first access, and the
-    adaptive mapper scatters straight from the rays (:mod:`undertow.mapping.rayscatter`; the
-    same map bit for bit), so a mapping call need not write 65 bytes per sample."""
+    adaptive and tpu mappers scatter straight from the rays (:mod:`undertow.mapping.rayscatter`,
+    :mod:`undertow.mapping.tpuscatter`; the same maps bit for bit), so a mapping call need not
+    write 65 bytes per sample."""
 
     def __init__(self, rays: Rays, dropped: dict) -> None:  # frozen: the fields set directly
         object.__setattr__(self, "rays", rays)

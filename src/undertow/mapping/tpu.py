@@ -61,8 +61,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
-from ..sim.waves import wavenumber
+from ..sim.waves import wavenumber_array
 from .samples import SENSOR_SONAR, Samples
 
 #: standard deviation of the sparse kernel k(d; l) in units of l: sqrt(1/6 - 1/pi^2)
@@ -100,24 +101,43 @@ def with_wave(config, trajectory):
 
 
 def wave_range_std(hits: Samples, rows, wave, resolution: float) -> np.ndarray:
-    """s_w of the samples ``rows`` of ``hits`` (module doc): a K_s(d) / sqrt(2) for the
-    sensor depth d and the water depth h at the end point (z, rounded to the grid's
-    ``resolution`` for the wavenumber, so a sample's value does not depend on the others:
-    tiles map alike); zeros without a wave or where the ray is unknown."""
+    """s_w of the samples ``rows`` of ``hits`` (:func:`wave_std` of their sensor and end point
+    depths); zeros without a wave or where the ray is unknown."""
     out = np.zeros(len(rows))
     ray = hits.ray[rows]
     known = ray >= 0
     if wave is None or not known.any() or not len(hits.origins):
         return out
+    out[known] = wave_std(hits.origins[ray[known], 2], hits.points[rows[known], 2], wave,
+                          resolution)  # fmt: skip
+    return out
+
+
+def wave_std(d, z, wave, resolution: float) -> np.ndarray:
+    """s_w = a K_s(d) / sqrt(2) (module doc) of hits at depth z seen from a sensor at depth d:
+    the water depth h is z rounded to the grid's ``resolution`` (for the wavenumber, so a
+    hit's value does not depend on the others: tiles map alike); zeros without a wave."""
+    d, z = np.asarray(d, float), np.asarray(z, float)
+    if wave is None or not z.size:
+        return np.zeros(z.size)
     amplitude, frequency = wave
-    d = hits.origins[ray[known], 2]
-    h = np.maximum(np.round(hits.points[rows[known], 2] / resolution) * resolution, resolution)
+    h = np.maximum(np.round(z / resolution) * resolution, resolution)
     depths, index = np.unique(h, return_inverse=True)
-    k = np.array([float(wavenumber(2.0 * np.pi * frequency, float(v))) for v in depths])[index]
+    k = wavenumbers(2.0 * np.pi * frequency, depths)[index]
     d = np.clip(d, 0.0, h)
     # K_s = sinh(k (h - d)) / sinh(k h) as a ratio of exponentials (no overflow when deep)
     k_s = (np.exp(-k * d) - np.exp(-k * (2.0 * h - d))) / -np.expm1(-2.0 * k * h)
-    out[known] = amplitude * np.nan_to_num(k_s) / np.sqrt(2.0)
+    return amplitude * np.nan_to_num(k_s) / np.sqrt(2.0)
+
+
+@njit(cache=True)
+def wavenumbers(omega, depths):
+    """:func:`~undertow.sim.waves.wavenumber` of one omega in each of ``depths`` (g the
+    standard gravity, its default), in one compiled loop."""
+    w = np.array([omega])
+    out = np.empty(depths.size)
+    for i in range(depths.size):
+        out[i] = wavenumber_array(w, depths[i], 9.80665)[0]
     return out
 
 

@@ -1,0 +1,131 @@
+"""The tpu mapper's scatter straight from the rays (mapping/tpuscatter.py) against its scatter of
+the written training samples (mapping/tpu.py's tpu_training and the generic product-kernel
+scatter of mapping/kernels.py, the path plain Samples take): the same chunks in the same order
+and the same alpha and beta, bit for bit, with pose covariance, every sensor and a wave, on one
+thread and on two."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+
+from undertow.mapping import grid as grid_module
+from undertow.mapping import make_mapper
+from undertow.mapping.grid import points_extent
+from undertow.mapping.samples import RaySamples, Samples, expand
+from undertow.mapping.tpu import tpu_training, wavenumbers
+from undertow.mapping.tpuscatter import tpu_extent, tpu_hits
+from undertow.sim.waves import wavenumber
+
+WAVE = (0.35, 0.2)  # amplitude m, frequency Hz: s_w of centimetres at these depths
+SETTINGS = {"resolution": 0.1, "base_length": 0.1, "max_length": 1.7,
+            "range_std": (0.005, 0.01, 0.01), "range_std_fraction": 0.005,
+            "sonar_beam_width_deg": 25.0}  # fmt: skip
+
+
+def _fan(seed: int, pings: int = 5, beams: int = 96):
+    """Multibeam fans (120 deg across track, small roll/pitch) 1.75 m over a wavy floor, a
+    pose variance per ping up to 0.006 m^2, every sensor code
+    (-1 unknown, 0 DVL, 1 sonar with its footprint, 2 multibeam, 3 unknown)."""
+    rng = np.random.default_rng(seed)
+    a = np.radians(np.linspace(-60, 60, beams))
+    o, v, r, var = [], [], [], []
+    for k in range(pings):
+        roll, pitch = rng.normal(0, 0.03, 2)
+        d = np.stack([np.full(beams, np.sin(pitch)), np.sin(a + roll), np.cos(a + roll)], 1)
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        origin = np.array([0.9 * k + 7.0 * seed + 0.37, -1.1 + seed, 5.0])
+        depth = 6.75 + 0.2 * np.sin(3.0 * d[:, 1] / d[:, 2])
+        o.append(np.repeat(origin[None], beams, 0))
+        v.append(d)
+        r.append((depth - origin[2]) / d[:, 2])
+        var.append(np.repeat(rng.uniform(0, [6e-3, 6e-3, 1e-3], (1, 3)), beams, 0))
+    o, v, r, var = (np.concatenate(x) for x in (o, v, r, var))
+    sensor = rng.integers(-1, 4, len(r)).astype(np.int8)
+    return o, v, r, var, rng.uniform(0.5, 1.0, len(r)), sensor
+
+
+def _samples(rays, written: bool):
+    """The rays' samples as expand gives them (kept as rays) or written out (plain Samples,
+    which the tpu mapper scatters through tpu_training)."""
+    samples = expand(*rays, 0.1, {})
+    assert isinstance(samples, RaySamples)
+    if written:
+        fields = ("points", "label", "sigma0", "pose_variance", "ray", "sensor")
+        return Samples(*(getattr(samples, name) for name in fields), origins=samples.origins)
+    return samples
+
+
+def _map(batches, written: bool, wave=WAVE, threads: int = 1, max_length: float = 2.0):
+    before = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        mapper = make_mapper("tpu", wave=wave, max_length=max_length)
+        for rays in batches:  # the grid starts small and grows in between and within batches
+            mapper.integrate(_samples(rays, written))
+        return mapper
+    finally:
+        numba.set_num_threads(before)
+
+
+def _same_map(a, b) -> bool:
+    n = a.grid.n_chunks
+    keys = np.array_equal(a.grid._keys[:n], b.grid._keys[: b.grid.n_chunks])
+    ca, cb = a.grid.cells(), b.grid.cells()
+    return keys and all(np.array_equal(x, y) for x, y in zip(ca, cb, strict=True))
+
+
+@pytest.mark.parametrize(("wave", "max_length"), [(WAVE, 2.0), (None, 2.0), (WAVE, 1.7)])
+def test_the_rays_give_the_written_samples_map_bit_for_bit(wave, max_length):
+    """(A cap of 1.7 m: l / cap * cap is not always l, as it is for 2 m.)"""
+    batches = [_fan(seed) for seed in range(3)]
+    written = _map(batches, True, wave, max_length=max_length)
+    rays = _map(batches, False, wave, max_length=max_length)
+    assert written.grid.n_chunks > 64  # grown, and resumed after each growth
+    assert _same_map(written, rays)
+    occupancy = rays.occupancy()
+    assert len(occupancy) > 1000 and np.all(occupancy.alpha >= rays.alpha0)
+    if wave is not None:  # the wave is in play: without it the map differs
+        assert not _same_map(rays, _map(batches, False, None, max_length=max_length))
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread")
+def test_the_rays_on_two_threads_give_the_serial_map_bit_for_bit(monkeypatch):
+    """Slabs of cells on numba's threads, the chunks placed in a pass before (the path of large
+    batches, forced here on small ones)."""
+    batches = [_fan(seed) for seed in range(3)]
+    serial = _map(batches, True)
+    monkeypatch.setattr(grid_module, "RAY_PARALLEL_MIN_SAMPLES", 1)
+    assert _same_map(serial, _map(batches, False, threads=2))
+
+
+def test_the_hits_and_the_extent_are_the_written_training_samples():
+    """Per hit: its cells' points, lengths and weights are tpu_training's rows (the cells of
+    weight 0 left out there), and the extent and count are those of the written samples."""
+    rays = _fan(4)
+    samples = _samples(rays, False)
+    hits = tpu_hits(samples.rays, wave=WAVE, **SETTINGS)
+    points, label, weight, lengths = tpu_training(_samples(rays, True), wave=WAVE, **SETTINGS)
+    keep = hits.w.reshape(-1) > 0
+    n_free = len(samples) - len(rays[2])
+    lattice = np.stack([np.repeat(hits.x, 3), np.repeat(hits.y, 3), hits.z.reshape(-1)], 1)
+    assert np.array_equal(points[n_free:], lattice[keep])
+    assert np.array_equal(weight[n_free:], hits.w.reshape(-1)[keep])
+    cap = SETTINGS["max_length"]
+    assert np.array_equal((lengths[n_free:, :2] / cap) * cap, np.repeat(hits.l, 3, 0)[keep])
+    assert np.array_equal((lengths[:n_free] / cap) * cap, np.tile(hits.l_free, (n_free, 1)))
+    assert np.all(label[n_free:] == 1) and np.all(label[:n_free] == 0)
+    r = samples.rays
+    lo, hi, finite, n = tpu_extent(r.origin, r.direction, r.rows, r.f, hits.x, hits.y, hits.z,
+                                   hits.w)  # fmt: skip
+    want = points_extent(points)
+    assert n == len(points) and finite and np.array_equal(lo, want[0])
+    assert np.array_equal(hi, want[1])
+
+
+def test_the_compiledwavenumbers_arewavenumbers_bit_for_bit():
+    depths = np.array([0.1, 0.7, 6.3, 6.8, 40.0, 400.0])
+    omega = 2.0 * np.pi * 0.2
+    want = np.array([float(wavenumber(omega, float(h))) for h in depths])
+    assert np.array_equal(wavenumbers(omega, depths), want)
