@@ -211,6 +211,7 @@ class ChunkedGrid:
         map, bit for bit, as :meth:`scatter` of the written samples with l_min 0, l_max ``cap``.
         ``extent``: of the samples (:func:`~undertow.mapping.tpuscatter.tpu_extent`)."""
         self._check_extent(extent)
+        self._touch(extent, cap)
         if n < RAY_PARALLEL_MIN_SAMPLES:  # (no thread slot to take)
             self._scatter_tpu(rays, hits, cap, extent, 1)
             return
