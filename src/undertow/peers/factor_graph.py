@@ -81,6 +81,7 @@ def isam2(log: Log, *, max_gap_s: float = MAX_GAP_S, relinearize_threshold: floa
     params = gtsam.ISAM2Params()
     params.setRelinearizeThreshold(relinearize_threshold)
     params.relinearizeSkip = relinearize_skip
+    params.setFactorization("QR")  # Cholesky finds a long log's marginals indeterminate
     solver, _point = isam2_solver(params)  # _point held: its callbacks then copy no Values
     graph, values = kg.start()
     solver.update(graph, values)
