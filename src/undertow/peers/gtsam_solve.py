@@ -70,8 +70,9 @@ def levenberg_marquardt(graph, values, *, max_iterations: int = 50,
     initial, lam, iterations = error, lambda_initial, 0
     while iterations < max_iterations and error > 0.0:
         linear = graph.linearize(x)
-        x_new, error_new, lam = _try_lambdas(gtsam, graph, linear, x, error, lam, ordering, dims,
-                                             relative_tol)
+        x_new, error_new, lam = _try_lambdas(
+            gtsam, graph, linear, x, error, lam, ordering, dims, relative_tol
+        )
         iterations += 1
         decrease = error - error_new
         x, error, previous = x_new, error_new, error
@@ -80,8 +81,9 @@ def levenberg_marquardt(graph, values, *, max_iterations: int = 50,
     return Solution(x, iterations, float(initial), float(error))
 
 
-def _try_lambdas(gtsam, graph, linear, x, error: float, lam: float, ordering, dims,
-                 relative_tol: float):
+def _try_lambdas(
+    gtsam, graph, linear, x, error: float, lam: float, ordering, dims, relative_tol: float
+):
     """One LM iteration's inner loop (LevenbergMarquardtOptimizer::tryLambda): (x', f(x'),
     lambda'), x' = x when no lambda up to the upper bound decreases the error; the search also
     stops at a change below ``relative_tol`` of the error."""
