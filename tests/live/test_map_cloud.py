@@ -14,7 +14,8 @@ METHODS = ["csm", "bki", "adaptive", "tpu"]
 
 
 def _config(method):
-    extra = {"variance_bounds": ((0.0, 0.0, 0.0), (0.05, 0.05, 0.05))} if method == "adaptive" else {}
+    bounds = ((0.0, 0.0, 0.0), (0.05, 0.05, 0.05))
+    extra = {"variance_bounds": bounds} if method == "adaptive" else {}
     return MappingConfig(method=method, resolution=0.1, **extra)
 
 
@@ -87,8 +88,12 @@ def test_budget_thins_the_cloud_and_colours_are_on_a_fixed_scale():
     thin.update()
     pts = thin.points()
     assert n // 8 <= len(pts) <= n // 4 + 64  # every 4th point of each tile (64 tiles at most)
+
     # a cell's colour does not depend on the rest of the map: the same in both clouds
-    key = lambda p: {tuple(x) + tuple(c) for x, c in zip(p["xyz"].tolist(), p["rgba"].tolist())}  # noqa: E731
+    def key(p):
+        return {tuple(x) + tuple(c) for x, c in zip(p["xyz"].tolist(), p["rgba"].tolist(),
+                                                    strict=True)}  # fmt: skip
+
     assert key(pts) <= key(full.points())
 
 

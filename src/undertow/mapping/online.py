@@ -165,8 +165,10 @@ class OnlineMapper:
             outside = now & ((w["t"] < first) | (w["t"] > last))
             gone = now & ~outside & (w["t"] < kept)  # (a chunk older than those pushed before)
             take = now & ~outside & ~gone
-            for key, count in ((f"{w['kind']}_outside_trajectory", outside.sum()),
-                               (f"{w['kind']}_before_the_states_kept", gone.sum())):
+            for key, count in (
+                (f"{w['kind']}_outside_trajectory", outside.sum()),
+                (f"{w['kind']}_before_the_states_kept", gone.sum()),
+            ):
                 if count:
                     self.dropped[key] = self.dropped.get(key, 0) + int(count)
             if take.any():

@@ -8,9 +8,11 @@ config, calibration, wave noise and initial state) plus **the accelerometer**, w
 not use (IMU preintegration needs it; a log without it is refused). The graph, its factors and
 their equations: :mod:`undertow.peers.graph` and :mod:`undertow.peers.gtsam_factors`.
 
-- :func:`factor_graph`: the whole graph optimized by Levenberg-Marquardt from a causal initial
-  guess; each keyframe's covariance from ``gtsam.Marginals`` (the pose's 6 x 6 joint marginal,
-  the velocity's and biases' marginals): a smoother, every state informed by the whole log.
+- :func:`factor_graph`: the whole graph optimized by GTSAM's Levenberg-Marquardt from a causal
+  initial guess; each keyframe's marginal covariances (the pose's 6 x 6, the velocity's and the
+  biases') from the solution's Bayes tree: a smoother, every state informed by the whole log.
+  Both in time linear in the log (:mod:`.gtsam_solve`: GTSAM's own optimizer loop would copy
+  all the Values at each Python factor's call).
 - :func:`isam2`: iSAM2 updated once per keyframe; each keyframe's state and marginals are
   recorded when it is the newest (``calculateEstimate``, ``marginalCovariance``), the online
   estimate a vehicle would have had: the comparison for the UKF's own (online) output.
@@ -30,6 +32,7 @@ from ..errors import ConfigError, DataError
 from ..log import Log
 from ..trajectory import Trajectory
 from .graph import MAX_GAP_S, KeyframeGraph
+from .gtsam_solve import bayes_tree_marginals, isam2_solver, levenberg_marquardt
 from .inputs import PeerInputs, peer_inputs, to_trajectory
 
 #: Levenberg-Marquardt's iteration limit and relative error decrease at which it stops
@@ -49,23 +52,19 @@ def factor_graph(log: Log, *, max_gap_s: float = MAX_GAP_S, **kw) -> Trajectory:
         graph.push_back(g)
         values.insert(v)
     graph.push_back(kg.finish())
-    gtsam = kg.gtsam
-    params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(MAX_ITERATIONS)
-    params.setRelativeErrorTol(RELATIVE_TOLERANCE)
-    optimizer = gtsam.LevenbergMarquardtOptimizer(graph, values, params)
-    result = optimizer.optimize()
+    solution = levenberg_marquardt(graph, values, max_iterations=MAX_ITERATIONS,
+                                   relative_tol=RELATIVE_TOLERANCE)  # fmt: skip
     try:
-        marginals = gtsam.Marginals(graph, result)
+        marginals = bayes_tree_marginals(graph, solution.values)
+        states = _states(kg, range(len(kg)), solution.values, marginals)
     except RuntimeError as exc:  # gtsam's IndeterminateLinearSystemException, one line
         first = str(exc).strip().splitlines()[0]
         raise DataError(f"factor-graph: the covariance could not be computed ({first})") from None
-    states = _states(kg, range(len(kg)), result, marginals)
     meta = {
-        "optimizer": "Levenberg-Marquardt (gtsam)",
-        "iterations": int(optimizer.iterations()),
-        "initial_error": float(graph.error(values)),
-        "final_error": float(graph.error(result)),
+        "optimizer": "Levenberg-Marquardt (gtsam's, driven from Python)",
+        "iterations": solution.iterations,
+        "initial_error": solution.initial_error,
+        "final_error": solution.final_error,
         "online": False,
     }
     return _trajectory(kg, states, "factor-graph", meta, time.process_time() - start)
@@ -82,7 +81,8 @@ def isam2(log: Log, *, max_gap_s: float = MAX_GAP_S, relinearize_threshold: floa
     params = gtsam.ISAM2Params()
     params.setRelinearizeThreshold(relinearize_threshold)
     params.relinearizeSkip = relinearize_skip
-    solver = gtsam.ISAM2(params)
+    params.setFactorization("QR")  # Cholesky finds a long log's marginals indeterminate
+    solver, _point = isam2_solver(params)  # _point held: its callbacks then copy no Values
     graph, values = kg.start()
     solver.update(graph, values)
     rows = [_state(kg, 0, _IsamView(solver))]

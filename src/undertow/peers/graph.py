@@ -183,9 +183,12 @@ class KeyframeGraph:
         return pim
 
     def _omega(self, t: float) -> np.ndarray:
-        """The gyro at t (interpolated) minus the initial gyro bias."""
+        """The gyro at t (interpolated between its two samples around t, held outside them)
+        minus the initial gyro bias."""
         imu_t, w = self.inputs.imu_t, self.inputs.gyro_rad_s
-        return np.array([np.interp(t, imu_t, w[:, j]) for j in range(3)]) - self.b0_gyro
+        i = int(np.searchsorted(imu_t, t, side="right"))
+        near = slice(max(i - 1, 0), i + 1)  # np.interp of the whole log costs O(samples)
+        return np.array([np.interp(t, imu_t[near], w[near, j]) for j in range(3)]) - self.b0_gyro
 
     def _dvl(self, k: int, i: int):
         inp = self.inputs
