@@ -150,8 +150,10 @@ def read_rosbag(path, topics: TopicMap | None = None, options: LogOptions | None
 
 
 #: seconds at the start of a log read in pieces from which its choices are made (time base,
-#: units, surface pressure, depth sign, mounting): the whole log when it is shorter
-DECIDE_S = 600.0
+#: units, surface pressure, depth sign, mounting): the whole log when it is shorter, so that a
+#: log of up to an hour is read with exactly the whole read's choices and evidence (the surface
+#: pressure, say, is the median of the readings near the log's lowest pressure)
+DECIDE_S = 3600.0
 #: a message more than this (s) off where its stream's clock offset puts it is put in a piece
 #: by its record time (:func:`~undertow.io.rosbag_choices.piece_keys`)
 PIECE_SLACK_S = 2.0
