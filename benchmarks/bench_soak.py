@@ -1,14 +1,15 @@
 """Soak: long missions (issue 27, section 4). `make bench ONLY=soak` prints JSON.
 
-Offline (:func:`bench_offline`): a simulated survey of ``hours`` of sensor time (the
-field-survey scenario's lawnmower repeated, one bag, in a temporary folder, not kept) is
-localized with the smoother and mapped, each step in its own process, whose peak RSS
-(``VmHWM``) is reported, for the states kept on disk (``chunked``, what `localize` does
-above 200 000 filter rows) and, when ``today`` is set, for the states in memory (the path
-before issue 27), with whether the two wrote the same files (TUM and config.yaml bytes, npz
-arrays). Target: peak RSS under 2 GB at 24 hours. The hours are ``UNDERTOW_SOAK_HOURS``
-(default 1 for now: the log is simulated in one piece, about 2 GB and 140 s per hour, and the
-bag reader holds the whole log, about 0.8 GB per hour at its peak, so 24 hours does not run yet).
+Offline (:func:`bench_offline`): a simulated survey of ``hours`` of sensor time (one lap of the
+field-survey scenario simulated, then repeated into one bag message by message with shifted
+times, :func:`repeat_bag`: disk, not memory; in a temporary folder, not kept) is localized with
+the smoother and mapped (BKI), each step in its own process, whose peak RSS (``VmHWM``) is
+reported. ``chunked``: what `localize` and `map` do with a bag above 200 000 messages (read
+and filtered in 600 s pieces, the states on disk; the map integrated piece by piece); when
+``today`` is set (default up to 2 hours) also ``memory``: the whole log read and filtered in
+memory (the path before issue 27), with whether the two wrote the same files (TUM and
+config.yaml bytes, npz arrays). Target: peak RSS under 2 GB at 24 hours. The hours are
+``UNDERTOW_SOAK_HOURS`` (default 1).
 
 Live (:func:`bench_live`, :mod:`soak_live`): ``serve`` plays the closed field survey again and
 again at 20x into `live` (all three links, view and map on) for ``UNDERTOW_SOAK_LIVE_HOURS`` of
@@ -47,7 +48,7 @@ elif step == "localize":
     extra = {"states": len(r.trajectory)}
 else:
     from undertow.commands.mapping import map_file
-    r = map_file(log, out, out_dir=out + "-map")
+    r = map_file(log, out, out_dir=out + "-map", method="bki")
     extra = {"cells": len(r.map)}
 # VmHWM: this process's peak RSS (ru_maxrss would keep the parent's peak across fork + exec)
 hwm = next(ln for ln in open("/proc/self/status") if ln.startswith("VmHWM"))
@@ -57,16 +58,72 @@ print(json.dumps({"wall_s": round(time.perf_counter() - t0, 1),
 
 
 def simulate_hours(hours: float, folder: Path) -> Path:
-    """The field survey repeated over ``hours`` (whole laps), written as a bag into
-    ``folder``; returns its log folder."""
+    """``hours`` of the field survey as one bag in ``folder``/log: one lap simulated
+    (``folder``/lap) and repeated (:func:`repeat_bag`), so that a long log costs disk, not
+    memory; returns the log folder."""
     from undertow.sim import load_scenario, simulate, write_simulation
 
     s = load_scenario("field-survey")
-    laps = max(1, math.ceil(hours * 3600.0 / LAP_S))
-    route = s.motion.waypoints.model_copy(update={"laps": laps})
+    route = s.motion.waypoints.model_copy(update={"laps": 1})
     s = s.model_copy(update={"motion": s.motion.model_copy(update={"waypoints": route})})
-    write_simulation(simulate(s), folder, overwrite=True)
-    return folder / "log"
+    write_simulation(simulate(s), folder / "lap", overwrite=True)
+    return repeat_bag(folder / "lap" / "log", folder / "log", hours)
+
+
+def repeat_bag(lap: Path, dest: Path, hours: float) -> Path:
+    """A bag of ``hours`` made of the bag ``lap`` repeated, as ``undertow serve --loop`` plays
+    a log: lap k's record times and header stamps shifted by k periods (period = the lap's span
+    + the smallest spacing of its messages; ``/tf_static`` written once), message by message
+    (the raw CDR bytes, the stamp patched in place: sec int32, nanosec uint32 after the 4-byte
+    encapsulation header of a message that starts with a ``std_msgs/Header``). The lap's
+    sidecar ``undertow.yaml`` is copied beside it."""
+    import shutil
+    import struct
+
+    import numpy as np
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    from undertow.io.msgdefs import dvl_typestore
+    from undertow.io.rosbag_write import TF_STATIC_QOS
+
+    store = dvl_typestore()
+    with AnyReader([lap], default_typestore=store) as reader:
+        times = np.array([ns for _, ns, _ in reader.messages()], dtype=np.int64)
+        spacing = int(np.diff(np.unique(times)).min()) if times.size > 1 else 1
+        period = int(times.max() - times.min()) + spacing
+        laps = max(1, math.ceil(hours * 3600e9 / period))
+        stamped = {}
+        for conn, _, raw in reader.messages():
+            if conn.id not in stamped:
+                msg = reader.deserialize(raw, conn.msgtype)
+                fields = getattr(msg, "__dataclass_fields__", {})
+                stamped[conn.id] = bool(fields) and next(iter(fields)) == "header"
+        with Writer(dest, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            out = {
+                c.id: writer.add_connection(
+                    c.topic, c.msgtype, typestore=store,
+                    offered_qos_profiles=(TF_STATIC_QOS,) if c.topic == "/tf_static" else (),
+                )
+                for c in reader.connections
+            }  # fmt: skip
+            for k in range(laps):
+                shift = k * period
+                for conn, ns, raw in reader.messages():
+                    if k and conn.topic == "/tf_static":
+                        continue
+                    data = raw
+                    if k and stamped[conn.id]:
+                        data = bytearray(raw)
+                        sec, nsec = struct.unpack_from("<iI", data, 4)
+                        total = sec * 1_000_000_000 + nsec + shift
+                        struct.pack_into("<iI", data, 4, total // 1_000_000_000,
+                                         total % 1_000_000_000)  # fmt: skip
+                    writer.write(out[conn.id], ns + shift, data)
+    sidecar = lap / "undertow.yaml"
+    if sidecar.exists():
+        shutil.copy(sidecar, dest / "undertow.yaml")
+    return dest
 
 
 def _step(step: str, log: Path, out, chunked: bool = False) -> dict:

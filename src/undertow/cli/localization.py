@@ -78,6 +78,13 @@ def localize(
         typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
     ] = None,
     smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
+    in_pieces: Annotated[
+        bool,
+        typer.Option(
+            help="A long ROS bag read and filtered in 600 s pieces, the states on disk (bounded "
+            "memory; the log's choices from its first hour; docs/localization.md)."
+        ),
+    ] = False,
     estimator: EstimatorOption = "ukf",
     gate: Annotated[
         str | None,
@@ -115,6 +122,7 @@ def localize(
             log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
             overwrite=overwrite, profile=profile, calibration=calibration,
             extrapolate=extrapolate, smooth=smooth, wave=condition, estimator=estimator,
+            chunked=True if in_pieces else None,
             **{name: value for name, value in options.items() if value is not None},
             **gate_option(gate),
         )  # fmt: skip

@@ -94,6 +94,13 @@ def map_command(
             "| tcp://host:8786 (a running Dask scheduler)."
         ),
     ] = None,
+    piece_s: Annotated[
+        float | None,
+        typer.Option(
+            help="A long ROS bag read and mapped in pieces of S seconds (csm and bki; bounded "
+            "memory for the log, not for the map)."
+        ),
+    ] = None,
     pose_std: PoseStdOption = None,
     trajectory_frame: TrajectoryFrameOption = None,
     config: ConfigOption = None,
@@ -123,7 +130,7 @@ def map_command(
                           prior=prior,
                           out_dir=out_dir, overwrite=overwrite, tiles=tiles,
                           scheduler=scheduler, pose_std=_pose_std(pose_std),
-                          trajectory_frame=frame, **given)  # fmt: skip
+                          trajectory_frame=frame, piece_s=piece_s, **given)  # fmt: skip
     print_warnings(result.warnings)
     if not quiet:
         _print_trajectory(result.metadata.get("trajectory", {}))

@@ -24,6 +24,7 @@ from ..estimation.calibration import Calibration, calibrate
 from ..estimation.config import DEFAULT_GATE
 from ..estimation.consistency import ConsistencyReport
 from ..estimation.localizer import check_options, localize
+from ..estimation.localizer_pieces import localize_pieces
 from ..estimation.noise import NoiseProfile
 from ..estimation.noise_physics import PHYSICS, outside_policy
 from ..evaluation.drift import (
@@ -35,7 +36,10 @@ from ..evaluation.drift import (
     trajectory_drift,
 )
 from ..evaluation.trajectory import PoseStates, TrajectoryErrors, trajectory_rmse
+from ..io import detect_format, iter_log_pieces
 from ..io.results import save_trajectory
+from ..io.rosbag import bag_topics
+from ..io.topics import LIVE_WAVE_TOPIC, TopicMap
 from ..io.trajectory_stream import save_stored_trajectory
 from ..io.tum import read_tum
 from ..peers import UKF
@@ -113,6 +117,18 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
         check_output_folder(out_dir, overwrite, inputs=inputs)
     profile, calibration = _read_options(profile, wave, calibration, extrapolate)
     caught: list[str] = []
+    if _in_pieces(path, chunked, estimator, params, wave, out_dir):
+        with collect_warnings(caught):
+            trajectory = _localize_in_pieces(
+                path,
+                topics,
+                settings,
+                params,
+                out_dir,
+                overwrite,
+                (profile, wave, calibration, extrapolate, smooth),
+            )
+        return _result(trajectory, caught, out_dir)
     with collect_warnings(caught):
         log = load_log(path, topics, settings)
         store = _store(chunked, log, params, out_dir) if estimator == UKF else None
@@ -134,6 +150,10 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
                 store.remove()
     if out_dir is not None and store is None:
         save_trajectory(trajectory, out_dir, overwrite)
+    return _result(trajectory, caught, out_dir)
+
+
+def _result(trajectory, caught: list[str], out_dir) -> LocalizationResult:
     meta = trajectory.metadata
     return LocalizationResult(
         trajectory=trajectory,
@@ -151,6 +171,54 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
 STORE_ABOVE_ROWS = 200_000
 
 
+#: seconds of log per piece when a bag is localized in pieces (about 70 MB of a BlueROV2 survey's
+#: messages decoded; the states go to disk as they come)
+PIECE_S = 600.0
+
+
+def _in_pieces(path, chunked: bool | None, estimator: str, params: dict, wave,
+               out_dir) -> bool:  # fmt: skip
+    """Whether the log is read and filtered in pieces (:mod:`undertow.estimation.localizer_pieces`):
+    a ROS bag localized by the UKF into ``out_dir`` at every state when ``chunked`` is True
+    (``localize --in-pieces``; None keeps the whole read), with a wave condition that is not
+    estimated from the log and no live session's wave decisions (those need the whole log)."""
+    if estimator != UKF or out_dir is None or params.get("output_rate_hz") is not None:
+        return False
+    if not chunked or is_auto(wave) or detect_format(path) not in ("ros1", "ros2"):
+        return False
+    topics = bag_topics(path)
+    if LIVE_WAVE_TOPIC in topics:
+        return False
+    return bool(chunked)  # opt-in: the pieces decide from the first hour (docs/localization.md)
+
+
+def _localize_in_pieces(path, topics, settings: Settings, params: dict, out_dir,
+                        overwrite: bool, options: tuple) -> NpzTrajectory:  # fmt: skip
+    """The folder of the log at ``path`` localized in pieces of PIECE_S seconds, its states in
+    a store beside ``out_dir`` (removed after); the written trajectory.npz, read lazily."""
+    profile, wave, calibration, extrapolate, smooth = options
+    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics
+    pieces = iter_log_pieces(path, PIECE_S, topic_map, options=settings.log)
+    pieces = (settings.apply_mounting(piece) for piece in pieces)
+    store = _new_store(out_dir)
+    try:
+        trajectory = localize_pieces(pieces, store, profile=profile, wave=wave,
+                                     calibration=calibration, extrapolate=extrapolate,
+                                     smooth=smooth, **params)  # fmt: skip
+        trajectory.metadata.setdefault("estimator", UKF)
+        save_stored_trajectory(trajectory, out_dir, overwrite)
+    finally:
+        store.remove()
+    return NpzTrajectory.open(Path(out_dir) / "trajectory.npz")
+
+
+def _new_store(out_dir) -> TrajectoryStore:
+    """An empty store in a hidden folder beside ``out_dir``."""
+    out = Path(out_dir).absolute()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return TrajectoryStore(tempfile.mkdtemp(prefix=f".{out.name}.states-", dir=out.parent))
+
+
 def _store(chunked: bool | None, log, params: dict, out_dir) -> TrajectoryStore | None:
     """The on-disk store for the states (a hidden folder beside ``out_dir``), or None to keep
     them in memory: ``chunked`` as given, else by the log's filter rows (STORE_ABOVE_ROWS);
@@ -162,9 +230,7 @@ def _store(chunked: bool | None, log, params: dict, out_dir) -> TrajectoryStore 
         chunked = sum(len(s) for s in streams if s is not None) > STORE_ABOVE_ROWS
     if not chunked:
         return None
-    out = Path(out_dir).absolute()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    return TrajectoryStore(tempfile.mkdtemp(prefix=f".{out.name}.states-", dir=out.parent))
+    return _new_store(out_dir)
 
 
 def _estimator(name: str, smooth: bool):

@@ -29,11 +29,13 @@ from ..evaluation.surface import (
     hull_area,
 )
 from ..evaluation.truth import check_truth_options, load_truth, truth_kind
+from ..io import detect_format, iter_log_pieces
 from ..io.export.georef import from_latlon, from_projected, parse_origin, parse_utm
 from ..io.export.geotiff import SUFFIXES as GEOTIFF_SUFFIXES
 from ..io.export.geotiff_read import read_map_geotiff
 from ..io.ply import read_ply, write_map_ply
 from ..io.results import save_map
+from ..io.topics import TopicMap
 from ..io.trajectory_input import (
     TrajectoryOptions,
     TumInput,
@@ -42,7 +44,14 @@ from ..io.trajectory_input import (
     tum_trajectory,
 )
 from ..mapping.config import MappingConfig
-from ..mapping.run import MappingResult, check_prior, map_log, tiled_map_metadata
+from ..mapping.run import (
+    PIECE_METHODS,
+    MappingResult,
+    check_prior,
+    map_log,
+    map_pieces,
+    tiled_map_metadata,
+)
 from ..mapping.samples import samples_from_config
 from ..mapping.surface import Surface, map_surface, surface_from_points
 from ..mapping.tiled import check_tiling, map_tiled
@@ -76,7 +85,7 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
              prior: OccupancyMap | str | Path | None = None, out_dir: str | Path | None = None,
              overwrite: bool = False, tiles: float | None = None, scheduler: str | None = None,
              pose_std=None, trajectory_frame: str | None = None,
-             **overrides) -> MappingResult:  # fmt: skip
+             piece_s: float | None = None, **overrides) -> MappingResult:  # fmt: skip
     """Occupancy map of the seafloor from a log's DVL beams and sonar ranges along a trajectory
     (a ``trajectory.npz`` with covariances, or its localization folder; or a TUM file, told by
     its content, with its pose standard deviations as columns or stated: ``pose_std`` (3 or 6
@@ -95,7 +104,11 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     ``tiles``: map in square tiles of this size (m) as Dask tasks on ``scheduler`` ("local",
     "threads", "sync" or ``tcp://host:port``; :func:`~undertow.mapping.tiled.map_tiled`), the
     tiles also written to ``out_dir/tiles``; a tile that fails twice is left out with a
-    warning naming it."""
+    warning naming it.
+
+    ``piece_s``: read a bag in pieces of this many seconds and map them in turn
+    (:func:`~undertow.mapping.run.map_pieces`: a trajectory.npz, ``csm`` or ``bki``, no tiles);
+    None: the whole log at once."""
     settings_path = None if isinstance(settings, Settings) else settings
     settings = as_settings(settings)
     config = mapping_config(settings, overrides)  # the options first, then the files
@@ -111,18 +124,63 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     caught: list[str] = []
     with collect_warnings(caught):
         given = _read_trajectory(trajectory_path, settings, stated)  # before the (longer) log
-        log = load_log(log_path, topics, settings)
-        trajectory, record = _trajectory_for_log(given, log, config)
-        if tiles is not None:
-            return _map_tiled_file(log, trajectory, config, tiles, scheduler, out_dir,
-                                   overwrite, caught, record)  # fmt: skip
-        result = map_log(log, trajectory, config, prior=prior)
+        if _in_pieces(log_path, given, tiles, config, piece_s):
+            result = _map_in_pieces(log_path, given, topics, settings, config, prior, piece_s)
+        else:
+            result = None
+    if result is None:
+        tiling, out = (tiles, scheduler), (out_dir, overwrite)
+        result, written = _map_whole(log_path, given, topics, settings, config, tiling, prior,
+                                     out, caught)  # fmt: skip
+        if written:  # tiled: written as the tiles finished
+            return result
     result.warnings = caught
-    result.metadata["trajectory"] = record
     if out_dir is not None:
         save_map(result.map, result.config.model_dump(mode="json"), result.metadata, out_dir,
                  overwrite, threshold=config.occupied_threshold)  # fmt: skip
     return result
+
+
+#: seconds of log per piece when a bag is mapped in pieces
+PIECE_S = 600.0
+
+
+def _in_pieces(log_path, given, tiles, config: MappingConfig, piece_s) -> bool:
+    """Map in pieces (:func:`~undertow.mapping.run.map_pieces`): a bag with a trajectory.npz,
+    no tiles, a method that allows it, and ``piece_s`` given."""
+    if isinstance(given, TumInput) or tiles is not None or config.method not in PIECE_METHODS:
+        return False
+    if detect_format(log_path) not in ("ros1", "ros2"):
+        return False
+    return piece_s is not None  # opt-in (`map --piece-s`): the pieces' sums differ in the last bits
+
+
+def _map_in_pieces(log_path, given, topics, settings: Settings, config: MappingConfig, prior,
+                   piece_s) -> MappingResult:  # fmt: skip
+    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics
+    pieces = iter_log_pieces(log_path, piece_s or PIECE_S, topic_map, options=settings.log)
+    pieces = (settings.apply_mounting(piece) for piece in pieces)
+    trajectory, record = _trajectory_for_log(given, None, config)
+    result = map_pieces(pieces, trajectory, config, prior=prior)
+    result.metadata["trajectory"] = record
+    return result
+
+
+def _map_whole(log_path, given, topics, settings: Settings, config: MappingConfig, tiling,
+               prior, out, caught: list[str]) -> tuple[MappingResult, bool]:  # fmt: skip
+    """The whole log read and mapped, and whether it was written already (tiled, with its
+    warnings)."""
+    tiles, scheduler = tiling
+    out_dir, overwrite = out
+    with collect_warnings(caught):
+        log = load_log(log_path, topics, settings)
+        trajectory, record = _trajectory_for_log(given, log, config)
+        if tiles is not None:
+            return _map_tiled_file(log, trajectory, config, tiles, scheduler, out_dir,
+                                   overwrite, caught, record), True  # fmt: skip
+        result = map_log(log, trajectory, config, prior=prior)
+    result.metadata["trajectory"] = record
+    return result, False
 
 
 def _read_trajectory(path, settings: Settings, stated: TrajectoryOptions | None):

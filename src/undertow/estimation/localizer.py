@@ -156,26 +156,10 @@ class Localizer:
             )  # fmt: skip
         else:
             counts, nis = filter_to_store(*records, r_adapted, whitened, store, store_rows)
-        counts = {**rejected, **dict(zip(filter_loop.COUNT_NAMES, counts.tolist(), strict=True))}
-        _warn_if_frozen(counts, int(meas.size))
+        consistency = innovation_consistency(meas["kind"], whitened)
         rows = np.bincount(meas["kind"], minlength=len(model.KIND_NAMES))
-        sensors = per_sensor(counts, dict(zip(model.KIND_NAMES, rows.tolist(), strict=True)))
-        warn_unhealthy(sensors, cfg.gate_probability)
-        metadata = {
-            "variant": cfg.variant,
-            "counts": counts,
-            "sensors": sensors,
-            "nis": nis_summary(nis),
-            "consistency": innovation_consistency(meas["kind"], whitened).to_dict(),
-            **wave_meta,
-            "unobserved": unobserved,
-            "held_bias": held,
-            "config": cfg.model_dump(),
-            "source": log.source,
-            "log": reading_record(log.metadata),
-        }
-        if cfg.adapts_r:
-            metadata["adaptive_r"] = adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)
+        metadata = run_metadata(log, cfg, (rejected, counts, nis, rows, r_adapted), consistency,
+                                wave_meta, (unobserved, held))  # fmt: skip
         if store is not None:
             return StoredTrajectory(store, variant=cfg.variant, metadata=metadata)
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
@@ -227,6 +211,35 @@ class Localizer:
             **meta,
         }
         return noise, meta
+
+
+def run_metadata(log: Log, cfg: LocalizerConfig, run: tuple, consistency, wave_meta: dict,
+                 coverage: tuple) -> dict:  # fmt: skip
+    """The metadata of a run (:meth:`Localizer.run`) from ``run`` = (rows rejected up front,
+    the filter's counts and NIS sums, rows per sensor kind, adaptive-r's R), the innovations'
+    ``consistency`` report, the wave entries and ``coverage`` = (unobserved, held); warns when
+    the track is frozen or a sensor unhealthy."""
+    rejected, counts, nis, rows, r_adapted = run
+    counts = {**rejected, **dict(zip(filter_loop.COUNT_NAMES, counts.tolist(), strict=True))}
+    _warn_if_frozen(counts, int(rows.sum()))
+    sensors = per_sensor(counts, dict(zip(model.KIND_NAMES, rows.tolist(), strict=True)))
+    warn_unhealthy(sensors, cfg.gate_probability)
+    metadata = {
+        "variant": cfg.variant,
+        "counts": counts,
+        "sensors": sensors,
+        "nis": nis_summary(nis),
+        "consistency": consistency.to_dict(),
+        **wave_meta,
+        "unobserved": coverage[0],
+        "held_bias": coverage[1],
+        "config": cfg.model_dump(),
+        "source": log.source,
+        "log": reading_record(log.metadata),
+    }
+    if cfg.adapts_r:
+        metadata["adaptive_r"] = adapted_summary(r_adapted, rows, cfg.adaptive_r_alpha)
+    return metadata
 
 
 def filter_to_store(meas, x0, P0, process, sensors, r_adapted, innovations, store,

@@ -27,7 +27,7 @@ from .info import LogSummary, StreamSummary, summarize
 from .mcap_recover import partial_bag
 from .ply import read_ply, write_ply
 from .read_options import LogOptions
-from .rosbag import read_rosbag
+from .rosbag import DECIDE_S, iter_rosbag_pieces, read_rosbag
 from .rosbag_write import write_log
 from .tlog import TLOG_SUFFIXES, looks_like_tlog, read_tlog
 from .topics import TopicMap
@@ -102,12 +102,25 @@ def read_log(path, topics: TopicMap | None = None, mavlink=None,
     return resolve_units(log, options)
 
 
+def iter_log_pieces(path, piece_s: float, topics: TopicMap | None = None, mavlink=None,
+                    options: LogOptions | None = None, decide_s: float = DECIDE_S):  # fmt: skip
+    """:func:`read_log` in pieces of ``piece_s`` seconds of log time, each a Log with the
+    whole read's choices (:func:`~undertow.io.rosbag.iter_rosbag_pieces`, decided from the
+    first ``decide_s`` seconds) for a ROS bag; any other format (small files) is read whole
+    and given as one piece."""
+    if detect_format(path) in ("ros1", "ros2"):
+        yield from iter_rosbag_pieces(path, piece_s, topics, options, decide_s)
+    else:
+        yield read_log(path, topics, mavlink, options)
+
+
 __all__ = [
     "LogOptions",
     "LogSummary",
     "StreamSummary",
     "TopicMap",
     "detect_format",
+    "iter_log_pieces",
     "read_a50_json",
     "read_dataflash",
     "read_log",

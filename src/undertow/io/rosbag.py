@@ -36,25 +36,36 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, replace
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import yaml
 from rosbags.highlevel import AnyReader
 
-from ..errors import ReaderError, UndertowError
+from ..errors import ConfigError, ReaderError, UndertowError
 from ..log import Dvl, Log
 from ..robot import DvlGeometry, Mounting
 from ..rotations import quaternion_to_rpy
-from .a50_json import add_velocity_report, dead_reckoning_from_rows, report_covariance
-from .collect import MALFORMED, DvlRows, Notes, check_regular
+from .a50_json import dead_reckoning_from_rows
+from .clock import TimeBase
+from .collect import MALFORMED, Notes, check_regular
 from .mcap_recover import Recovered, incomplete_mcap, partial_bag, recover
 from .msgdefs import dvl_typestore
 from .read_options import LogOptions
-from .rosbag_choices import apply_time_base, depth_sign, dvl_frame, resolve_topics
-from .rosbag_streams import ACCEPTED, Rows
+from .rosbag_choices import (
+    apply_time_base,
+    depth_sign,
+    dvl_frame,
+    fixed_times,
+    piece_keys,
+    piece_windows,
+    resolve_topics,
+)
+from .rosbag_streams import ACCEPTED, Rows, build_dvl
 from .topics import TopicMap
+from .units import DEG, resolve_units
 
 SIDECAR = "undertow.yaml"
 STORAGE_SUFFIXES = (".mcap", ".db3")
@@ -138,6 +149,118 @@ def read_rosbag(path, topics: TopicMap | None = None, options: LogOptions | None
         return _read_rosbag(path, topics or TopicMap(), options or LogOptions(), recovered)
 
 
+#: seconds at the start of a log read in pieces from which its choices are made (time base,
+#: units, surface pressure, depth sign, mounting): the whole log when it is shorter, so that a
+#: log of up to an hour is read with exactly the whole read's choices and evidence (the surface
+#: pressure, say, is the median of the readings near the log's lowest pressure)
+DECIDE_S = 3600.0
+#: a message more than this (s) off where its stream's clock offset puts it is put in a piece
+#: by its record time (:func:`~undertow.io.rosbag_choices.piece_keys`)
+PIECE_SLACK_S = 2.0
+#: metadata a piece has of its own (not the head's)
+PIECE_METADATA = ("warnings", "dvl_time_of_validity_s", "dvl_json_matched")
+#: what a head's rows decide that the pieces' rows keep (the first message's constants)
+PIECE_DECIDED = ("pressure_scale", "gps_local_origin", "sonar_limits", "probe_x")
+
+
+@dataclass(frozen=True)
+class Head:
+    """The choices a log read in pieces makes once, from its first ``DECIDE_S`` seconds: that
+    part read as a whole log (``log``: its metadata and mounting go to every piece) and what
+    its rows decided."""
+
+    log: Log
+    time_base: TimeBase
+    #: the attributes of :class:`~undertow.io.rosbag_streams.Rows` its rows decided
+    decided: dict
+    depth_sign: float | None
+    gps_origin: tuple | None
+    warned: set = field(default_factory=set)
+
+
+def iter_rosbag_pieces(path, piece_s: float, topics: TopicMap | None = None,
+                       options: LogOptions | None = None, decide_s: float = DECIDE_S,
+                       slack_s: float = PIECE_SLACK_S) -> Iterator[Log]:  # fmt: skip
+    """The bag at ``path`` as Logs of consecutive ``piece_s``-second windows of its time base,
+    with its units resolved (:func:`~undertow.io.units.resolve_units`), each holding only its
+    window (memory: a piece, not the log).
+
+    Every choice the whole read (:func:`read_rosbag`) makes from the data is made once, from
+    the first ``decide_s`` seconds read as a log (all of it when it is shorter: then the
+    choices are the whole read's): topics, time base (its shifts and offsets), gyro unit,
+    surface pressure and water, hPa, a depth pose's sign, GPS origin, mounting, sonar and wave
+    probe constants; every piece carries that part's metadata (``warnings`` and the DVL's
+    ``time_of_validity`` are the piece's own). A message is in the piece of its time on that
+    base (:func:`~undertow.io.rosbag_choices.piece_keys`); the bag is read by record time, a
+    window ``slack_s`` wider than the pieces' (plus the streams' clock offsets) on each side.
+    The pieces' streams concatenated are those of :func:`~undertow.io.read_log` as long as each
+    stream's times are in record order (no message sorted across a piece's edge) and the
+    decisions of the first ``decide_s`` seconds are those of the whole log."""
+    if not (piece_s > 0 and decide_s > 0 and slack_s >= 0):
+        raise ConfigError(f"pieces: piece_s {piece_s} and decide_s {decide_s} must be > 0, "
+                          f"slack_s {slack_s} >= 0")  # fmt: skip
+    path = Path(path)
+    recovered = recover_crashed(path)
+    if recovered is None and not path.exists():
+        raise ReaderError(f"{path}: no such file or directory")
+    topics, options = topics or TopicMap(), options or LogOptions()
+    notes = Notes(str(path))
+    reader = _open(path, recovered, notes)
+    try:
+        available, used, guessed, conns = _select(reader, topics, notes)
+        rows = Rows(notes)
+        with np.errstate(all="ignore"):
+            _read_messages(reader, conns, used, rows, notes, path,
+                           stop=reader.start_time + int(decide_s * 1e9))  # fmt: skip
+            selected = (available, used, guessed)
+            log = resolve_units(_finish(rows, notes, path, selected, topics, options, recovered),
+                                options)  # fmt: skip
+        gps = None if log.gps is None or rows.gps_local else log.gps.origin
+        kept = {name: getattr(rows, name) for name in PIECE_DECIDED}
+        head = Head(log, rows.time_base, kept, rows.depth_sign, gps)
+        del log, rows  # the head's rows: only what they decided is kept
+        windows = piece_windows(head.time_base, set(used.values()), reader, piece_s, slack_s)
+        for a, b, start, stop in windows:
+            with np.errstate(all="ignore"):
+                piece = _piece(reader, conns, used, path, topics, head, (a, b, start, stop),
+                               slack_s)  # fmt: skip
+            if piece is not None:
+                yield piece
+    finally:
+        reader.close()
+
+
+def _piece(reader, conns, used, path: Path, topics: TopicMap, head: Head, window: tuple,
+           slack_s: float) -> Log | None:  # fmt: skip
+    """The piece of the messages whose time is in [a, b) (``window``: a, b and the record
+    times start, stop (ns) to read), None when it has none."""
+    a, b, start, stop = window
+    notes = Notes(str(path))
+    rows = Rows(notes)
+    for name, value in head.decided.items():
+        setattr(rows, name, value)
+    _read_messages(reader, conns, used, rows, notes, path, start=start, stop=stop)
+    base = head.time_base
+    times = fixed_times(rows, base)
+    keys = piece_keys(rows, base, times, slack_s)
+    rows.apply_times(np.where((keys >= a) & (keys < b), times, np.nan))
+    log = _assemble(rows, notes, path, used, topics, LogOptions(), path, head)
+    if not log.streams():
+        return None
+    for kind in list(notes.counts):  # the messages of other pieces, left out
+        if kind.endswith(("with a non-finite time dropped", "(stream dropped)")):
+            del notes.counts[kind]
+    log.metadata["warnings"] = notes.lines()
+    for kind, line in zip([*notes.statements, *notes.counts], notes.lines(), strict=True):
+        if kind not in head.warned:  # each kind of note once for the whole log
+            head.warned.add(kind)
+            warnings.warn(line, stacklevel=4)
+    imu_units = head.log.metadata.get("imu_units") or {}
+    if log.imu is not None and imu_units.get("converted"):
+        log = log.replace(imu=replace(log.imu, angular_velocity=log.imu.angular_velocity * DEG))
+    return log
+
+
 def recover_crashed(path) -> Recovered | None:
     """The recovered copy of the crashed recording ``path`` names (module docstring), None
     when it names none."""
@@ -180,6 +303,17 @@ def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
                  recovered: Recovered | None) -> Log:  # fmt: skip
     notes = Notes(str(path))
     rows = Rows(notes)
+    reader = _open(path, recovered, notes)
+    try:
+        available, used, guessed, conns = _select(reader, topics, notes)
+        _read_messages(reader, conns, used, rows, notes, path)
+    finally:
+        reader.close()
+    return _finish(rows, notes, path, (available, used, guessed), topics, options, recovered)
+
+
+def _open(path: Path, recovered: Recovered | None, notes: Notes):
+    """The opened AnyReader of the bag (one ReaderError line when it cannot be opened)."""
     paths = _storage(path, recovered)
     if recovered is not None:
         notes.state(recovered.line())
@@ -188,21 +322,29 @@ def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
         reader.open()
     except Exception as exc:  # rosbags raises many types for corrupt input
         raise ReaderError(f"{path}: cannot open bag ({_one_line(exc)})") from exc
-    try:
-        available = {str(c.topic): str(c.msgtype) for c in reader.connections}
-        mapped, guessed = resolve_topics(topics, available, notes)
-        used = {}
-        for stream, topic in mapped.items():
-            if available[topic] in ACCEPTED[stream]:
-                used[topic] = stream
-            else:
-                notes.add(
-                    f"topic {topic} has unsupported type {available[topic]} for {stream} (skipped)"
-                )
-        conns = [c for c in reader.connections if str(c.topic) in used]
-        _read_messages(reader, conns, used, rows, notes, path)
-    finally:
-        reader.close()
+    return reader
+
+
+def _select(reader, topics: TopicMap, notes: Notes) -> tuple[dict, dict, dict, list]:
+    """(topic -> type in the bag, topic -> stream read, guessed topics, connections read)."""
+    available = {str(c.topic): str(c.msgtype) for c in reader.connections}
+    mapped, guessed = resolve_topics(topics, available, notes)
+    used = {}
+    for stream, topic in mapped.items():
+        if available[topic] in ACCEPTED[stream]:
+            used[topic] = stream
+        else:
+            notes.add(
+                f"topic {topic} has unsupported type {available[topic]} for {stream} (skipped)"
+            )
+    conns = [c for c in reader.connections if str(c.topic) in used]
+    return available, used, guessed, conns
+
+
+def _finish(rows: Rows, notes: Notes, path: Path, selected: tuple, topics: TopicMap,
+            options: LogOptions, recovered: Recovered | None) -> Log:  # fmt: skip
+    """The Log of the rows read (``selected``: what :func:`_select` gave)."""
+    available, used, guessed = selected
     beside = Path(recovered.source) if recovered else partial_bag(path) or path  # the sidecar's
     log = _assemble(rows, notes, path, used, topics, options, beside)
     if recovered is not None:
@@ -219,10 +361,13 @@ def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
     return log
 
 
-def _read_messages(reader, conns, used, rows: Rows, notes: Notes, path: Path) -> None:
+def _read_messages(reader, conns, used, rows: Rows, notes: Notes, path: Path,
+                   start: int | None = None, stop: int | None = None) -> None:  # fmt: skip
+    """Decode the messages of ``conns`` recorded in [start, stop) ns (all by default) into
+    ``rows``."""
     if not conns:  # rosbags reads every topic when given no connection
         return
-    messages = reader.messages(connections=conns)
+    messages = reader.messages(connections=conns, start=start, stop=stop)
     index = 0
     while True:
         try:
@@ -251,18 +396,59 @@ def _read_messages(reader, conns, used, rows: Rows, notes: Notes, path: Path) ->
 
 
 def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap,
-              options: LogOptions, beside: Path) -> Log:  # fmt: skip
+              options: LogOptions, beside: Path, head: Head | None = None) -> Log:  # fmt: skip
+    """The Log of ``rows``: the choices made from them, or (``head``, a piece of a log read in
+    pieces) those the head made, with its metadata."""
     metadata: dict = {"format": "rosbag", "topics": {s: t for t, s in used.items()}}
-    metadata["time_base"] = apply_time_base(rows, notes, used, options)
-    if rows.live_wave:  # a live session's wave decisions (estimation.wave_schedule replays them)
-        metadata["live_wave"] = rows.live_wave
-    dvl = _dvl(rows, notes, metadata)
+    if head is None:
+        metadata["time_base"] = apply_time_base(rows, notes, used, options)
+        if rows.live_wave:  # a live session's wave decisions (estimation.wave_schedule replays)
+            metadata["live_wave"] = rows.live_wave
+        mounting, source_meta = _mounting(rows, notes, used, topics, beside, metadata)
+    else:
+        metadata = {k: v for k, v in head.log.metadata.items() if k not in PIECE_METADATA}
+        mounting, source_meta = head.log.mounting, head.log.metadata.get("recorded") or {}
+    dvl = build_dvl(rows, notes, metadata)
     dead_reckoning = None
     if rows.rows["dead_reckoning"]:
         dead_reckoning = dead_reckoning_from_rows(list(rows.dead_reckoning_rows()), notes)
     elif rows.json_position:
         dead_reckoning = dead_reckoning_from_rows(rows.json_position, notes)
         metadata["dead_reckoning_source"] = "dvl_json position_local reports"
+    dvl = _dvl_geometry(dvl, rows, metadata, notes)
+    dvl = dvl_frame(dvl, rows, topics, mounting, metadata, notes)
+    if head is None:
+        depth = rows.depth(depth_sign(rows, options, metadata, notes))
+        gps = rows.gps(options.gps_origin)
+    else:
+        depth, gps = rows.depth(head.depth_sign or 1.0), rows.gps(head.gps_origin)
+    if gps is not None and head is None:
+        metadata["gps_origin"] = (
+            [float(v) for v in gps.origin] if not rows.gps_local else ("first odometry fix")
+        )
+    limits = (source_meta or {}).get("multibeam")
+    limits = limits if isinstance(limits, dict) else {}
+    return Log(
+        imu=rows.imu(),
+        dvl=dvl,
+        dead_reckoning=dead_reckoning,
+        pressure=rows.pressure(),
+        sonar=rows.sonar(),
+        wave_probe=rows.wave_probe(),
+        ground_truth=rows.ground_truth(),
+        multibeam=rows.multibeam(_limit(limits, "min_range"), _limit(limits, "max_range")),
+        mounting=mounting,
+        source=str(path),
+        metadata=metadata,
+        depth=depth,
+        gps=gps,
+    )
+
+
+def _mounting(rows: Rows, notes: Notes, used: dict, topics: TopicMap, beside: Path,
+              metadata: dict) -> tuple[Mounting, dict]:  # fmt: skip
+    """(the mounting: the sidecar's, else /tf_static's, else the defaults; the sidecar's other
+    fields), its source and the sidecar's metadata put in ``metadata``."""
     mounting, source_meta = _sidecar(beside, notes)
     if mounting is not None:
         metadata["mounting_source"] = SIDECAR
@@ -278,32 +464,7 @@ def _assemble(rows: Rows, notes: Notes, path: Path, used: dict, topics: TopicMap
         for key, value in (recorded.pop("metadata", None) or {}).items():
             metadata.setdefault(key, value)
         metadata["recorded"] = recorded
-    dvl = _dvl_geometry(dvl, rows, metadata, notes)
-    dvl = dvl_frame(dvl, rows, topics, mounting, metadata, notes)
-    depth = rows.depth(depth_sign(rows, options, metadata, notes))
-    gps = rows.gps(options.gps_origin)
-    if gps is not None:
-        metadata["gps_origin"] = (
-            [float(v) for v in gps.origin] if not rows.gps_local else ("first odometry fix")
-        )
-    limits = (source_meta or {}).get("multibeam")
-    limits = limits if isinstance(limits, dict) else {}
-    log = Log(
-        imu=rows.imu(),
-        dvl=dvl,
-        dead_reckoning=dead_reckoning,
-        pressure=rows.pressure(),
-        sonar=rows.sonar(),
-        wave_probe=rows.wave_probe(),
-        ground_truth=rows.ground_truth(),
-        multibeam=rows.multibeam(_limit(limits, "min_range"), _limit(limits, "max_range")),
-        mounting=mounting,
-        source=str(path),
-        metadata=metadata,
-        depth=depth,
-        gps=gps,
-    )
-    return log
+    return mounting, source_meta
 
 
 def _limit(limits: dict, key: str) -> float | None:
@@ -323,56 +484,6 @@ def _dvl_geometry(dvl: Dvl | None, rows: Rows, metadata: dict, notes: Notes) -> 
     except UndertowError as exc:
         notes.add(f"{SIDECAR}: dvl_geometry unusable, A50 beams kept ({_one_line(exc)})")
         return dvl
-
-
-def _dvl(rows: Rows, notes: Notes, metadata: dict) -> Dvl | None:
-    if len(rows.dvl):
-        if rows.dvl_mode_given and not any(rows.dvl_mode_given):
-            # marine_acoustic_msgs with velocity_mode never set: judge by the beams instead
-            good = np.array(rows.dvl.extra["good_beams"]) >= 3
-            rows.dvl.valid = [
-                bool(g) and np.isfinite(v).all()
-                for g, v in zip(good, rows.dvl.velocity, strict=True)
-            ]
-            notes.add("dvl: velocity_mode never set; valid = at least 3 good beams", len(good))
-        dvl, order = rows.dvl.build(notes)
-        return _merge_json(dvl, order, rows, metadata) if len(dvl) else None
-    if rows.json_velocity:
-        fallback = DvlRows()
-        for t, obj in rows.json_velocity:
-            add_velocity_report(fallback, obj, t)
-        dvl, order = fallback.build(notes)
-        if not len(dvl):
-            return None
-        tov = np.array(fallback.extra["time_of_validity"])[order]
-        if np.isfinite(tov).any():
-            metadata["dvl_time_of_validity_s"] = tov
-        metadata["dvl_source"] = "dvl_json (time: bag record time)"
-        return dvl
-    return None
-
-
-def _merge_json(dvl: Dvl, order: np.ndarray, rows: Rows, metadata: dict) -> Dvl:
-    """Covariance and time_of_validity from raw JSON reports matching (time, vx, vy, vz)."""
-    if not rows.json_velocity or "key" not in rows.dvl.extra:
-        return dvl
-    by_key = {(o.get("time"), o["vx"], o["vy"], o["vz"]): o for _, o in rows.json_velocity}
-    keys = [rows.dvl.extra["key"][i] for i in order]
-    cov = dvl.covariance.copy()
-    tov = np.full(len(dvl), np.nan)
-    for i, key in enumerate(keys):
-        obj = by_key.get(key)
-        if obj is None:
-            continue
-        obj_cov = report_covariance(obj)
-        if obj_cov is not None and np.isnan(cov[i]).all():
-            cov[i] = obj_cov
-        if obj.get("time_of_validity") is not None:
-            tov[i] = float(obj["time_of_validity"]) * 1e-6
-    if np.isfinite(tov).any():
-        metadata["dvl_time_of_validity_s"] = tov
-    metadata["dvl_json_matched"] = int(sum(k in by_key for k in keys))
-    return replace(dvl, covariance=cov)
 
 
 def _used_topic(used: dict, stream: str) -> str:
@@ -461,4 +572,4 @@ def _check_numeric(metadata: dict, notes: Notes) -> None:
             del metadata[key]
 
 
-__all__ = ["bag_topics", "read_rosbag", "SIDECAR"]
+__all__ = ["bag_topics", "iter_rosbag_pieces", "read_rosbag", "SIDECAR"]

@@ -7,13 +7,16 @@ of a DVL velocity stamped in the body frame (:func:`dvl_frame`). Used by
 
 from __future__ import annotations
 
+import dataclasses
+import math
+from collections.abc import Iterator
 from dataclasses import replace
 
 import numpy as np
 
 from ..log import Dvl
 from ..robot import Mounting
-from .clock import choose_time_base
+from .clock import TimeBase, choose_time_base
 from .collect import Notes
 from .read_options import LogOptions
 from .rosbag_streams import Rows
@@ -61,6 +64,7 @@ def apply_time_base(rows: Rows, notes: Notes, used: dict, options: LogOptions) -
     names = {s: t for t, s in used.items()}
     base = choose_time_base(rows.clock, options.time, names, options.clock_tolerance_s, streams)
     rows.apply_times(base.times)
+    rows.time_base = dataclasses.replace(base, times=np.zeros(0))
     if base.mixed or options.time != "auto":
         notes.state(base.line())
     return base.to_dict()
@@ -126,3 +130,75 @@ def dvl_frame(dvl: Dvl | None, rows: Rows, topics: TopicMap, mounting: Mounting,
     metadata["dvl_frame"] = f"{base} (body), rotated to the DVL frame by its mounting"
     notes.add(f"dvl: velocities stamped in the body frame {base}, rotated to the DVL frame")
     return replace(dvl, velocity=np.asarray(dvl.velocity) @ R)
+
+
+def fixed_times(rows: Rows, base: TimeBase) -> np.ndarray:
+    """The time of every message of ``rows.clock`` on the time base ``base`` chose for the
+    whole log (no choice made again): the record time, or the header stamp where there is one
+    and the record time minus the base's shift of its stream (else its offset, else 0) where
+    there is none, as :func:`~undertow.io.clock.choose_time_base` puts them."""
+    clock = rows.clock
+    record = np.asarray(clock.record, dtype=np.float64)
+    if base.base != "header":
+        return record
+    header = np.asarray(clock.header, dtype=np.float64)
+    times = record.copy()
+    have = np.isfinite(header)
+    times[have] = header[have]
+    if not have.all():
+        kinds = np.asarray(clock.stream, dtype=object)
+        for s in set(kinds[~have].tolist()):
+            sel = (kinds == s) & ~have
+            times[sel] = record[sel] - stream_offset(base, s)
+    return times
+
+
+def stream_offset(base: TimeBase, stream: str) -> float:
+    """A stream's record time minus its time on ``base`` (s): 0 on the record time; on the
+    stamps, the shift put on its unstamped messages, else its median offset, else 0."""
+    if base.base != "header":
+        return 0.0
+    value = base.shift_s.get(stream, base.offsets_s.get(stream, math.nan))
+    if not math.isfinite(value):
+        finite = [v for v in base.offsets_s.values() if math.isfinite(v)]
+        value = float(np.median(finite)) if finite else 0.0
+    return value
+
+
+def piece_keys(rows: Rows, base: TimeBase, times: np.ndarray, slack_s: float) -> np.ndarray:
+    """The time that puts each message of ``rows.clock`` in a piece of a log read in pieces:
+    its time on ``base`` when its record time is within ``slack_s`` of where its stream's
+    offset puts it, else its record time minus that offset (a message stamped far off its
+    stream stays in the piece it was recorded in, instead of falling between pieces)."""
+    kinds = np.asarray(rows.clock.stream, dtype=object)
+    record = np.asarray(rows.clock.record, dtype=np.float64)
+    offset = np.zeros(len(record))
+    for s in set(kinds.tolist()):
+        offset[kinds == s] = stream_offset(base, s)
+    expected = record - offset
+    return np.where(np.abs(times - expected) <= slack_s, times, expected)
+
+
+def piece_windows(base: TimeBase, streams: set[str], reader, piece_s: float,
+                  slack_s: float) -> Iterator[tuple[float, float, int, int]]:  # fmt: skip
+    """(a, b, start, stop) per piece of a bag read in pieces: the piece holds the messages
+    whose key (:func:`piece_keys`) is in [a, b) s, read from the record times [start, stop) ns
+    (the window widened by the streams' offsets on ``base`` and ``slack_s``). The pieces are
+    ``piece_s`` long from the bag's first record time less the smallest offset; the first
+    starts at -inf, the last (after which no message's key can fall) ends at +inf."""
+    offsets = [stream_offset(base, s) for s in (*streams, "dvl_json")]
+    lo, hi = min(offsets), max(offsets)
+    first, end = reader.start_time * 1e-9, reader.end_time * 1e-9
+    origin = first - lo
+    k = 0
+    while True:
+        a = -math.inf if k == 0 else origin + k * piece_s
+        b = origin + (k + 1) * piece_s
+        last = b + lo - slack_s > end
+        b = math.inf if last else b
+        start = None if k == 0 else math.floor((a + lo - slack_s) * 1e9) - 1
+        stop = None if last else math.ceil((b + hi + slack_s) * 1e9) + 1
+        yield a, b, start, stop
+        if last:
+            return
+        k += 1

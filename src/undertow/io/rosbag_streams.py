@@ -25,12 +25,19 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 
-from ..log import Depth, GpsFix, GroundTruth, Imu, Multibeam, Pressure, SonarRange, WaveProbe
+from ..log import Depth, Dvl, GpsFix, GroundTruth, Imu, Multibeam, Pressure, SonarRange, WaveProbe
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
-from .a50_json import add_velocity_report, is_position_report, is_velocity_report, position_row
+from .a50_json import (
+    add_velocity_report,
+    is_position_report,
+    is_velocity_report,
+    position_row,
+    report_covariance,
+)
 from .clock import ClockTable
 from .collect import MALFORMED, DvlRows, Notes, count_nan_rows, time_order
 from .geo import local_ned
@@ -162,6 +169,14 @@ class Rows:
         #: the gps rows are (t, x, y, z, std) in a local frame (Odometry), not (t, lat, lon, alt,
         #: std) of NavSatFix
         self.gps_local = False
+        # what the builders decide from all the rows, kept (None: not decided yet) so that a log
+        # read in pieces decides once (:func:`undertow.io.rosbag.iter_rosbag_pieces`): the
+        # pressure's scale (100 for hPa), the local GPS frame's origin, the depth's sign; the
+        # chosen time base (:class:`~undertow.io.clock.TimeBase`)
+        self.pressure_scale: float | None = None
+        self.gps_local_origin: np.ndarray | None = None
+        self.depth_sign: float | None = None
+        self.time_base = None
 
     def stamp(self, stream: str, msg, record_ns: int) -> float:
         """Register the message's two times; the row's time placeholder (its index). A zero stamp
@@ -374,12 +389,15 @@ class Rows:
             return None
         count_nan_rows(self.notes, "pressure", a[:, 1])
         p = a[:, 1]
-        med = np.nanmedian(p) if np.isfinite(p).any() else math.nan
-        if med < HPA_THRESHOLD:
-            self.notes.add(
-                f"pressure: values look like hPa/mbar (median {med:.1f}), converted to Pa (x100)",
-                len(p),
-            )
+        if self.pressure_scale is None:
+            med = np.nanmedian(p) if np.isfinite(p).any() else math.nan
+            self.pressure_scale = 100.0 if med < HPA_THRESHOLD else 1.0
+            if self.pressure_scale != 1.0:
+                self.notes.add(f"pressure: values look like hPa/mbar (median {med:.1f}), "
+                               "converted to Pa (x100)", len(p))  # fmt: skip
+        elif self.pressure_scale != 1.0:
+            self.notes.add("pressure: values in hPa/mbar, converted to Pa (x100)", len(p))
+        if self.pressure_scale != 1.0:
             p = p * 100.0
         return Pressure(t=a[:, 0], pressure=p)
 
@@ -472,6 +490,7 @@ class Rows:
         if a is None:
             return None
         count_nan_rows(self.notes, "depth", a[:, 1])
+        self.depth_sign = sign
         return Depth(t=a[:, 0], depth=sign * a[:, 1])
 
     def gps(self, origin=None) -> GpsFix | None:
@@ -483,10 +502,64 @@ class Rows:
         if a is None:
             return None
         if self.gps_local:
-            enu = a[:, 1:4] - a[0, 1:4]
+            if self.gps_local_origin is None:
+                self.gps_local_origin = a[0, 1:4].copy()
+            enu = a[:, 1:4] - self.gps_local_origin
             ned = np.column_stack([enu[:, 1], enu[:, 0], -enu[:, 2]])
             return GpsFix(t=a[:, 0], position=ned, horizontal_std=a[:, 4])
         origin = tuple(a[0, 1:4]) if origin is None else tuple(origin)
         ned = local_ned(a[:, 1], a[:, 2], a[:, 3], origin)
         return GpsFix(t=a[:, 0], position=ned, latitude=a[:, 1], longitude=a[:, 2],
                       altitude=a[:, 3], horizontal_std=a[:, 4], origin=origin)  # fmt: skip
+
+
+def build_dvl(rows: Rows, notes: Notes, metadata: dict) -> Dvl | None:
+    """The DVL stream of ``rows`` (its driver's messages, with what the raw JSON reports add,
+    else the JSON reports alone), noting in ``metadata`` what came from the JSON."""
+    if len(rows.dvl):
+        if rows.dvl_mode_given and not any(rows.dvl_mode_given):
+            # marine_acoustic_msgs with velocity_mode never set: judge by the beams instead
+            good = np.array(rows.dvl.extra["good_beams"]) >= 3
+            rows.dvl.valid = [
+                bool(g) and np.isfinite(v).all()
+                for g, v in zip(good, rows.dvl.velocity, strict=True)
+            ]
+            notes.add("dvl: velocity_mode never set; valid = at least 3 good beams", len(good))
+        dvl, order = rows.dvl.build(notes)
+        return _merge_json(dvl, order, rows, metadata) if len(dvl) else None
+    if rows.json_velocity:
+        fallback = DvlRows()
+        for t, obj in rows.json_velocity:
+            add_velocity_report(fallback, obj, t)
+        dvl, order = fallback.build(notes)
+        if not len(dvl):
+            return None
+        tov = np.array(fallback.extra["time_of_validity"])[order]
+        if np.isfinite(tov).any():
+            metadata["dvl_time_of_validity_s"] = tov
+        metadata["dvl_source"] = "dvl_json (time: bag record time)"
+        return dvl
+    return None
+
+
+def _merge_json(dvl: Dvl, order: np.ndarray, rows: Rows, metadata: dict) -> Dvl:
+    """Covariance and time_of_validity from raw JSON reports matching (time, vx, vy, vz)."""
+    if not rows.json_velocity or "key" not in rows.dvl.extra:
+        return dvl
+    by_key = {(o.get("time"), o["vx"], o["vy"], o["vz"]): o for _, o in rows.json_velocity}
+    keys = [rows.dvl.extra["key"][i] for i in order]
+    cov = dvl.covariance.copy()
+    tov = np.full(len(dvl), np.nan)
+    for i, key in enumerate(keys):
+        obj = by_key.get(key)
+        if obj is None:
+            continue
+        obj_cov = report_covariance(obj)
+        if obj_cov is not None and np.isnan(cov[i]).all():
+            cov[i] = obj_cov
+        if obj.get("time_of_validity") is not None:
+            tov[i] = float(obj["time_of_validity"]) * 1e-6
+    if np.isfinite(tov).any():
+        metadata["dvl_time_of_validity_s"] = tov
+    metadata["dvl_json_matched"] = int(sum(k in by_key for k in keys))
+    return replace(dvl, covariance=cov)

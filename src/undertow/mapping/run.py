@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError, DataError, MissingStreamError
 from ..io.units import reading_record
 from ..log import Log
 from ..occupancy import OccupancyMap
@@ -55,17 +56,75 @@ def map_log(
     return MappingResult(occupancy, config, metadata)
 
 
+#: the mappers whose map of samples integrated in pieces is the map of them all at once (the
+#: adaptive kernels normalize the pose variance over the session's samples)
+PIECE_METHODS = ("csm", "bki")
+
+
+def map_pieces(pieces: Iterable[Log], trajectory, config: MappingConfig | None = None,
+               prior=None) -> MappingResult:  # fmt: skip
+    """:func:`map_log` of the log the consecutive ``pieces`` make
+    (:func:`undertow.io.iter_log_pieces`), each piece's samples integrated in turn
+    (:meth:`~undertow.mapping.mappers.Mapper.integrate` adds kernel mass), so that one piece's
+    samples are in memory. The same cells (in another order); ``csm`` counts exactly, ``bki``
+    sums float32 kernel weights in another grouping (alpha and beta within 2e-6). The
+    metadata's ``n_integrations`` counts the pieces with ranges. ``trajectory``: a Trajectory
+    or a lazy :class:`~undertow.trajectory_chunks.PoseTrack`. Methods: :data:`PIECE_METHODS`."""
+    config = with_wave(config or MappingConfig(), trajectory)
+    if config.method not in PIECE_METHODS:
+        raise ConfigError(f"map in pieces: method {config.method} normalizes over the whole log;"
+                          f" use one of {', '.join(PIECE_METHODS)}")  # fmt: skip
+    mapper = mapper_from_config(config, prior=prior)
+    counts = {"hits": 0, "free": 0, "dropped": {}}
+    first = None
+    for log in pieces:
+        first = log if first is None else first
+        ranges = [log.dvl if config.use_dvl else None, log.sonar if config.use_sonar else None,
+                  log.multibeam if config.use_multibeam else None]  # fmt: skip
+        if not any(r is not None and len(r) for r in ranges):
+            continue
+        try:
+            samples = samples_from_config(log, trajectory, config)
+            mapper.integrate(samples)
+        except MemoryError:
+            raise out_of_memory(config.resolution) from None
+        except DataError as error:
+            raise _implausible_trajectory(trajectory) or error from None
+        for key, value in sample_counts(samples).items():
+            if key == "dropped":
+                for k, v in value.items():
+                    counts[key][k] = counts[key].get(k, 0) + v
+            else:
+                counts[key] += value
+        del samples
+    if mapper.n_integrations == 0:
+        raise MissingStreamError("mapping needs a range stream but the log has none")
+    occupancy = mapper.occupancy()
+    occupancy = dataclasses.replace(
+        occupancy,
+        metadata={**occupancy.metadata, "occupied_threshold": config.occupied_threshold},
+    )
+    metadata = map_metadata(mapper.metadata(), counts, occupancy, config, trajectory, first)
+    return MappingResult(occupancy, config, metadata)
+
+
+def sample_counts(samples) -> dict:
+    """hits, free and dropped ranges (by reason) of ``samples``."""
+    return {
+        "hits": int((samples.label == 1).sum()),
+        "free": int((samples.label == 0).sum()),
+        "dropped": {k: int(v) for k, v in samples.dropped.items()},
+    }
+
+
 def map_metadata(mapper: dict, samples, occupancy: OccupancyMap, config: MappingConfig,
                  trajectory: Trajectory, log: Log) -> dict:  # fmt: skip
     """What a map records of how it was made: the mapper's settings, the samples (hits, free,
-    dropped), its cells and where the poses and ranges came from."""
+    dropped; or those counts as :func:`sample_counts` gives them), its cells and where the
+    poses and ranges came from."""
     return {
         "mapper": mapper,
-        "samples": {
-            "hits": int((samples.label == 1).sum()),
-            "free": int((samples.label == 0).sum()),
-            "dropped": {k: int(v) for k, v in samples.dropped.items()},
-        },
+        "samples": samples if isinstance(samples, dict) else sample_counts(samples),
         "cells_with_mass": len(occupancy),
         "occupied_cells": len(occupancy.occupied(config.occupied_threshold)),
         "trajectory_variant": trajectory.variant,

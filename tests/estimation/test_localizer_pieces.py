@@ -1,0 +1,41 @@
+"""A log localized in pieces (:mod:`undertow.estimation.localizer_pieces`) against the whole
+log's run (:func:`undertow.estimation.localizer.localize`): the same states bit for bit, the
+same metadata (counts, NIS, consistency report), filtered and smoothed."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from undertow.errors import ConfigError
+from undertow.estimation.localizer import localize
+from undertow.estimation.localizer_pieces import localize_pieces
+from undertow.io import iter_log_pieces, read_log
+from undertow.trajectory_chunks import TrajectoryStore
+
+
+def test_tiny_pieces_give_the_whole_logs_states_and_metadata(simulated_run, tmp_path):
+    smooth = True  # the smoothed states are the filtered ones smoothed: both are checked
+    log = simulated_run("wave-a0.10-f1.00") / "log"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        whole = localize(read_log(log), variant="proposed", smooth=smooth)
+        store = TrajectoryStore(tmp_path / "store")
+        # 0.7 s pieces: 70 of them, each holding about 7 barometer rows (the depth-rate check's
+        # window reaches into the neighbours)
+        pieces = localize_pieces(iter_log_pieces(log, 0.7), store, variant="proposed",
+                                 smooth=smooth)  # fmt: skip
+    t, x, P = store.read()
+    np.testing.assert_array_equal(t, whole.t)
+    np.testing.assert_array_equal(x, whole.x)
+    np.testing.assert_array_equal(P, whole.P)
+    assert pieces.metadata == whole.metadata
+    assert list(pieces.metadata) == list(whole.metadata)
+    assert sorted(p.name for p in (tmp_path / "store").iterdir()) == ["P.f8", "t.f8", "x.f8"]
+
+
+def test_a_wave_estimated_from_the_log_is_refused(simulated_run, tmp_path):
+    log = simulated_run("calm") / "log"
+    with pytest.raises(ConfigError, match="whole log"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        localize_pieces(iter_log_pieces(log, 5.0), TrajectoryStore(tmp_path / "s"), wave="auto")
