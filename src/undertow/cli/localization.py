@@ -39,6 +39,15 @@ EstimatorOption = Annotated[
 ]
 
 
+InPiecesOption = Annotated[
+    bool,
+    typer.Option(
+        help="A long ROS bag read and filtered in 600 s pieces, the states on disk (bounded "
+        "memory; the log's choices from its first hour; docs/localization.md)."
+    ),
+]
+
+
 @app.command()
 @user_errors
 def localize(
@@ -78,13 +87,7 @@ def localize(
         typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
     ] = None,
     smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
-    in_pieces: Annotated[
-        bool,
-        typer.Option(
-            help="A long ROS bag read and filtered in 600 s pieces, the states on disk (bounded "
-            "memory; the log's choices from its first hour; docs/localization.md)."
-        ),
-    ] = False,
+    in_pieces: InPiecesOption = False,
     estimator: EstimatorOption = "ukf",
     gate: Annotated[
         str | None,
@@ -106,8 +109,7 @@ def localize(
     """Localize a log with the paper's 18-state UKF; writes trajectory.tum/.npz and config.yaml.
 
     Example: `undertow localize runs/a10/log --variant proposed --wave wave-a0.10-f1.00
-    --calibration calm_cal.yaml --out runs/a10/proposed`
-    """
+    --calibration calm_cal.yaml --out runs/a10/proposed`"""
     from ..commands.localization import gate_option, localize_file
 
     condition = _wave_option(wave, wave_amplitude, wave_frequency)
@@ -122,9 +124,8 @@ def localize(
             log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
             overwrite=overwrite, profile=profile, calibration=calibration,
             extrapolate=extrapolate, smooth=smooth, wave=condition, estimator=estimator,
-            chunked=True if in_pieces else None,
+            chunked=in_pieces or None, **gate_option(gate),
             **{name: value for name, value in options.items() if value is not None},
-            **gate_option(gate),
         )  # fmt: skip
     print_warnings(result.warnings)
     if not quiet:

@@ -56,6 +56,15 @@ TrajectoryFrameOption = Annotated[
 ]
 
 
+PieceOption = Annotated[
+    float | None,
+    typer.Option(
+        help="A long ROS bag read and mapped in pieces of S seconds (csm and bki; bounded "
+        "memory for the log, not for the map)."
+    ),
+]
+
+
 @app.command("map")
 @user_errors
 def map_command(
@@ -94,13 +103,7 @@ def map_command(
             "| tcp://host:8786 (a running Dask scheduler)."
         ),
     ] = None,
-    piece_s: Annotated[
-        float | None,
-        typer.Option(
-            help="A long ROS bag read and mapped in pieces of S seconds (csm and bki; bounded "
-            "memory for the log, not for the map)."
-        ),
-    ] = None,
+    piece_s: PieceOption = None,
     pose_std: PoseStdOption = None,
     trajectory_frame: TrajectoryFrameOption = None,
     config: ConfigOption = None,
