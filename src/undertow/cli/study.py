@@ -101,6 +101,16 @@ def reproduce(
         bool,
         typer.Option(help="Also Table IV on the mapping scenarios (mhl-basin, field-survey)."),
     ] = True,
+    peers: Annotated[
+        bool,
+        typer.Option(help="Also the peers table: the UKF beside the factor graph (batch, "
+                     "iSAM2) and the InEKF on six scenarios (needs undertow[peers] for gtsam)."),
+    ] = True,
+    peer_time_cap: Annotated[
+        float | None,
+        typer.Option(help="Wall-time cap (s) of each batch factor-graph run (default 900; 0 "
+                     "leaves it out); a capped run is reported as such in the table."),
+    ] = None,
     quiet: QuietOption = False,
 ) -> None:
     """The paper's experiments end to end: simulate, characterize, localize (4 variants), map
@@ -112,7 +122,8 @@ def reproduce(
 
     _run_study(study.reproduce, out_dir, quiet, seeds=seeds, first_seed=first_seed,
                scheduler=scheduler, rock_survey=rock_survey,
-               map_scenarios=map_scenarios)  # fmt: skip
+               map_scenarios=map_scenarios, peers=peers,
+               peer_time_cap_s=peer_time_cap)  # fmt: skip
 
 
 @app.command()
