@@ -10,8 +10,11 @@ Per scenario of :attr:`PeerSettings.scenarios` (the three carriage wave conditio
   with the proposed variant's noise (:func:`undertow.peers.run_estimator`).
 
 Every estimator of a scenario reads the same log with the same options (the wave condition the
-study measured for it, the study's noise profile and calibration). Metrics, against the ground
-truth: RMSE per axis and the pose NEES (:func:`undertow.evaluation.trajectory.trajectory_rmse`),
+study measured for it, the study's noise profile and calibration). Each estimator outputs at its
+own times (the UKF after every measurement, the factor graph at its keyframes, the InEKF after
+each update), so every trajectory is evaluated at the same instants: the DVL's valid reports
+(each estimator's last row at that time, after its DVL update; :func:`at_times`). Metrics,
+against the ground truth: RMSE per axis and the pose NEES (:func:`undertow.evaluation.trajectory.trajectory_rmse`),
 the horizontal RMSE sqrt(RMSE_x^2 + RMSE_y^2), the final horizontal drift as a percentage of
 the distance travelled (:func:`undertow.evaluation.drift.trajectory_drift`, the ground truth as
 the reference, no alignment: the estimators start at the true pose), and the CPU time,
@@ -159,7 +162,27 @@ def run_one(estimator: str, run: PeerRun, settings: PeerSettings):
         return None, {"status": str(exc)}
     except Exception as exc:  # a peer that fails must not lose the table
         return None, {"status": f"failed: {describe_exception(exc)}"}
-    return traj, estimator_metrics(traj, run.log.ground_truth, cpu_s, run.duration_s)
+    times = dvl_times(run.log)
+    return traj, estimator_metrics(at_times(traj, times), run.log.ground_truth, cpu_s,
+                                   run.duration_s)  # fmt: skip
+
+
+def dvl_times(log) -> np.ndarray:
+    """The times of the log's valid DVL reports (the common evaluation instants)."""
+    return np.asarray(log.dvl.t, float)[np.asarray(log.dvl.valid, bool)]
+
+
+#: A row is at a time when it is within this (s).
+TIME_TOLERANCE_S = 1e-6
+
+
+def at_times(traj, times: np.ndarray):
+    """The rows of ``traj`` at ``times``: at each time its last row within
+    :data:`TIME_TOLERANCE_S` (a time without a row is left out)."""
+    idx = np.searchsorted(traj.t, times + TIME_TOLERANCE_S, side="right") - 1
+    ok = (idx >= 0) & (np.abs(traj.t[np.maximum(idx, 0)] - times) <= TIME_TOLERANCE_S)
+    idx = np.unique(idx[ok])
+    return traj.replace(t=traj.t[idx], x=traj.x[idx], P=traj.P[idx])
 
 
 def call_estimator(estimator: str, log, options: dict):
