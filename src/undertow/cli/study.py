@@ -103,13 +103,17 @@ def reproduce(
     ] = True,
     peers: Annotated[
         bool,
-        typer.Option(help="Also the peers table: the UKF beside the factor graph (batch, "
-                     "iSAM2) and the InEKF on six scenarios (needs undertow[peers] for gtsam)."),
+        typer.Option(
+            help="Also the peers table: the UKF beside the factor graph (batch, "
+            "iSAM2) and the InEKF on six scenarios (needs undertow[peers] for gtsam)."
+        ),
     ] = True,
     peer_time_cap: Annotated[
         float | None,
-        typer.Option(help="Wall-time cap (s) of each batch factor-graph run (default 900; 0 "
-                     "leaves it out); a capped run is reported as such in the table."),
+        typer.Option(
+            help="Wall-time cap (s) of each batch factor-graph run (default 900; 0 "
+            "leaves it out); a capped run is reported as such in the table."
+        ),
     ] = None,
     quiet: QuietOption = False,
 ) -> None:

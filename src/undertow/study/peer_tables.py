@@ -10,7 +10,7 @@ from collections import Counter
 
 from .peer_claims import COMPARISONS, METRICS, explain, scenario_verdicts, with_derived
 from .peers import ESTIMATORS, GTSAM_PEERS
-from .stats import aggregate
+from .stats import aggregate, cell
 
 AXES = ("x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_m_s", "vy_m_s", "vz_m_s")
 AXIS_HEADERS = ("x (m)", "y (m)", "z (m)", "roll (rad)", "pitch (rad)", "yaw (rad)", "vx (m/s)",
@@ -56,12 +56,6 @@ def _estimators(runs: list[dict], name: str) -> list[str]:
     return [e for e in ESTIMATORS if e in seen] + sorted(seen - set(ESTIMATORS))
 
 
-def _cell(stat: dict | None, digits: int) -> str:
-    from .tables import cell
-
-    return cell(stat, digits)
-
-
 def peers_markdown(t: dict, name: str) -> str:
     """One scenario's peers table, the estimators that did not run, and its verdicts."""
     table = t["tables"][name]
@@ -77,8 +71,8 @@ def peers_markdown(t: dict, name: str) -> str:
         if st["ran"] < st["n"]:
             label += f" ({st['ran']}/{st['n']} seeds)"
         m = table["metrics"][estimator]
-        rows.append([label, *(_cell(m["rmse"][a], 4) for a in AXES), _cell(m["nees_mean"], 2),
-                     _cell(m.get("final_drift_pct"), 2), _cell(m["cpu_s_per_hour"], 1)])  # fmt: skip
+        rows.append([label, *(cell(m["rmse"][a], 4) for a in AXES), cell(m["nees_mean"], 2),
+                     cell(m.get("final_drift_pct"), 2), cell(m["cpu_s_per_hour"], 1)])  # fmt: skip
     parts = [_md(header, rows)]
     notes = _gtsam_line(notes, table["status"])
     if notes:
@@ -91,8 +85,11 @@ def peers_markdown(t: dict, name: str) -> str:
 
 def _gtsam_line(notes: list[str], status: dict) -> list[str]:
     """The gtsam peers' 'not installed' notes folded into one line."""
-    missing = [e for e in GTSAM_PEERS
-               if any("gtsam is not installed" in r for r in status.get(e, {}).get("reasons", {}))]
+    missing = [
+        e
+        for e in GTSAM_PEERS
+        if any("gtsam is not installed" in r for r in status.get(e, {}).get("reasons", {}))
+    ]
     if not missing:
         return notes
     kept = [n for n in notes if "gtsam is not installed" not in n]
@@ -108,7 +105,7 @@ def verdicts_markdown(table: dict) -> str:
         d = v["difference"]
         rows.append([f"{v['ukf']} vs {v['peer']}", f"{label} ({unit})" if unit else label,
                      f"{v['ukf_mean']:.{digits}f}", f"{v['peer_mean']:.{digits}f}",
-                     _cell(d, digits), f"{v['holds']}/{v['n']}", v["verdict"]])  # fmt: skip
+                     cell(d, digits), f"{v['holds']}/{v['n']}", v["verdict"]])  # fmt: skip
     header = ["comparison", "metric", "undertow", "peer", "difference [95 % CI]",
               "undertow lower in (seeds)", "verdict"]  # fmt: skip
     why = [f"- **{k}**: {w}." for k, w in table["why"].items() if w]

@@ -14,7 +14,8 @@ study measured for it, the study's noise profile and calibration). Each estimato
 own times (the UKF after every measurement, the factor graph at its keyframes, the InEKF after
 each update), so every trajectory is evaluated at the same instants: the DVL's valid reports
 (each estimator's last row at that time, after its DVL update; :func:`at_times`). Metrics,
-against the ground truth: RMSE per axis and the pose NEES (:func:`undertow.evaluation.trajectory.trajectory_rmse`),
+against the ground truth: RMSE per axis and the pose NEES
+(:func:`undertow.evaluation.trajectory.trajectory_rmse`),
 the horizontal RMSE sqrt(RMSE_x^2 + RMSE_y^2), the final horizontal drift as a percentage of
 the distance travelled (:func:`undertow.evaluation.drift.trajectory_drift`, the ground truth as
 the reference, no alignment: the estimators start at the true pose), and the CPU time,
