@@ -33,6 +33,7 @@ from .._util.dask import describe_exception
 from ..evaluation.drift import reference_track, trajectory_drift
 from ..io import read_log
 from ..settings import Settings
+from .peer_tables import ESTIMATOR_LABELS
 from .peers import (
     ESTIMATORS,
     GTSAM_PEERS,
@@ -42,7 +43,6 @@ from .peers import (
     gtsam_available,
     warm_up,
 )
-from .peer_tables import ESTIMATOR_LABELS
 
 #: The degrees of freedom of the InEKF's update kinds (its mean NIS's expected value).
 INEKF_DOF = {"dvl": 3, "depth": 1, "attitude": 3}
