@@ -115,6 +115,13 @@ def reproduce(
             "leaves it out); a capped run is reported as such in the table."
         ),
     ] = None,
+    peer_scenarios: Annotated[
+        str | None,
+        typer.Option(
+            help="The peers table's scenarios, comma-separated (default: the three wave "
+            "conditions, rock-survey, field-survey, changing-sea-survey)."
+        ),
+    ] = None,
     quiet: QuietOption = False,
 ) -> None:
     """The paper's experiments end to end: simulate, characterize, localize (4 variants), map
@@ -127,7 +134,13 @@ def reproduce(
     _run_study(study.reproduce, out_dir, quiet, seeds=seeds, first_seed=first_seed,
                scheduler=scheduler, rock_survey=rock_survey,
                map_scenarios=map_scenarios, peers=peers,
-               peer_time_cap_s=peer_time_cap)  # fmt: skip
+               peer_time_cap_s=peer_time_cap,
+               peer_scenarios=_names(peer_scenarios))  # fmt: skip
+
+
+def _names(text: str | None) -> list[str] | None:
+    """A comma-separated list of names (None if not given)."""
+    return None if text is None else [n.strip() for n in text.split(",") if n.strip()]
 
 
 @app.command()

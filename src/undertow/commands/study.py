@@ -84,6 +84,7 @@ def reproduce(
     map_scenarios: bool = True,
     peers: bool = True,
     peer_time_cap_s: float | None = None,
+    peer_scenarios: Sequence[str] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> StudyResult:
     """The paper's experiments end to end for the seeds ``first_seed .. first_seed + seeds - 1``:
@@ -94,7 +95,8 @@ def reproduce(
     ``peers``: also the peers table (:mod:`undertow.study.peers`: the UKF beside the factor
     graph, iSAM2 and the InEKF), the batch factor graph capped at ``peer_time_cap_s`` wall
     seconds per run (default :data:`~undertow.study.peers.FACTOR_GRAPH_CAP_S`; 0 leaves it
-    out)."""
+    out; ``peer_scenarios``: its scenarios, default
+    :data:`~undertow.study.peers.PEER_SCENARIOS`)."""
     if seeds < 1:
         raise UndertowError("--seeds must be at least 1")
     if first_seed < 0:
@@ -103,7 +105,9 @@ def reproduce(
     if not map_scenarios:
         settings = dataclasses.replace(settings, map_scenarios=())
     if peers:
-        settings = dataclasses.replace(settings, peers=peer_settings(peer_time_cap_s))
+        settings = dataclasses.replace(
+            settings, peers=peer_settings(peer_time_cap_s, peer_scenarios)
+        )
     return run_study(
         out_dir,
         seeds=list(range(first_seed, first_seed + seeds)),
@@ -113,13 +117,28 @@ def reproduce(
     )
 
 
-def peer_settings(time_cap_s: float | None = None) -> PeerSettings:
-    """The peers table's settings, the batch factor graph capped at ``time_cap_s`` (s)."""
-    if time_cap_s is None:
-        return PeerSettings()
-    if time_cap_s < 0:
-        raise UndertowError(f"--peer-time-cap must be >= 0 s, got {time_cap_s:g}")
-    return PeerSettings(time_cap_s={"factor-graph": float(time_cap_s)})
+def peer_settings(
+    time_cap_s: float | None = None, scenarios: Sequence[str] | None = None
+) -> PeerSettings:
+    """The peers table's settings: the batch factor graph capped at ``time_cap_s`` (s), the
+    ``scenarios`` (built-in scenario names) if given."""
+    changes = {}
+    if time_cap_s is not None:
+        if time_cap_s < 0:
+            raise UndertowError(f"--peer-time-cap must be >= 0 s, got {time_cap_s:g}")
+        changes["time_cap_s"] = {"factor-graph": float(time_cap_s)}
+    if scenarios is not None:
+        from ..sim import list_scenarios
+
+        known = set(list_scenarios())
+        unknown = [s for s in scenarios if s not in known]
+        if unknown or not scenarios:
+            raise UndertowError(
+                f"--peer-scenarios: unknown scenario(s) {', '.join(unknown) or '(none given)'}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        changes["scenarios"] = tuple(scenarios)
+    return PeerSettings(**changes)
 
 
 def demo(
