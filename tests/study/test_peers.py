@@ -13,6 +13,7 @@ from undertow.log import Log
 from undertow.study import peers
 from undertow.study.peer_claims import verdict
 from undertow.study.peer_tables import build_peers, peers_markdown
+from undertow.study.report import peer_figures, peer_notes
 from undertow.trajectory import Trajectory
 
 
@@ -74,7 +75,7 @@ def test_the_time_cap_stops_the_child_interpreter(monkeypatch):
 
 
 @pytest.mark.slow
-def test_every_estimator_on_a_short_run(simulation):
+def test_every_estimator_on_a_short_run(simulation, tmp_path):
     sim = simulation("wave-a0.10-f1.00", 0)
     short = types.SimpleNamespace(log=peers.log_head(sim.log, 12.0))
     art = types.SimpleNamespace(simulations={"wave-a0.10-f1.00": short}, peers={})
@@ -94,6 +95,12 @@ def test_every_estimator_on_a_short_run(simulation):
         truth = [np.interp(t_last, gt.t, gt.position[:, i]) for i in (0, 1)]
         drift = math.hypot(traj.x[0, 0] - truth[0], traj.x[0, 1] - truth[1])
         assert out[e]["final_drift_m"] == pytest.approx(drift, rel=1e-6, abs=1e-9)
-    text = peers_markdown(build_peers([{"seed": 0, "peers": {"wave-a0.10-f1.00": {
-        "duration_s": 12.0, "estimators": out}}}]), "wave-a0.10-f1.00")  # fmt: skip
+    tables = build_peers([{"seed": 0, "peers": {"wave-a0.10-f1.00": {
+        "duration_s": 12.0, "estimators": out}}}])  # fmt: skip
+    text = peers_markdown(tables, "wave-a0.10-f1.00")
     assert "InEKF" in text and "(1 seed, no interval)" in text
+    # the report: one figure of every estimator together, one note per comparison
+    figures = peer_figures(tmp_path, art)
+    assert [p.name for _, p in figures] == ["peers_wave-a0.10-f1.00.png"]
+    assert figures[0][1].read_bytes()[:4] == b"\x89PNG"
+    assert len(peer_notes(tables)) == (3 if peers.gtsam_available() else 1)
