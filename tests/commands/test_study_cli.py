@@ -27,6 +27,8 @@ def _free_port() -> int:
         (["--seeds", "1", "--scheduler", "bogus"], "unknown scheduler 'bogus'"),
         (["--seeds", "0"], "--seeds must be at least 1"),
         (["--first-seed", "-1"], "--first-seed must be >= 0, got -1"),
+        (["--peer-time-cap", "-1"], "--peer-time-cap must be >= 0 s, got -1"),
+        (["--peer-scenarios", "rock-survey,nope"], "--peer-scenarios: unknown scenario(s) nope"),
         (["--seeds", "2", "--scheduler", "tcp://127.0.0.1:{port}"], "cannot reach the Dask"),
     ],
 )

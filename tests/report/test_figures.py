@@ -56,6 +56,22 @@ def test_trajectory_errors_png(run, tmp_path):
     check_png(out, 10, 7.5)
 
 
+@pytest.mark.slow
+def test_estimators_png(run, tmp_path):
+    sim, trajs, _ = run
+    trajs = {**trajs, "inekf": trajs["proposed"]}  # a third, dashed line
+    out = figures_traj.plot_estimators(tmp_path / "est.png", sim.log.ground_truth, trajs, "t")
+    check_png(out, 10, 10)
+
+
+def test_estimators_reject_trajectory_outside_ground_truth(run, tmp_path):
+    sim, trajs, _ = run
+    late = dataclasses.replace(trajs["proposed"], t=trajs["proposed"].t + 1e4)
+    with pytest.raises(DataError, match="overlap"):
+        figures_traj.plot_estimators(tmp_path / "e.png", sim.log.ground_truth, {"late": late})
+    assert not (tmp_path / "e.png").exists()
+
+
 def test_trajectory_errors_reject_trajectory_outside_ground_truth(run, tmp_path):
     sim, trajs, _ = run
     late = dataclasses.replace(trajs["proposed"], t=trajs["proposed"].t + 1e4)

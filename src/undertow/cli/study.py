@@ -101,6 +101,27 @@ def reproduce(
         bool,
         typer.Option(help="Also Table IV on the mapping scenarios (mhl-basin, field-survey)."),
     ] = True,
+    peers: Annotated[
+        bool,
+        typer.Option(
+            help="Also the peers table: the UKF beside the factor graph (batch, "
+            "iSAM2) and the InEKF on six scenarios (needs undertow[peers] for gtsam)."
+        ),
+    ] = True,
+    peer_time_cap: Annotated[
+        float | None,
+        typer.Option(
+            help="Wall-time cap (s) of each batch factor-graph run (default 900; 0 "
+            "leaves it out); a capped run is reported as such in the table."
+        ),
+    ] = None,
+    peer_scenarios: Annotated[
+        str | None,
+        typer.Option(
+            help="The peers table's scenarios, comma-separated (default: the three wave "
+            "conditions, rock-survey, field-survey, changing-sea-survey)."
+        ),
+    ] = None,
     quiet: QuietOption = False,
 ) -> None:
     """The paper's experiments end to end: simulate, characterize, localize (4 variants), map
@@ -112,7 +133,14 @@ def reproduce(
 
     _run_study(study.reproduce, out_dir, quiet, seeds=seeds, first_seed=first_seed,
                scheduler=scheduler, rock_survey=rock_survey,
-               map_scenarios=map_scenarios)  # fmt: skip
+               map_scenarios=map_scenarios, peers=peers,
+               peer_time_cap_s=peer_time_cap,
+               peer_scenarios=_names(peer_scenarios))  # fmt: skip
+
+
+def _names(text: str | None) -> list[str] | None:
+    """A comma-separated list of names (None if not given)."""
+    return None if text is None else [n.strip() for n in text.split(",") if n.strip()]
 
 
 @app.command()

@@ -19,6 +19,7 @@ from .._util.atomic import check_output_file
 from ..errors import UndertowError
 from ..estimation.characterize import Characterization, characterize
 from ..settings import Settings
+from ..study.peers import PeerSettings
 from ..study.pipeline import StudySettings
 from ..study.runner import StudyResult, run_study
 from .common import as_settings, collect_warnings, load_log
@@ -81,13 +82,21 @@ def reproduce(
     scheduler: str | None = None,
     rock_survey: bool = True,
     map_scenarios: bool = True,
+    peers: bool = True,
+    peer_time_cap_s: float | None = None,
+    peer_scenarios: Sequence[str] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> StudyResult:
     """The paper's experiments end to end for the seeds ``first_seed .. first_seed + seeds - 1``:
     simulate, characterize, localize (4 variants), map (CSM, BKI, adaptive BKI), evaluate;
     tables with the paper's values, figures and ``report.html`` under ``out_dir``
     (:func:`undertow.study.runner.run_study`; ``scheduler`` runs the seeds after the first).
-    ``map_scenarios``: also Table IV on the mapping scenarios (mhl-basin, field-survey)."""
+    ``map_scenarios``: also Table IV on the mapping scenarios (mhl-basin, field-survey);
+    ``peers``: also the peers table (:mod:`undertow.study.peers`: the UKF beside the factor
+    graph, iSAM2 and the InEKF), the batch factor graph capped at ``peer_time_cap_s`` wall
+    seconds per run (default :data:`~undertow.study.peers.FACTOR_GRAPH_CAP_S`; 0 leaves it
+    out; ``peer_scenarios``: its scenarios, default
+    :data:`~undertow.study.peers.PEER_SCENARIOS`)."""
     if seeds < 1:
         raise UndertowError("--seeds must be at least 1")
     if first_seed < 0:
@@ -95,6 +104,10 @@ def reproduce(
     settings = StudySettings(rock_survey="rock-survey" if rock_survey else None)
     if not map_scenarios:
         settings = dataclasses.replace(settings, map_scenarios=())
+    if peers:
+        settings = dataclasses.replace(
+            settings, peers=peer_settings(peer_time_cap_s, peer_scenarios)
+        )
     return run_study(
         out_dir,
         seeds=list(range(first_seed, first_seed + seeds)),
@@ -104,9 +117,33 @@ def reproduce(
     )
 
 
+def peer_settings(
+    time_cap_s: float | None = None, scenarios: Sequence[str] | None = None
+) -> PeerSettings:
+    """The peers table's settings: the batch factor graph capped at ``time_cap_s`` (s), the
+    ``scenarios`` (built-in scenario names) if given."""
+    changes = {}
+    if time_cap_s is not None:
+        if time_cap_s < 0:
+            raise UndertowError(f"--peer-time-cap must be >= 0 s, got {time_cap_s:g}")
+        changes["time_cap_s"] = {"factor-graph": float(time_cap_s)}
+    if scenarios is not None:
+        from ..sim import list_scenarios
+
+        known = set(list_scenarios())
+        unknown = [s for s in scenarios if s not in known]
+        if unknown or not scenarios:
+            raise UndertowError(
+                f"--peer-scenarios: unknown scenario(s) {', '.join(unknown) or '(none given)'}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        changes["scenarios"] = tuple(scenarios)
+    return PeerSettings(**changes)
+
+
 def demo(
     out_dir: str | Path = "results", progress: Callable[[str], None] | None = None
 ) -> StudyResult:
     """The main job with its defaults: :func:`reproduce` with one seed (seed 0), without the
-    mapping scenarios (they run in ``undertow reproduce``: about a minute more per seed)."""
-    return reproduce(out_dir, progress=progress, map_scenarios=False)
+    mapping scenarios and the peers table (they run in ``undertow reproduce``)."""
+    return reproduce(out_dir, progress=progress, map_scenarios=False, peers=False)

@@ -87,3 +87,34 @@ def plot_trajectory_errors(
     axes[0].set_title("Error along the trajectory (paper Fig. 3b)")
     axes[-1].set_xlabel("time (s)")
     return save_figure(fig, path)
+
+
+def plot_estimators(path, ground_truth: GroundTruth, trajectories: dict[str, Trajectory],
+                    title: str = "") -> Path:  # fmt: skip
+    """Several estimators of one run together (the style of paper Fig. 3): the top view (x-y)
+    against the ground truth (green), then the horizontal position error
+    sqrt(e_x^2 + e_y^2) and the yaw error over time, one colour per estimator (the UKF's solid,
+    the others dashed)."""
+    _check(ground_truth, trajectories)
+    fig, (top, horizontal, yaw) = new_figure(10, 10, nrows=3)
+    gp = ground_truth.position[_thin(len(ground_truth))]
+    top.plot(gp[:, 0], gp[:, 1], color=GROUND_TRUTH_COLOR, lw=2.5, label="ground truth")
+    for i, (name, traj) in enumerate(trajectories.items()):
+        color = variant_color(name, i)
+        style = "-" if name.startswith(("baseline", "proposed")) else "--"
+        p = traj.position[_thin(len(traj))]
+        top.plot(p[:, 0], p[:, 1], color=color, ls=style, lw=1.2, label=name)
+        t, err, _ = _errors(ground_truth, traj)
+        if len(t) == 0:
+            raise DataError(f"trajectory {name!r} does not overlap the ground truth in time")
+        horizontal.plot(t, np.hypot(err[:, 0], err[:, 1]), color=color, ls=style, lw=1.2,
+                        label=name)  # fmt: skip
+        yaw.plot(t, np.degrees(err[:, 2]), color=color, ls=style, lw=1.2, label=name)
+    top.set(xlabel="x (m)", ylabel="y (m)", title=title or "Estimators, top view")
+    horizontal.set(ylabel="horizontal error (m)")
+    yaw.set(xlabel="time (s)", ylabel="yaw error (deg)")
+    yaw.axhline(0.0, color="0.4", lw=0.8)
+    for ax in (top, horizontal, yaw):
+        ax.grid(alpha=0.3)
+    top.legend(loc="best", fontsize=8)
+    return save_figure(fig, path)

@@ -23,6 +23,8 @@ For a seed s, with every simulator parameter from the built-in scenarios (never 
 6. (beyond the paper) the changing-sea scenarios: the sea state changes during the run; the
    proposed filter with the true schedule, with ``--wave auto``, with each fixed condition,
    ``adaptive-r`` and the baseline, and the onboard wave estimate against the schedule.
+7. (beyond the paper, ``settings.peers``) the peers table: the UKF beside the factor graph
+   (batch and iSAM2) and the InEKF on the same runs (:mod:`undertow.study.peers`).
 
 Returns plain, JSON-serializable numbers; :func:`run_seed_with_artifacts` also returns the
 in-memory objects the figures need.
@@ -47,6 +49,7 @@ from ..wavetrack import WaveTrack
 from . import paper
 from .claims import evaluate_seed
 from .maps import MAP_RUNS, evaluate_runs, map_scenario
+from .peers import PeerSettings, peer_waves, run_peers
 
 WAVE_CONDITIONS = ("wave-a0.10-f1.00", "wave-a0.10-f0.75", "wave-a0.05-f0.75")
 VARIANTS = ("baseline", "be", "an", "proposed")
@@ -77,6 +80,8 @@ class StudySettings:
     changing_sea: tuple[str, ...] = ("changing-sea-carriage", "changing-sea-survey")
     bki_length_scale: float = paper.BKI_LENGTH_SCALE_M
     map_scenarios: tuple[str, ...] = field(default_factory=default_map_scenarios)
+    #: the peers table (:mod:`undertow.study.peers`); None: not run
+    peers: PeerSettings | None = None
 
 
 @dataclass
@@ -87,6 +92,7 @@ class Artifacts:
     trajectories: dict = field(default_factory=dict)  # (condition, variant) -> Trajectory
     maps: dict = field(default_factory=dict)  # (condition, "method/variant") -> OccupancyMap
     wave_estimates: dict = field(default_factory=dict)  # scenario -> (estimate dict, truth)
+    peers: dict = field(default_factory=dict)  # (scenario, estimator) -> thinned Trajectory
 
 
 def run_seed(seed: int, settings: StudySettings | None = None) -> dict:
@@ -152,6 +158,10 @@ def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
         )  # fmt: skip
         for name in settings.map_scenarios
     }
+    if settings.peers is not None:
+        study = {"waves": peer_waves(table1, settings.conditions), "profile": char.profile,
+                 "calibration": calibration}  # fmt: skip
+        results["peers"] = run_peers(seed, settings.peers, study, art)
     results["claims"], results["claims_table1"] = evaluate_seed(results)
     return results, art
 

@@ -32,6 +32,7 @@ def build_report(
     figures += rock_survey_figures(out / "figures", tables, art)
     figures += map_scenario_figures(out / "figures", tables, art, settings)
     figures += wave_estimate_figures(out / "figures", art)
+    figures += peer_figures(out / "figures", art)
     sim = art.simulations[cond]
     report = write_report(
         out / "report.html",
@@ -186,6 +187,25 @@ def wave_estimate_figures(figdir: Path, art: Artifacts) -> Figures:
     return out
 
 
+def peer_figures(figdir: Path, art: Artifacts) -> Figures:
+    """Per scenario of the peers table: every estimator's trajectory and errors together."""
+    from ..report.figures_traj import plot_estimators
+
+    out = []
+    for name in dict.fromkeys(scenario for scenario, _ in art.peers):
+        trajs = {est: traj for (scenario, est), traj in art.peers.items() if scenario == name}
+        gt = art.simulations[name].log.ground_truth
+        path = plot_estimators(figdir / f"peers_{name}.png", gt, trajs,
+                               title=f"{name}: the UKF and its peers, top view")  # fmt: skip
+        caption = (
+            f"Peers ({name}): the paper's UKF (baseline, proposed, proposed + URTS smoother; "
+            "solid) beside the factor graph (batch, iSAM2) and the InEKF (dashed): top view "
+            "against the ground truth (green), horizontal position error and yaw error."
+        )
+        out.append((caption, path))
+    return out
+
+
 def adaptive_lengths():
     """(l_min, l_max) of the adaptive kernel the study maps with (the mapping defaults)."""
     from ..mapping.config import MappingConfig
@@ -217,6 +237,7 @@ def report_notes(tables: dict) -> list[str]:
                 f"{_verdict(f['holds'], f['n'])} ({f['holds']}/{f['n']} seeds). Measured: "
                 f"{entry['why']}."
             )
+    notes += peer_notes(tables.get("peers"))
     scenarios = tables.get("map_scenario_names") or []
     entries = [(e, tables["conditions"]) for e in tables["claims"].values()]
     entries += [(e, tables["conditions"]) for e in tables.get("field_claims", {}).values()]
@@ -237,3 +258,15 @@ def report_notes(tables: dict) -> list[str]:
                 note += f" {c}: {entry['why'][c]}."
         notes.append(note)
     return notes
+
+
+def peer_notes(peers: dict | None) -> list[str]:
+    """One note per scenario and comparison of the peers table: the verdict's why."""
+    if not peers:
+        return []
+    return [
+        f"Peers, {name}, {pair}: {why}."
+        for name in peers["scenarios"]
+        for pair, why in peers["tables"][name]["why"].items()
+        if why
+    ]

@@ -93,6 +93,16 @@ def format_cell(leaf: Mapping, decimals: int = 3) -> str:
     return f"{fmt(leaf.get('mean'))} [{fmt(leaf.get('ci95_low'))}, {fmt(leaf.get('ci95_high'))}]"
 
 
+def cell(stat: dict | None, digits: int = 3) -> str:
+    """'mean' for one seed, 'mean [lo, hi]' (95 % CI of the mean) for several; '-' if absent."""
+    if not stat or stat.get("mean") is None:
+        return "-"
+    mean = f"{stat['mean']:.{digits}f}"
+    if stat.get("n", 1) > 1 and stat.get("ci95_low") is not None:
+        return f"{mean} [{stat['ci95_low']:.{digits}f}, {stat['ci95_high']:.{digits}f}]"
+    return mean
+
+
 def _collect(node: Mapping, path: tuple, leaves: dict, nodes: set) -> None:
     for key, value in node.items():
         here = (*path, key)

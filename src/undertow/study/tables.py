@@ -17,8 +17,9 @@ from .claims import (
     Claim,
     sea_applies,
 )
+from .peer_tables import build_peers, peers_section
 from .pipeline import MAP_RUNS, ROCK_MARGIN_M
-from .stats import aggregate, claim_fraction
+from .stats import aggregate, cell, claim_fraction
 
 AXIS_LABELS = {
     "x_m": "x (m)", "y_m": "y (m)", "z_m": "z (m)", "roll_rad": "roll (rad)",
@@ -51,6 +52,7 @@ def build_tables(results: list[dict]) -> dict:
         "map_scenario_claims": {
             c.id: _claim(c, results, scenarios) for c in (MAP_SCENARIO_CLAIMS if scenarios else ())
         },
+        "peers": build_peers(results),
         "paper": {
             "table1": paper.TABLE_I,
             "table2_3": paper.TABLE_II_III,
@@ -95,16 +97,6 @@ def _sea_claim(claim: Claim, results: list[dict]) -> dict:
     entry["why"] = claim.explain(measured) if measured else None
     entry["all"] = claim_fraction(measured.verdicts if measured else [])
     return entry
-
-
-def cell(stat: dict | None, digits: int = 3) -> str:
-    """'mean' for one seed, 'mean [lo, hi]' (95 % CI of the mean) for several; '-' if absent."""
-    if not stat or stat.get("mean") is None:
-        return "-"
-    mean = f"{stat['mean']:.{digits}f}"
-    if stat.get("n", 1) > 1 and stat.get("ci95_low") is not None:
-        return f"{mean} [{stat['ci95_low']:.{digits}f}, {stat['ci95_high']:.{digits}f}]"
-    return mean
 
 
 def _mean(stat: dict | None, digits: int = 3) -> str:
@@ -382,6 +374,7 @@ def render_markdown(t: dict) -> str:
             f"## Table IV on a rough floor: {name} (beyond the paper)",
             map_scenario_markdown(t, name),
         ]
+    parts += peers_section(t.get("peers"))
     parts += ["## The paper's claims in simulation", claims_markdown(t)]
     if t.get("map_scenario_claims"):
         parts += [
