@@ -42,7 +42,7 @@ METRICS = {
 }
 #: The accuracy metrics the explanation chooses from (CPU is explained on its own).
 ACCURACY = ("horizontal_rmse_m", "yaw_rad", "vx_m_s", "nees_deviation", "final_drift_pct")
-#: The modelling difference that acts on a metric, per peer (docs/peers.md, docs/peers-inekf.md).
+#: The modelling difference that acts on a metric, per peer (docs/peers.md).
 CAUSES = {
     ("isam2", "horizontal_rmse_m"): "position is the integral of the velocity: between DVL "
     "reports the graph propagates it with the accelerometer (IMU preintegration), the UKF with "
