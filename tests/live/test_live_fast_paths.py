@@ -394,21 +394,29 @@ def test_latency_counts_from_the_links_receipt():
     assert received_at(clock, clock() + 10.0, queued) == queued  # an arrival in the future
 
 
-def test_a_commit_waits_for_a_preview_at_most_the_buffers_length():
+def test_a_commit_waits_for_a_preview_at_most_max_wait():
     """A preview that reached a time far ahead (a record stamped ahead of the others) must not
-    hold the commits back for ever: the buffer, and the session's memory, would grow."""
+    hold the commits back for ever: the buffer, and the session's memory, would grow. The wait
+    counts from the first commit that waited, not from the last release (commits come every
+    commit_every_s, longer than the buffer: counted from the release, every wait would end at
+    once)."""
     from undertow.live.preview import PreviewCheckpoints
 
     c = PreviewCheckpoints()
-    assert c.commit_to(10.0, 9.5, 1.0) == (10.0, False)  # none kept: up to the horizon
+    assert c.commit_to(10.0, 2.0) == (10.0, False)  # none kept: up to the horizon
     c.reached(9.7, "s9.7", fresh=True)
-    at, forced = c.commit_to(10.0, 9.5, 1.0)
+    at, forced = c.commit_to(10.0, 2.0)
     assert at == math.nextafter(9.7, math.inf) and not forced  # to the preview's end
     c.released(at, continued=True)
     c.reached(500.0, "far", fresh=False)  # far ahead of every horizon to come
-    assert c.commit_to(10.2, at, 1.0) == (None, False)  # waits, at most 1 s
-    assert c.commit_to(at + 1.0, at, 1.0) == (None, False)
-    assert c.commit_to(at + 1.01, at, 1.0) == (at + 1.01, True)  # then commits without it
+    assert c.commit_to(10.5, 2.0) == (None, False)  # waits, from 10.5 on
+    assert c.commit_to(12.5, 2.0) == (None, False)  # 2 s: still waits
+    assert c.commit_to(12.51, 2.0) == (12.51, True)  # then commits without it
     assert c.start() is None  # and the next preview starts afresh
-    c.reached(600.0, "far", fresh=True)
-    assert c.commit_to(5.0, -math.inf, 1.0) == (None, False)  # before any release: waits
+    c.reached(13.0, "s13", fresh=True)
+    assert c.commit_to(12.9, 2.0) == (None, False)  # a new wait starts afresh
+    assert c.commit_to(13.5, 2.0) == (math.nextafter(13.0, math.inf), False)  # ends it
+    c.released(math.nextafter(13.0, math.inf), continued=True)
+    c.reached(600.0, "far", fresh=False)
+    assert c.commit_to(14.0, 2.0) == (None, False)  # counted from 14.0, not from 12.9
+    assert c.commit_to(15.9, 2.0) == (None, False)

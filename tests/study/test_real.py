@@ -7,9 +7,9 @@ import json
 
 import numpy as np
 import pytest
+from conftest import REAL_DATA
 from typer.testing import CliRunner
 
-from conftest import REAL_DATA
 from undertow.study import real
 
 # the settings `undertow check coug_a50_imu_ros2 --write-config` proposes (docs/your-robot.md)

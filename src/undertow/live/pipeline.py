@@ -90,6 +90,8 @@ PATH_DECIMATION = 10
 #: sensor seconds between online map updates (the chunks released meanwhile at once: the map
 #: is the same to rounding, module :mod:`undertow.mapping.online`, for a tenth of the calls)
 MAP_EVERY_S = 1.0
+#: sensor seconds the commits wait at most for a preview's end (module preview)
+MAX_COMMIT_WAIT_S = 2.0
 #: the folder (in the output folder) that holds the final states until the end of the session
 STATES_DIR = ".localization.states"
 
@@ -274,10 +276,9 @@ class LiveSession:
         sea state, the recording of final states, the map and the view's rays. Up to the end
         of the latest preview before the horizon, so that the filter takes the previews'
         states; when every preview kept is ahead of the horizon, not yet (False: the next
-        step tries again; the wait is at most the buffer's length)."""
+        step tries again; the wait is at most MAX_COMMIT_WAIT_S)."""
         if not math.isinf(horizon):
-            horizon, forced = self._checkpoints.commit_to(horizon, self.buffer.horizon,
-                                                          self.live.reorder_s)  # fmt: skip
+            horizon, forced = self._checkpoints.commit_to(horizon, MAX_COMMIT_WAIT_S)
             if horizon is None:
                 return False
             self.stats.forced_commits += forced

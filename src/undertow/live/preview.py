@@ -35,6 +35,7 @@ class PreviewCheckpoints:
 
     def __init__(self, max_kept: int = 64) -> None:
         self._kept: collections.deque = collections.deque(maxlen=max_kept)
+        self._waiting_since: float | None = None  # the first horizon a commit waited at
 
     def arrived(self, t: float) -> None:
         """A filter record stamped ``t`` was buffered: previews that reached t or later did
@@ -56,21 +57,23 @@ class PreviewCheckpoints:
         before = [t for t, _ in self._kept if t < horizon]
         return before[-1] if before else None
 
-    def commit_to(self, horizon: float, last: float, max_wait: float) -> tuple[float | None, bool]:
+    def commit_to(self, horizon: float, max_wait: float) -> tuple[float | None, bool]:
         """(where a commit at ``horizon`` releases up to, forced): just after the latest time
         a kept preview reached before it (:meth:`boundary`), or ``horizon`` when none is kept;
-        None (wait) when every kept preview is ahead of it, unless the last release (``last``)
-        is more than ``max_wait`` behind ``horizon`` (a preview reached a time far ahead, e.g.
-        of a record stamped ahead of the others): then the previews are dropped and the commit
-        goes to ``horizon`` (forced: True). So a commit waits at most ``max_wait``."""
+        None (wait) when every kept preview is ahead of it, unless the commits have waited so
+        since a horizon more than ``max_wait`` before this one (a preview reached a time far
+        ahead, e.g. of a record stamped ahead of the others): then the previews are dropped and
+        the commit goes to ``horizon`` (forced: True). So a commit waits at most ``max_wait``."""
         boundary = self.boundary(horizon)
-        if boundary is not None:
-            return math.nextafter(boundary, math.inf), False
-        if not self._kept:
-            return horizon, False
-        if not math.isfinite(last) or horizon - last <= max_wait:  # (-inf: none released yet)
+        if boundary is not None or not self._kept:
+            self._waiting_since = None
+            return (horizon if boundary is None else math.nextafter(boundary, math.inf)), False
+        if self._waiting_since is None:
+            self._waiting_since = horizon
+        if horizon - self._waiting_since <= max_wait:
             return None, False
         self._kept.clear()
+        self._waiting_since = None
         return horizon, True
 
     def start(self) -> tuple[float, object] | None:
