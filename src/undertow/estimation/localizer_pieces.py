@@ -43,8 +43,8 @@ from .health import HALF_WINDOW, check_mounting, depth_jumps
 from .localizer import (
     FILTER_ROWS,
     Localizer,
-    calibration_fields,
     check_options,
+    resolved_localizer,
     run_metadata,
     sensor_coverage,
 )
@@ -69,13 +69,8 @@ def localize_pieces(pieces: Iterable[Log], store: TrajectoryStore, variant: str 
     if first is None:
         raise ConfigError("localize in pieces: the log has no piece")
     log = first[1]
-    filled = {} if calibration is None else calibration_fields(calibration, config)
-    if log.ground_truth is not None and len(log.ground_truth):
-        filled["initial_position"] = tuple(float(v) for v in log.ground_truth.position[0])
-    if "water_density_kg_m3" in log.metadata:
-        filled["water_density_kg_m3"] = float(log.metadata["water_density_kg_m3"])
-    localizer = Localizer(profile=profile, wave=wave, extrapolate=extrapolate,
-                          **{**filled, **params})  # fmt: skip
+    localizer, calibration = resolved_localizer(log, profile, wave, calibration, extrapolate,
+                                                params, smooth)  # fmt: skip
     if isinstance(wave, str) and wave.strip().lower() == "auto" or log.metadata.get("live_wave"):
         raise ConfigError("localize in pieces: wave 'auto' and a live session's wave decisions "
                           "need the whole log")  # fmt: skip
