@@ -199,14 +199,19 @@ def error_frame(R, v, p):
 
 
 @njit(cache=True)
+def right_correct(R, v, p, b, dx):
+    """X <- exp(dxi) X, b <- b + db: a right-invariant correction dx = (dxi (9), db (6))."""
+    dR, dv, dp = se23_exp(dx[0:9].copy())
+    return dR @ R, dR @ v + dv, dR @ p + dp, b + dx[9:15]
+
+
+@njit(cache=True)
 def update_dvl(R, v, p, b, P, y, cov, omega_m, model):
     """A DVL update (right-invariant): X <- exp(dxi) X, b <- b + db; returns the NIS too."""
     z, H, N = dvl_innovation(R, v, b, y, cov, omega_m, model)
     dx, P, nis, ok = kalman(P, z, H, N, model.gate_dvl)
     if ok:
-        dR, dv, dp = se23_exp(dx[0:9].copy())
-        R, v, p = dR @ R, dR @ v + dv, dR @ p + dp
-        b = b + dx[9:15]
+        R, v, p, b = right_correct(R, v, p, b, dx)
     return R, v, p, b, P, nis, ok
 
 
@@ -219,9 +224,7 @@ def update_attitude(R, v, p, b, P, Rm, cov, model):
     H[0:3, 0:3] = np.eye(3)
     dx, P, nis, ok = kalman(P, z, H, cov, model.gate_attitude)
     if ok:
-        dR, dv, dp = se23_exp(dx[0:9].copy())
-        R, v, p = dR @ R, dR @ v + dv, dR @ p + dp
-        b = b + dx[9:15]
+        R, v, p, b = right_correct(R, v, p, b, dx)
     return R, v, p, b, P, nis, ok
 
 
