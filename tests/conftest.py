@@ -53,6 +53,25 @@ def pytest_runtest_setup(item):
     )
 
 
+def multibeam_fan(rng, pings: int, beams: int, seed: int, var_high) -> tuple:
+    """Multibeam fans (120 deg across track, small roll/pitch from ``rng``) 1.75 m over a wavy
+    floor, one pose variance per ping drawn in [0, var_high): rays (origin, direction, range,
+    variance), as the mapping benchmark's."""
+    a = np.radians(np.linspace(-60, 60, beams))
+    o, v, r, var = [], [], [], []
+    for k in range(pings):
+        roll, pitch = rng.normal(0, 0.03, 2)
+        d = np.stack([np.full(beams, np.sin(pitch)), np.sin(a + roll), np.cos(a + roll)], 1)
+        d /= np.linalg.norm(d, axis=1)[:, None]
+        origin = np.array([0.9 * k + 7.0 * seed + 0.37, -1.1 + seed, 5.0])
+        depth = 6.75 + 0.2 * np.sin(3.0 * d[:, 1] / d[:, 2])
+        o.append(np.repeat(origin[None], beams, 0))
+        v.append(d)
+        r.append((depth - origin[2]) / d[:, 2])
+        var.append(np.repeat(rng.uniform(0, var_high, (1, 3)), beams, 0))
+    return tuple(np.concatenate(x) for x in (o, v, r, var))
+
+
 def one_error_line(result):
     """The single ``error:`` line of a CLI result that exited with status 1 (a user error), with
     no traceback; fails otherwise."""

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pytest
+from conftest import multibeam_fan
 
 from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
@@ -21,19 +22,7 @@ def _fan(seed: int, pings: int = 6, beams: int = 96):
     """Multibeam fans (120 deg across track, small roll/pitch) 1.75 m over a wavy floor, one
     pose variance per ping, as the benchmark's: rays (origin, direction, range, variance, sigma)."""
     rng = np.random.default_rng(seed)
-    a = np.radians(np.linspace(-60, 60, beams))
-    o, v, r, var = [], [], [], []
-    for k in range(pings):
-        roll, pitch = rng.normal(0, 0.03, 2)
-        d = np.stack([np.full(beams, np.sin(pitch)), np.sin(a + roll), np.cos(a + roll)], 1)
-        d /= np.linalg.norm(d, axis=1)[:, None]
-        origin = np.array([0.9 * k + 7.0 * seed + 0.37, -1.1 + seed, 5.0])
-        depth = 6.75 + 0.2 * np.sin(3.0 * d[:, 1] / d[:, 2])
-        o.append(np.repeat(origin[None], beams, 0))
-        v.append(d)
-        r.append((depth - origin[2]) / d[:, 2])
-        var.append(np.repeat(rng.uniform(0, 1.3e-3, (1, 3)), beams, 0))
-    o, v, r, var = (np.concatenate(x) for x in (o, v, r, var))
+    o, v, r, var = multibeam_fan(rng, pings, beams, seed, 1.3e-3)
     return o, v, r, var, np.full(len(r), 0.6)
 
 
