@@ -72,6 +72,16 @@ def multibeam_fan(rng, pings: int, beams: int, seed: int, var_high) -> tuple:
     return tuple(np.concatenate(x) for x in (o, v, r, var))
 
 
+def numeric_jacobian(fun, n: int, h: float = 1e-6) -> np.ndarray:
+    """d fun / d e at e = 0 by central differences, one column per coordinate of e (n)."""
+    cols = []
+    for j in range(n):
+        e = np.zeros(n)
+        e[j] = h
+        cols.append((fun(e) - fun(-e)) / (2 * h))
+    return np.stack(cols, axis=1)
+
+
 def one_error_line(result):
     """The single ``error:`` line of a CLI result that exited with status 1 (a user error), with
     no traceback; fails otherwise."""

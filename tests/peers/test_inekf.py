@@ -3,6 +3,7 @@ through the Log adapter, and the refusal of a log without an accelerometer."""
 
 import numpy as np
 import pytest
+from conftest import numeric_jacobian
 
 from undertow.errors import MissingStreamError
 from undertow.log import G0, Dvl, Imu, Log, Pressure
@@ -12,12 +13,7 @@ from undertow.rotations import matrix_to_rpy, rpy_to_matrix
 
 
 def _numeric(fun, n=15, h=1e-6):
-    cols = []
-    for j in range(n):
-        e = np.zeros(n)
-        e[j] = h
-        cols.append((fun(e) - fun(-e)) / (2 * h))
-    return np.stack(cols, axis=1)
+    return numeric_jacobian(fun, n, h)
 
 
 def test_conversions_to_and_from_the_ordinary_errors_match_numerical_derivatives():

@@ -3,6 +3,7 @@ closed form of a pure-noise propagation, and a constant-velocity line in closed 
 Monte Carlo NEES."""
 
 import numpy as np
+from conftest import numeric_jacobian
 from scipy.stats import chi2
 
 from undertow.peers.inekf_core import (
@@ -45,12 +46,7 @@ def _perturb_right(X, b, e):
 
 
 def _numeric(fun, n=15, h=1e-6):
-    cols = []
-    for j in range(n):
-        e = np.zeros(n)
-        e[j] = h
-        cols.append((fun(e) - fun(-e)) / (2 * h))
-    return np.stack(cols, axis=1)
+    return numeric_jacobian(fun, n, h)
 
 
 def test_dvl_jacobian_matches_numerical_derivative_of_the_measurement_model():
