@@ -91,7 +91,9 @@ class ChunkedGrid:
         """Indices of the chunks that the writes since the last call may have changed (every
         chunk written, and maybe a few neighbours: the boxes are the samples' extents widened
         by the kernels' reach), sorted; the record is then cleared."""
-        boxes, self._touched = self._touched or [], [] if self._touched is not None else None
+        boxes = self._touched or []
+        if self._touched is not None:
+            self._touched = []
         n = self.n_chunks
         if not boxes or n == 0:
             return np.zeros(0, np.int64)
