@@ -60,11 +60,14 @@ print(json.dumps({"wall_s": round(time.perf_counter() - t0, 1),
 def simulate_hours(hours: float, folder: Path) -> Path:
     """``hours`` of the field survey as one bag in ``folder``/log: one lap simulated
     (``folder``/lap) and repeated (:func:`repeat_bag`), so that a long log costs disk, not
-    memory; returns the log folder."""
+    memory; returns the log folder. The lawnmower is closed (back to its first waypoint), as the
+    live soak's (:data:`soak_live.CLOSED`), so that the laps survey one site: the memory measured
+    is the log's length, not the area mapped (a map of new ground all day is the map's size)."""
     from undertow.sim import load_scenario, simulate, write_simulation
 
     s = load_scenario("field-survey")
-    route = s.motion.waypoints.model_copy(update={"laps": 1})
+    points = list(s.motion.waypoints.points)
+    route = s.motion.waypoints.model_copy(update={"laps": 1, "points": [*points, points[0]]})
     s = s.model_copy(update={"motion": s.motion.model_copy(update={"waypoints": route})})
     write_simulation(simulate(s), folder / "lap", overwrite=True)
     return repeat_bag(folder / "lap" / "log", folder / "log", hours)

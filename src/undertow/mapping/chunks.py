@@ -165,3 +165,16 @@ def add_mass_to_cells(start, cells, d_alpha, d_beta, table_keys, table_vals, chu
         alpha[ci, ix & 7, iy & 7, iz & 7] += d_alpha[s]
         beta[ci, ix & 7, iy & 7, iz & 7] += d_beta[s]
     return cells.shape[0]
+
+
+@njit(cache=True)
+def insert_keys(start, keys, slots, table_keys, table_vals, chunk_keys, n_chunks):
+    """The index of each chunk of coordinates ``keys`` (k, 3) into ``slots``, inserting those
+    not held; resumes as :func:`insert_chunks` does (the first key left when full)."""
+    for s in range(start, keys.shape[0]):
+        ci = find_or_insert(keys[s, 0], keys[s, 1], keys[s, 2], table_keys, table_vals,
+                            chunk_keys, n_chunks)  # fmt: skip
+        if ci < 0:
+            return s
+        slots[s] = ci
+    return keys.shape[0]

@@ -36,6 +36,12 @@ Triple = Annotated[tuple[Finite, Finite, Finite], BeforeValidator(_three)]
 Method = Literal["csm", "bki", "adaptive", "tpu"]
 
 
+
+#: the map's chunks kept in memory by default, MB (mapping.resident_mb): 16 384 chunks of 8^3
+#: cells, e.g. 8 000 m^3 of mapped volume at 0.1 m cells around the vehicle; a Raspberry Pi 4
+#: (4-8 GB) runs the filter, the map and the view of a dive of hours in a few hundred MB
+RESIDENT_MB = 64.0
+
 class MappingConfig(BaseModel):
     """Mapping stage settings (grid 0.1 m, sigma_0 DVL 0.9 / sonar 0.6 / multibeam 0.6, l_min,
     l_max). A multibeam stream, when the log has one, is mapped unless ``use_multibeam`` is
@@ -105,6 +111,11 @@ class MappingConfig(BaseModel):
     max_memory_gb: float | None = Field(
         None, gt=0, allow_inf_nan=False, description="refuse a map whose storage would exceed "
         "this, GB; None: half the machine's RAM"
+    )  # fmt: skip
+    resident_mb: float | None = Field(
+        RESIDENT_MB, gt=0, allow_inf_nan=False, description="the most the map's chunks keep "
+        "in memory, MB; beyond it the tiles farthest from the latest write move to a temporary "
+        "file and come back when written again (the same map); None: all in memory"
     )  # fmt: skip
 
     @model_validator(mode="after")

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from ..errors import DataError
-from .chunks import CHUNK, CHUNK_LIMIT, add_mass_to_cells, boxes_chunks, rehash
+from .chunks import CHUNK, CHUNK_LIMIT, add_mass_to_cells, boxes_chunks, insert_keys, rehash
 from .kernels import (
     ALL_CELLS,
     MODE_CELL,
@@ -27,6 +27,7 @@ from .kernels import (
     scatter_slab,
     slab_splits,
 )
+from .spill import TILE, ChunkSpill, tiles_of
 from .rayscatter import (
     ray_insert_chunks,
     ray_scatter_parallel,
@@ -48,6 +49,8 @@ CHUNK_BYTES = 2 * 4 * CHUNK**3 + 3 * 8 + 2 * 2 * 8
 GROWTH_PEAK = 2.5  # growing by 1.5 holds the old and the new arrays at once
 READOUT_BYTES_PER_CELL = 100  # cells(): indices, keys, alpha and beta as float64, temporaries
 RAY_PARALLEL_MIN_SAMPLES = 1 << 16  # scatter_rays: fewer samples stay on the calling thread
+LOW_WATER = 0.75  # a spill brings the chunks held down to this share of the resident budget
+READOUT_BATCH = 8192  # chunks read out at once when some are spilled
 
 
 def peak_bytes(chunks: float, cells_bound: float) -> float:
@@ -65,14 +68,23 @@ def load_kernels() -> None:
 
 
 class ChunkedGrid:
-    """Hash of dense CHUNK^3 blocks of (alpha mass, beta mass); grows by a factor 1.5."""
+    """Hash of dense CHUNK^3 blocks of (alpha mass, beta mass); grows by a factor 1.5.
 
-    def __init__(self, resolution: float, capacity: int = 64) -> None:
+    ``resident_bytes``: the most the chunks may hold in memory (None: no limit); beyond it the
+    tiles farthest from the latest write move to a :class:`~undertow.mapping.spill.ChunkSpill`
+    (a temporary file in ``spill_dir``, None: the system's) and come back before a write that
+    may reach them, so the map is the same bit for bit (:mod:`undertow.mapping.spill`)."""
+
+    def __init__(self, resolution: float, capacity: int = 64, *,
+                 resident_bytes: float | None = None, spill_dir=None) -> None:  # fmt: skip
         self.resolution = float(resolution)
         self._support_cells: dict = {}  # _cells_per_axis by mode and length scales
         self._n = np.zeros(1, np.int64)
         self._allocate(max(int(capacity), 8))
         self._touched: list | None = None  # boxes (lo, hi) in m written since taken
+        self.resident_bytes = None if resident_bytes is None else float(resident_bytes)
+        self.spill = ChunkSpill(spill_dir)
+        self._born = 0  # chunks created so far: the next chunk's birth number
 
     def track_touched(self) -> None:
         """Record the box each later write may touch, for :meth:`take_touched` (a live view
@@ -80,12 +92,81 @@ class ChunkedGrid:
         if self._touched is None:
             self._touched = []
 
-    def _touch(self, extent, reach) -> None:
-        """Note the samples' box ``extent`` widened by the kernels' reach (m, >= the largest
-        support: the largest length scale; a cell kernel reaches one cell)."""
+    def _begin_write(self, extent, reach) -> int:
+        """Before a write of samples in box ``extent`` with kernels of ``reach`` (m, >= the
+        largest support: the largest length scale; a cell kernel reaches one cell): note the box
+        widened by the reach for :meth:`take_touched`, and take back the spilled tiles the write
+        may reach (the box widened by two more cells: a support's cells are rounded outwards).
+        Returns the chunks held then (the chunks after it are the write's new ones)."""
+        r = max(float(np.max(reach)), self.resolution)
+        lo, hi = np.asarray(extent[0]) - r, np.asarray(extent[1]) + r
         if self._touched is not None:
-            r = max(float(np.max(reach)), self.resolution)
-            self._touched.append((np.asarray(extent[0]) - r, np.asarray(extent[1]) + r))
+            self._touched.append((lo, hi))
+        if len(self.spill):
+            span, pad = CHUNK * self.resolution, 2 * self.resolution
+            tiles = self.spill.tiles_in(np.floor((lo - pad) / span).astype(np.int64),
+                                        np.floor((hi + pad) / span).astype(np.int64))  # fmt: skip
+            if tiles:
+                self._take_back(tiles)
+        return self.n_chunks
+
+    def _end_write(self, n0: int, extent) -> None:
+        """After a write: number the chunks it created (in the order the kernels created them,
+        the order :meth:`cells` keeps), then spill if the chunks exceed the resident budget."""
+        n1 = self.n_chunks
+        if n1 > n0:
+            self._birth[n0:n1] = np.arange(self._born, self._born + n1 - n0)
+            self._born += n1 - n0
+        if self.resident_bytes is not None and n1 * CHUNK_BYTES > self.resident_bytes:
+            self._spill_far(extent)
+
+    def _take_back(self, tiles) -> None:
+        """Reinsert the chunks of spilled ``tiles`` (their mass and birth numbers)."""
+        keys, births, alpha, beta = self.spill.take(tiles)
+        slots, start, n_before = np.empty(len(keys), np.int64), 0, self.n_chunks
+        while start < len(keys):
+            start = insert_keys(start, keys, slots, *self._tables()[:4])
+            if start < len(keys):
+                self._grow()
+        new = slots >= n_before
+        self._alpha[slots[new]], self._beta[slots[new]] = alpha[new], beta[new]
+        self._birth[slots[new]] = births[new]
+        if not new.all():  # held already (created empty meanwhile): 0 + mass is the mass
+            held = slots[~new]
+            self._alpha[held] += alpha[~new]
+            self._beta[held] += beta[~new]
+            self._birth[held] = np.minimum(self._birth[held], births[~new])
+
+    def _spill_far(self, extent) -> None:
+        """Spill whole tiles, the farthest from the centre of the write box ``extent`` first,
+        until the chunks held are LOW_WATER of the budget; the tiles of the boxes written
+        since :meth:`take_touched` (a view still to redraw them) and of ``extent`` stay."""
+        n, span = self.n_chunks, CHUNK * self.resolution
+        target = int(LOW_WATER * self.resident_bytes / CHUNK_BYTES)
+        tiles, inverse, counts = np.unique(tiles_of(self._keys[:n]), axis=0, return_inverse=True,
+                                           return_counts=True)  # fmt: skip
+        inverse = inverse.reshape(-1)
+        centre = (np.asarray(extent[0]) + np.asarray(extent[1])) / 2 / (span * TILE)
+        far = np.linalg.norm(tiles + 0.5 - centre, axis=1)
+        for lo, hi in [*(self._touched or []), (extent[0], extent[1])]:
+            t_lo = np.floor(np.asarray(lo) / (span * TILE)) - 1
+            t_hi = np.floor(np.asarray(hi) / (span * TILE)) + 1
+            far[np.all((tiles >= t_lo) & (tiles <= t_hi), axis=1)] = -1.0
+        order = np.argsort(-far, kind="stable")
+        order = order[far[order] >= 0]
+        k = int(np.searchsorted(np.cumsum(counts[order]), n - target)) + 1
+        out = np.isin(inverse, order[:k])
+        if not out.any():
+            return
+        gone, keep = np.flatnonzero(out), np.flatnonzero(~out)
+        self.spill.put(self._keys[gone], self._birth[gone], self._alpha[gone], self._beta[gone])
+        m = len(keep)
+        for a in (self._keys, self._alpha, self._beta, self._birth):
+            a[:m] = a[keep]
+            a[m:n] = 0  # the kernels expect a new chunk's mass at zero
+        self._table_keys.fill(-1)
+        rehash(self._keys, m, self._table_keys, self._table_vals)
+        self._n[0] = m
 
     def take_touched(self) -> np.ndarray:
         """Indices of the chunks that the writes since the last call may have changed (every
@@ -114,26 +195,31 @@ class ChunkedGrid:
         self._keys = np.zeros((capacity, 3), np.int64)
         self._alpha = np.zeros((capacity, CHUNK, CHUNK, CHUNK), np.float32)
         self._beta = np.zeros((capacity, CHUNK, CHUNK, CHUNK), np.float32)
+        self._birth = np.zeros(capacity, np.int64)
         size = 1 << int(np.ceil(np.log2(2 * capacity)))  # power of two, load factor <= 1/2
         self._table_keys = np.full(size, -1, np.int64)
         self._table_vals = np.zeros(size, np.int64)
 
     def _grow(self) -> None:
         n = int(self._n[0])
-        keys, alpha, beta = self._keys, self._alpha, self._beta
+        keys, alpha, beta, birth = self._keys, self._alpha, self._beta, self._birth
         self._allocate(keys.shape[0] * 3 // 2)
         self._keys[:n], self._alpha[:n], self._beta[:n] = keys[:n], alpha[:n], beta[:n]
+        self._birth[:n] = birth[:n]
         rehash(self._keys, n, self._table_keys, self._table_vals)
 
     @property
     def n_chunks(self) -> int:
+        """Chunks held in memory (:attr:`spill` has the others)."""
         return int(self._n[0])
 
     @property
     def nbytes(self) -> int:
-        """Bytes held by the storage arrays (capacity, not only the chunks in use)."""
-        arrays = (self._keys, self._alpha, self._beta, self._table_keys, self._table_vals)
-        return int(sum(a.nbytes for a in arrays))
+        """Bytes held in memory by the storage arrays (capacity, not only the chunks in use)
+        and the index of the spilled chunks."""
+        arrays = (self._keys, self._alpha, self._beta, self._birth, self._table_keys,
+                  self._table_vals)  # fmt: skip
+        return int(sum(a.nbytes for a in arrays)) + self.spill.index_bytes
 
     def _tables(self):
         return (self._table_keys, self._table_vals, self._keys, self._n, self._alpha, self._beta)
@@ -151,7 +237,7 @@ class ChunkedGrid:
         if extent is None:
             extent = points_extent(points)
         self._check_extent(extent)
-        self._touch(extent, l_max)
+        n0 = self._begin_write(extent, l_max)
         lo, hi = var_bounds
         res = self.resolution
         while start < n:
@@ -167,6 +253,7 @@ class ChunkedGrid:
                 scatter_parallel(*slab_splits(points, res, parts, *extent[:2]), *args)
             else:
                 scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
+        self._end_write(n0, extent)
 
     def scatter_rays(self, rays, var_bounds, l_min, l_max, extent) -> None:
         """:meth:`scatter` in product mode (the adaptive kernel) of the samples of ``rays``
@@ -176,13 +263,14 @@ class ChunkedGrid:
         pass); on several, first. ``extent``: of the samples
         (:func:`~undertow.mapping.rayscatter.ray_extent`)."""
         self._check_extent(extent)
-        self._touch(extent, l_max)
+        n0 = self._begin_write(extent, l_max)
         n = int(rays.rows[-1])
         if n < RAY_PARALLEL_MIN_SAMPLES:  # (no thread slot to take)
             self._scatter_rays(rays, var_bounds, l_min, l_max, extent, 1)
-            return
-        with parallel_slot(n, RAY_PARALLEL_MIN_SAMPLES) as parts:
-            self._scatter_rays(rays, var_bounds, l_min, l_max, extent, parts)
+        else:
+            with parallel_slot(n, RAY_PARALLEL_MIN_SAMPLES) as parts:
+                self._scatter_rays(rays, var_bounds, l_min, l_max, extent, parts)
+        self._end_write(n0, extent)
 
     def _scatter_rays(self, rays, var_bounds, l_min, l_max, extent, parts: int) -> None:
         """:meth:`scatter_rays` on ``parts`` threads."""
@@ -213,12 +301,13 @@ class ChunkedGrid:
         map, bit for bit, as :meth:`scatter` of the written samples with l_min 0, l_max ``cap``.
         ``extent``: of the samples (:func:`~undertow.mapping.tpuscatter.tpu_extent`)."""
         self._check_extent(extent)
-        self._touch(extent, cap)
+        n0 = self._begin_write(extent, cap)
         if n < RAY_PARALLEL_MIN_SAMPLES:  # (no thread slot to take)
             self._scatter_tpu(rays, hits, cap, extent, 1)
-            return
-        with parallel_slot(n, RAY_PARALLEL_MIN_SAMPLES) as parts:
-            self._scatter_tpu(rays, hits, cap, extent, parts)
+        else:
+            with parallel_slot(n, RAY_PARALLEL_MIN_SAMPLES) as parts:
+                self._scatter_tpu(rays, hits, cap, extent, parts)
+        self._end_write(n0, extent)
 
     def _scatter_tpu(self, rays, hits, cap: float, extent, parts: int) -> None:
         """:meth:`scatter_tpu` on ``parts`` threads."""
@@ -323,11 +412,12 @@ class ChunkedGrid:
             return
         extent = points_extent((cells + 0.5) * self.resolution)
         self._check_extent(extent)
-        self._touch(extent, 0.0)
+        n0 = self._begin_write(extent, 0.0)
         while start < n:
             start = add_mass_to_cells(start, cells, d_alpha, d_beta, *self._tables())
             if start < n:
                 self._grow()
+        self._end_write(n0, extent)
 
     def chunk_mass(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(chunk coordinates (k, 3), alpha mass (k, C, C, C), beta mass) of chunks ``idx``
@@ -336,12 +426,32 @@ class ChunkedGrid:
         return self._keys[idx], self._alpha[idx], self._beta[idx]
 
     def cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(cells (M, 3) int64, alpha mass (M,), beta mass (M,)) of cells with mass > 0."""
+        """(cells (M, 3) int64, alpha mass (M,), beta mass (M,)) of cells with mass > 0, chunk by
+        chunk in the order they were created (cell by cell within a chunk), spilled or not."""
         n = self.n_chunks
-        alpha, beta = self._alpha[:n], self._beta[:n]
-        c, i, j, k = np.nonzero((alpha + beta) > 0)
-        cells = self._keys[c] * CHUNK + np.stack([i, j, k], axis=1)
-        return cells, alpha[c, i, j, k].astype(float), beta[c, i, j, k].astype(float)
+        if not len(self.spill):
+            return _massed_cells(self._keys[:n], self._alpha[:n], self._beta[:n])
+        keys_out, births_out, slots_out = self.spill.index()
+        order = np.argsort(np.concatenate([self._birth[:n], births_out]), kind="stable")
+        parts = []
+        for batch in np.array_split(order, max(1, -(-len(order) // READOUT_BATCH))):
+            held = batch < n
+            keys = np.empty((len(batch), 3), np.int64)
+            keys[held], keys[~held] = self._keys[batch[held]], keys_out[batch[~held] - n]
+            alpha = np.empty((len(batch), CHUNK, CHUNK, CHUNK), np.float32)
+            beta = np.empty_like(alpha)
+            alpha[held], beta[held] = self._alpha[batch[held]], self._beta[batch[held]]
+            alpha[~held], beta[~held] = self.spill.read(slots_out[batch[~held] - n])
+            parts.append(_massed_cells(keys, alpha, beta))
+        return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+
+
+def _massed_cells(keys, alpha, beta) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cells, alpha, beta) of the cells with mass > 0 of chunks ``keys`` (k, 3) of masses
+    (k, C, C, C), in chunk then cell order."""
+    c, i, j, k = np.nonzero((alpha + beta) > 0)
+    cells = keys[c] * CHUNK + np.stack([i, j, k], axis=1)
+    return cells, alpha[c, i, j, k].astype(float), beta[c, i, j, k].astype(float)
 
 
 @njit(cache=True)

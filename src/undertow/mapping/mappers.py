@@ -76,10 +76,11 @@ class Mapper:
     method = ""
 
     def __init__(self, *, resolution: float, alpha0: float, beta0: float,
-                 max_memory_gb: float | None) -> None:  # fmt: skip
+                 max_memory_gb: float | None, resident_mb: float | None = None) -> None:  # fmt: skip
         self.resolution, self.alpha0, self.beta0 = float(resolution), float(alpha0), float(beta0)
         self.max_memory_gb = max_memory_gb
-        self.grid = ChunkedGrid(self.resolution)
+        resident = None if resident_mb is None else resident_mb * 1e6
+        self.grid = ChunkedGrid(self.resolution, resident_bytes=resident)
         self.n_samples = 0
         self.n_integrations = 0
         self.seeded_from = ""
@@ -321,7 +322,8 @@ def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
     """The config's mapper with its (checked) values, optionally seeded from a prior map (an
     :class:`~undertow.occupancy.OccupancyMap` or a saved ``map.npz``)."""
     base = {"resolution": config.resolution, "alpha0": config.alpha0, "beta0": config.beta0,
-            "max_memory_gb": config.max_memory_gb}  # fmt: skip
+            "max_memory_gb": config.max_memory_gb,
+            "resident_mb": config.resident_mb}  # fmt: skip
     if config.method == "csm":
         mapper: Mapper = CsmMapper(**base)
     elif config.method == "bki":
