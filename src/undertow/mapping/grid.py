@@ -27,13 +27,13 @@ from .kernels import (
     scatter_slab,
     slab_splits,
 )
-from .spill import TILE, ChunkSpill, tiles_of
 from .rayscatter import (
     ray_insert_chunks,
     ray_scatter_parallel,
     ray_scatter_slab,
     ray_slab_splits,
 )
+from .spill import TILE, ChunkSpill, tiles_of
 from .threads import parallel_slot
 from .tpuscatter import tpu_insert_chunks, tpu_scatter_parallel, tpu_scatter_slab
 

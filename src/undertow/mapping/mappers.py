@@ -76,7 +76,8 @@ class Mapper:
     method = ""
 
     def __init__(self, *, resolution: float, alpha0: float, beta0: float,
-                 max_memory_gb: float | None, resident_mb: float | None = None) -> None:  # fmt: skip
+                 max_memory_gb: float | None,
+                 resident_mb: float | None = None) -> None:  # fmt: skip
         self.resolution, self.alpha0, self.beta0 = float(resolution), float(alpha0), float(beta0)
         self.max_memory_gb = max_memory_gb
         resident = None if resident_mb is None else resident_mb * 1e6
