@@ -36,11 +36,11 @@ Triple = Annotated[tuple[Finite, Finite, Finite], BeforeValidator(_three)]
 Method = Literal["csm", "bki", "adaptive", "tpu"]
 
 
-
 #: the map's chunks kept in memory by default, MB (mapping.resident_mb): 16 384 chunks of 8^3
 #: cells, e.g. 8 000 m^3 of mapped volume at 0.1 m cells around the vehicle; a Raspberry Pi 4
 #: (4-8 GB) runs the filter, the map and the view of a dive of hours in a few hundred MB
 RESIDENT_MB = 64.0
+
 
 class MappingConfig(BaseModel):
     """Mapping stage settings (grid 0.1 m, sigma_0 DVL 0.9 / sonar 0.6 / multibeam 0.6, l_min,
