@@ -17,7 +17,8 @@ far (a histogram); from these:
 - ``latency_p99_ms_by_hour``: the p99 of the DVL-arrival-to-pose latency per hour. Target:
   < 10 ms in every hour;
 - ``realtime_factor``: sensor seconds per CPU second of the whole run (bench_live's figure);
-- ``map``: the online map's own memory at the end (its chunk arrays) and its cells, so that a
+- ``map``: the online map's own memory at the end (its chunk arrays in memory, the chunks
+  spilled beyond ``mapping.resident_mb`` and taken back) and the view's points held, so that a
   growth which is the map's (a survey covering new ground) is told apart from a leak.
 
     .venv/bin/python benchmarks/soak_live.py [--hours 3] [--rate 20] [--scenario field-survey]
@@ -178,7 +179,14 @@ def _map_info(session) -> dict:
     grid = getattr(mapper.mapper, "grid", None)
     out = {"pings": int(session.stats.pings)}
     if grid is not None:
-        out.update({"chunks": int(grid.n_chunks), "grid_mb": round(grid.nbytes / 2**20, 1)})
+        out.update({"chunks": int(grid.n_chunks), "grid_mb": round(grid.nbytes / 2**20, 1),
+                    "resident_mb": grid.resident_bytes and grid.resident_bytes / 1e6,
+                    "chunks_spilled": len(grid.spill), "spill_file_mb":
+                    round(grid.spill.file_bytes / 2**20, 1), "chunks_taken_back":
+                    grid.spill.takes})  # fmt: skip
+    cloud = getattr(session, "_cloud", None)  # the view's map cloud (made at the first draw)
+    if cloud is not None:
+        out.update({"view_points_held": cloud.n_points, "view_stride": cloud.stride})
     return out
 
 

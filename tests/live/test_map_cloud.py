@@ -107,3 +107,30 @@ def test_path_trail_keeps_evenly_spaced_positions_in_bounded_memory():
     steps = np.diff(kept[:-1, 0])
     assert np.all(steps == trail.step)  # evenly spaced, the newest added last
     assert len(path_points(kept)) == len(kept)  # already within what the view sends
+
+
+def test_a_growing_map_holds_a_bounded_cloud_even_when_its_chunks_spill():
+    """A survey over new ground with a view budget of 400 points and a resident budget of 200
+    chunks: the points held stay within HELD x budget (chunks thinned), the chunks in memory
+    within theirs plus the tiles the latest write reaches (kept: one write, the first, is the
+    allowance), and every point sent is a point of the full cloud (spilled chunks keep
+    their points; chunks taken back and written again are read again)."""
+    from undertow.live.map_cloud import HELD
+    from undertow.mapping.grid import CHUNK_BYTES
+
+    rng = np.random.default_rng(5)
+    config = _config("bki").model_copy(update={"resident_mb": 200 * CHUNK_BYTES / 1e6})
+    mapper = mapper_from_config(config)
+    cloud = MapCloud(mapper, config.occupied_threshold, budget=400)
+    allowance = None
+    for x0 in [*range(0, 16, 2), *range(14, -1, -2)]:  # out and back over spilled ground
+        mapper.integrate(_rays(rng, float(x0), 100))
+        allowance = allowance or mapper.grid.n_chunks
+        cloud.update()
+        assert cloud.n_points <= HELD * 400
+        assert mapper.grid.n_chunks <= 200 + allowance
+    assert cloud.stride > 1 and mapper.grid.spill.takes > 0
+    occupied = mapper.occupancy().points(config.occupied_threshold)
+    centres = {tuple(np.round(c, 4)) for c in occupied.tolist()}
+    sent = {tuple(np.round(p, 4)) for p in cloud.points()["xyz"].astype(float).tolist()}
+    assert sent and sent <= centres

@@ -10,7 +10,9 @@ E[theta] = alpha / (alpha + beta) > threshold, ``eq:mean_var``, alpha = alpha_0 
 only the touched chunks and rebuilds only their tiles. The cloud sent is the tiles joined;
 beyond ``budget`` points every k-th point of each tile is sent, k = ceil(points / budget), so
 a message never carries more than about ``budget`` points (a day's map stays a message the app
-draws at once).
+draws at once). What is held is bounded too: once the chunks' points exceed HELD x ``budget``,
+every chunk keeps every second of its points (and every chunk read later every ``stride``-th),
+so a day's map holds at most about HELD x ``budget`` points, not the map's cells.
 
 Colours are on a fixed scale, so that a chunk's colours do not depend on the rest of the map:
 the mean from the threshold (blue) to 1 (red), or the variance
@@ -28,6 +30,7 @@ from .view import scale_colors
 #: the most points a map message carries (16 bytes each: 3.2 MB)
 MAX_MAP_POINTS = 200_000
 TILE = 4  # chunks per tile edge
+HELD = 2  # the points held, at most about HELD x budget
 POINT = np.dtype([("xyz", "<f4", 3), ("rgba", "u1", 4)])
 
 
@@ -46,7 +49,8 @@ class MapCloud:
         self.threshold, self.color_by, self.budget = float(threshold), color_by, int(budget)
         self._chunks: dict[tuple, np.ndarray] = {}  # chunk key -> its points
         self._tiles: dict[tuple, np.ndarray | None] = {}  # tile key -> its points (None: stale)
-        self.n_points = 0
+        self.n_points = 0  # points held
+        self.stride = 1  # each chunk holds every stride-th of its occupied cells
         self.chunks_read = 0  # (what the updates cost: chunks read, in all)
         self._first = True
         self.grid.track_touched()
@@ -64,13 +68,23 @@ class MapCloud:
         keys, alpha, beta = self.grid.chunk_mass(idx)
         points = self._points(keys, alpha, beta)
         for key, pts in zip(map(tuple, keys.tolist()), points, strict=True):
+            pts = pts[:: self.stride].copy()  # (a copy: not a view keeping the update's array)
             old = self._chunks.pop(key, None)
             self.n_points += len(pts) - (0 if old is None else len(old))
             if len(pts):
                 self._chunks[key] = pts
             self._tiles[tuple(c // TILE for c in key)] = None
         self.chunks_read += int(idx.size)
+        while self.budget > 0 and self.n_points > HELD * self.budget:
+            self._thin()
         return int(idx.size)
+
+    def _thin(self) -> None:
+        """Every chunk keeps every second of its points; every tile is redrawn."""
+        self.stride *= 2
+        self._chunks = {key: pts[::2].copy() for key, pts in self._chunks.items()}
+        self.n_points = sum(len(pts) for pts in self._chunks.values())
+        self._tiles = dict.fromkeys(self._tiles)
 
     def _points(self, keys, alpha, beta) -> list[np.ndarray]:
         """Each chunk's occupied cells as points (module docstring)."""

@@ -149,8 +149,8 @@ class ChunkedGrid:
         centre = (np.asarray(extent[0]) + np.asarray(extent[1])) / 2 / (span * TILE)
         far = np.linalg.norm(tiles + 0.5 - centre, axis=1)
         for lo, hi in [*(self._touched or []), (extent[0], extent[1])]:
-            t_lo = np.floor(np.asarray(lo) / (span * TILE)) - 1
-            t_hi = np.floor(np.asarray(hi) / (span * TILE)) + 1
+            t_lo = np.floor(np.asarray(lo) / (span * TILE))
+            t_hi = np.floor(np.asarray(hi) / (span * TILE))
             far[np.all((tiles >= t_lo) & (tiles <= t_hi), axis=1)] = -1.0
         order = np.argsort(-far, kind="stable")
         order = order[far[order] >= 0]
