@@ -80,6 +80,10 @@ class OccupancyMap:
         """Cells with mean occupancy > threshold."""
         return self.select(self.mean > threshold)
 
+    def n_occupied(self, threshold: float = OCCUPIED_THRESHOLD) -> int:
+        """How many cells have mean occupancy > threshold."""
+        return int(np.count_nonzero(self.mean > threshold))
+
     def points(self, threshold: float = OCCUPIED_THRESHOLD) -> np.ndarray:
         """Occupied cell centres (K, 3): the map's point cloud for evaluation (C2C)."""
         return self.occupied(threshold).centres

@@ -57,18 +57,43 @@ def write_ply(path, points, properties: dict | None = None, binary: bool = True)
         table[axis] = pts[:, i]
     for name, arr in props.items():
         table[name] = arr
-    fmt = "binary_little_endian" if binary else "ascii"
-    header = (
-        f"ply\nformat {fmt} 1.0\ncomment written by undertow\nelement vertex {n}\n"
-        + "".join(f"property float {name}\n" for name in names)
-        + "end_header\n"
-    )
+    header = _header(n, names, "binary_little_endian" if binary else "ascii")
     if binary:
         with atomic_path(path) as tmp:
             tmp.write_bytes(header.encode("ascii") + table.tobytes())
     else:
         body = "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in table.tolist())
         atomic_write_text(path, header + body)
+    return path
+
+
+def _header(n: int, names, fmt: str) -> str:
+    return (
+        f"ply\nformat {fmt} 1.0\ncomment written by undertow\nelement vertex {n}\n"
+        + "".join(f"property float {name}\n" for name in names)
+        + "end_header\n"
+    )
+
+
+def write_ply_parts(path, n: int, names: list[str], parts) -> Path:
+    """A binary PLY of ``n`` vertices with float properties x, y, z, ``names`` written part by
+    part (the bytes :func:`write_ply` writes for the parts joined): ``parts`` yields (points
+    (k, 3), {name: (k,)}); atomic. The parts must hold ``n`` vertices in all."""
+    path = Path(path)
+    dtype = np.dtype([(name, "<f4") for name in ["x", "y", "z", *names]])
+    written = 0
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(_header(n, ["x", "y", "z", *names], "binary_little_endian").encode("ascii"))
+        for points, props in parts:
+            table = np.empty(len(points), dtype=dtype)
+            for i, axis in enumerate("xyz"):
+                table[axis] = np.asarray(points, np.float64)[:, i]
+            for name in names:
+                table[name] = np.asarray(props[name], dtype=np.float32).reshape(-1)
+            fh.write(table.tobytes())
+            written += len(points)
+        if written != n:
+            raise DataError(f"write_ply {path}: {written} vertices written, {n} announced")
     return path
 
 

@@ -32,10 +32,14 @@ def save_map(occupancy_map: OccupancyMap, config: dict, metadata: dict, out_dir:
     """Write ``map.npz``, ``map.ply`` (occupied cell centres, mean occupancy > ``threshold``,
     with mean and variance) and ``config.yaml`` (``mapping``: the mapping ``config`` the map was
     made with, ``result``: the ``metadata`` of what went into it), all at once (a non-empty
-    folder is replaced only with ``overwrite``)."""
+    folder is replaced only with ``overwrite``). ``occupancy_map``: an OccupancyMap, or a map
+    read out part by part that writes its own (``save``, ``write_ply``: a GridOccupancy)."""
     with output_folder(out_dir, overwrite) as out:
         occupancy_map.save(out / "map.npz")
-        write_map_ply(out / "map.ply", occupancy_map, threshold=threshold)
+        if hasattr(occupancy_map, "write_ply"):  # a map read out part by part (GridOccupancy)
+            occupancy_map.write_ply(out / "map.ply", threshold=threshold)
+        else:
+            write_map_ply(out / "map.ply", occupancy_map, threshold=threshold)
         doc = {"mapping": config, "result": metadata}
         (out / "config.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
     return Path(out_dir)

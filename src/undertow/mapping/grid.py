@@ -428,22 +428,29 @@ class ChunkedGrid:
     def cells(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(cells (M, 3) int64, alpha mass (M,), beta mass (M,)) of cells with mass > 0, chunk by
         chunk in the order they were created (cell by cell within a chunk), spilled or not."""
+        parts = list(self.iter_cells())
+        if len(parts) == 1:
+            return parts[0]
+        return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+
+    def iter_cells(self, batch: int = READOUT_BATCH):
+        """:meth:`cells` in parts of at most ``batch`` chunks (one part when none is spilled):
+        a map larger than memory read out part by part."""
         n = self.n_chunks
         if not len(self.spill):
-            return _massed_cells(self._keys[:n], self._alpha[:n], self._beta[:n])
+            yield _massed_cells(self._keys[:n], self._alpha[:n], self._beta[:n])
+            return
         keys_out, births_out, slots_out = self.spill.index()
         order = np.argsort(np.concatenate([self._birth[:n], births_out]), kind="stable")
-        parts = []
-        for batch in np.array_split(order, max(1, -(-len(order) // READOUT_BATCH))):
-            held = batch < n
-            keys = np.empty((len(batch), 3), np.int64)
-            keys[held], keys[~held] = self._keys[batch[held]], keys_out[batch[~held] - n]
-            alpha = np.empty((len(batch), CHUNK, CHUNK, CHUNK), np.float32)
+        for part in np.array_split(order, max(1, -(-len(order) // batch))):
+            held = part < n
+            keys = np.empty((len(part), 3), np.int64)
+            keys[held], keys[~held] = self._keys[part[held]], keys_out[part[~held] - n]
+            alpha = np.empty((len(part), CHUNK, CHUNK, CHUNK), np.float32)
             beta = np.empty_like(alpha)
-            alpha[held], beta[held] = self._alpha[batch[held]], self._beta[batch[held]]
-            alpha[~held], beta[~held] = self.spill.read(slots_out[batch[~held] - n])
-            parts.append(_massed_cells(keys, alpha, beta))
-        return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+            alpha[held], beta[held] = self._alpha[part[held]], self._beta[part[held]]
+            alpha[~held], beta[~held] = self.spill.read(slots_out[part[~held] - n])
+            yield _massed_cells(keys, alpha, beta)
 
 
 def _massed_cells(keys, alpha, beta) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

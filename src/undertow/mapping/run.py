@@ -14,6 +14,7 @@ from ..log import Log
 from ..occupancy import OccupancyMap
 from ..trajectory import Trajectory
 from .config import MappingConfig
+from .grid_map import GridOccupancy
 from .mappers import mapper_from_config, out_of_memory
 from .samples import samples_from_config
 from .tpu import with_wave
@@ -23,9 +24,11 @@ from .tpu import with_wave
 class MappingResult:
     """The map, and what went into it (sample counts, dropped ranges, mapper settings);
     ``warnings``: what reading and mapping warned of (filled by
-    :func:`undertow.commands.mapping.map_file`)."""
+    :func:`undertow.commands.mapping.map_file`). ``map``: an OccupancyMap, or from
+    :func:`map_pieces` a map that outgrew ``mapping.resident_mb`` as a
+    :class:`~undertow.mapping.grid_map.GridOccupancy` (read out part by part; ``load()``)."""
 
-    map: OccupancyMap
+    map: OccupancyMap | GridOccupancy
     config: MappingConfig
     metadata: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
@@ -69,7 +72,9 @@ def map_pieces(pieces: Iterable[Log], trajectory, config: MappingConfig | None =
     samples are in memory. The same cells (in another order); ``csm`` counts exactly, ``bki``
     sums float32 kernel weights in another grouping (alpha and beta within 2e-6). The
     metadata's ``n_integrations`` counts the pieces with ranges. ``trajectory``: a Trajectory
-    or a lazy :class:`~undertow.trajectory_chunks.PoseTrack`. Methods: :data:`PIECE_METHODS`."""
+    or a lazy :class:`~undertow.trajectory_chunks.PoseTrack`. Methods: :data:`PIECE_METHODS`.
+    A map that outgrew ``mapping.resident_mb`` (chunks spilled) comes back as a
+    :class:`~undertow.mapping.grid_map.GridOccupancy`: a day's survey is never formed whole."""
     config = with_wave(config or MappingConfig(), trajectory)
     if config.method not in PIECE_METHODS:
         raise ConfigError(f"map in pieces: method {config.method} normalizes over the whole log;"
@@ -99,11 +104,11 @@ def map_pieces(pieces: Iterable[Log], trajectory, config: MappingConfig | None =
         del samples
     if mapper.n_integrations == 0:
         raise MissingStreamError("mapping needs a range stream but the log has none")
-    occupancy = mapper.occupancy()
-    occupancy = dataclasses.replace(
-        occupancy,
-        metadata={**occupancy.metadata, "occupied_threshold": config.occupied_threshold},
-    )
+    meta = {**mapper.metadata(), "occupied_threshold": config.occupied_threshold}
+    if len(mapper.grid.spill):  # larger than its resident budget: read out part by part
+        occupancy = GridOccupancy(mapper, meta)
+    else:
+        occupancy = dataclasses.replace(mapper.occupancy(), metadata=meta)
     metadata = map_metadata(mapper.metadata(), counts, occupancy, config, trajectory, first)
     return MappingResult(occupancy, config, metadata)
 
@@ -126,7 +131,7 @@ def map_metadata(mapper: dict, samples, occupancy: OccupancyMap, config: Mapping
         "mapper": mapper,
         "samples": samples if isinstance(samples, dict) else sample_counts(samples),
         "cells_with_mass": len(occupancy),
-        "occupied_cells": len(occupancy.occupied(config.occupied_threshold)),
+        "occupied_cells": occupancy.n_occupied(config.occupied_threshold),
         "trajectory_variant": trajectory.variant,
         "source": log.source,
         "log": reading_record(log.metadata),
