@@ -183,8 +183,6 @@ def _in_pieces(path, in_pieces: bool | None, piece_s: float, run: tuple) -> Piec
     localizer options, wave and output folder) at every state, with a wave condition that is
     not estimated from the log and no live session's wave decisions (those need the whole
     log); the choice stated in one warning when it is not today's whole read."""
-    if in_pieces is False:  # no index read: the whole read, as before pieces existed
-        return PieceChoice(False, "asked", piece_s)
     estimator, params, wave, out_dir = run
     choice = piece_choice(path, in_pieces, piece_s)
     if choice.pieces:

@@ -153,8 +153,6 @@ def _in_pieces(log_path, given, tiles, config: MappingConfig, asked: tuple) -> P
     its size; and ``piece_s``), with a trajectory.npz, no tiles and a method that allows it;
     the choice stated in one warning when it is not today's whole read."""
     in_pieces, piece_s = asked
-    if in_pieces is False:  # no index read: the whole read, as before pieces existed
-        return PieceChoice(False, "asked", piece_s)
     choice = piece_choice(log_path, in_pieces, piece_s)
     if choice.pieces and isinstance(given, TumInput):
         choice = choice.blocked("a TUM trajectory (its frame is detected from the log)")
