@@ -117,10 +117,10 @@ def iter_log_pieces(path, piece_s: float, topics: TopicMap | None = None, mavlin
 
 
 #: a ROS bag whose index spans more than this (s of record time) is read in pieces by
-#: `localize` and `map` (:func:`piece_choice`): their whole read peaks at about 0.8 GB (the
-#: filter, its states on disk) and 1.1 GB (a BKI map) per hour of a BlueROV2 survey with
-#: a ground-truth track (docs/benchmarks.md), so a log of up to two hours is read whole, in
-#: under 2 GB, and gives today's outputs bit for bit
+#: `localize` and `map` (:func:`piece_choice`): the whole read of `localize --smooth` peaks at
+#: 0.85 GB at 1.1 hours of the simulated field survey and 1.45 GB at 2 (0.65 GB an hour; the
+#: pieces 0.8-1.0 GB at any length; docs/benchmarks.md), so a log of up to two hours is read
+#: whole, under 1.5 GB, and gives the outputs it always did bit for bit
 PIECES_ABOVE_S = 7200.0
 #: or whose index holds more messages than this (two hours of that survey: 0.9 million an
 #: hour, the IMU and ground truth at 100 Hz): a log of faster sensors is as large sooner
