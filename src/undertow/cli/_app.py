@@ -151,9 +151,9 @@ InPiecesOption = Annotated[
     bool | None,
     typer.Option(
         "--in-pieces/--whole",
-        help="A ROS bag read in pieces of --piece-s seconds, in bounded memory, or whole. "
-        "Default: in pieces when its index spans more than 2 h (or 1.8 million messages), "
-        "stated in one line (docs/localization.md#long-logs-read-filtered-and-mapped-in-pieces).",
+        help="A ROS bag read in pieces of --piece-s seconds (bounded memory) or whole. "
+        "Default: in pieces when its index spans more than 2 h or 1.8 million messages, "
+        "said in one line (docs/localization.md).",
         show_default=False,
     ),
 ]
