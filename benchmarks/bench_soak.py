@@ -4,12 +4,13 @@ Offline (:func:`bench_offline`): a simulated survey of ``hours`` of sensor time 
 field-survey scenario simulated, then repeated into one bag message by message with shifted
 times, :func:`repeat_bag`: disk, not memory; in a temporary folder, not kept) is localized with
 the smoother and mapped (BKI), each step in its own process, whose peak RSS (``VmHWM``) is
-reported. ``chunked``: what `localize` and `map` do with a bag above 200 000 messages (read
-and filtered in 600 s pieces, the states on disk; the map integrated piece by piece); when
-``today`` is set (default up to 2 hours) also ``memory``: the whole log read and filtered in
-memory (the path before issue 27), with whether the two wrote the same files (TUM and
-config.yaml bytes, npz arrays). Target: peak RSS under 2 GB at 24 hours. The hours are
-``UNDERTOW_SOAK_HOURS`` (default 1).
+reported. ``chunked``: the bag read and filtered in 600 s pieces, the states on disk, the map
+integrated piece by piece: what `localize` and `map` do by default with a bag whose index
+spans more than 2 hours (``undertow.io.PIECES_ABOVE_S``; asked for with ``in_pieces=True``
+below that); when ``today`` is set (default up to 2 hours) also ``memory``: the whole log read
+and filtered in memory (the path before issue 27), with whether the two wrote the same files
+(TUM and npz arrays, config.yaml bytes but for the ``read_in_pieces`` record). Target: peak
+RSS under 2 GB at 24 hours. The hours are ``UNDERTOW_SOAK_HOURS`` (default 1).
 
 Live (:func:`bench_live`, :mod:`soak_live`): ``serve`` plays the closed field survey again and
 again at 20x into `live` (all three links, view and map on) for ``UNDERTOW_SOAK_LIVE_HOURS`` of
@@ -35,7 +36,9 @@ _STEP = r"""
 import json, sys, time, warnings
 from pathlib import Path
 warnings.simplefilter("ignore")
-step, log, out, chunked = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4] == "1"
+step, log, out, chunked = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
+# "auto": the default (pieces above 2 h), "1": pieces asked, "0": the whole log, states in memory
+pieces = {"auto": None, "1": True, "0": False}[chunked]
 t0 = time.perf_counter()
 if step == "generate":
     sys.path.insert(0, sys.argv[5])
@@ -44,11 +47,12 @@ if step == "generate":
     extra = {}
 elif step == "localize":
     from undertow.commands.localization import localize_file
-    r = localize_file(log, smooth=True, out_dir=out, chunked=chunked)
+    r = localize_file(log, smooth=True, out_dir=out, in_pieces=pieces,
+                      chunked=False if pieces is False else None)
     extra = {"states": len(r.trajectory)}
 else:
     from undertow.commands.mapping import map_file
-    r = map_file(log, out, out_dir=out + "-map", method="bki")
+    r = map_file(log, out, out_dir=out + "-map", method="bki", in_pieces=pieces)
     extra = {"cells": len(r.map)}
 # VmHWM: this process's peak RSS (ru_maxrss would keep the parent's peak across fork + exec)
 hwm = next(ln for ln in open("/proc/self/status") if ln.startswith("VmHWM"))
@@ -129,9 +133,10 @@ def repeat_bag(lap: Path, dest: Path, hours: float) -> Path:
     return dest
 
 
-def _step(step: str, log: Path, out, chunked: bool = False) -> dict:
-    """One step in a fresh process; its JSON line (peak RSS of that process)."""
-    args = [step, str(log), str(out), "1" if chunked else "0", str(Path(__file__).parent)]
+def _step(step: str, log: Path, out, chunked: str = "0") -> dict:
+    """One step in a fresh process (``chunked``: "auto", "1" or "0", see ``_STEP``); its JSON
+    line (peak RSS of that process)."""
+    args = [step, str(log), str(out), chunked, str(Path(__file__).parent)]
     done = subprocess.run([sys.executable, "-c", _STEP, *args], capture_output=True, text=True,
                           check=False)  # fmt: skip
     if done.returncode:
@@ -141,12 +146,16 @@ def _step(step: str, log: Path, out, chunked: bool = False) -> dict:
 
 def _same_files(a: Path, b: Path) -> bool:
     import numpy as np
+    import yaml
 
-    for name in ("trajectory.tum", "config.yaml"):
-        if (a / name).read_bytes() != (b / name).read_bytes():
-            return False
+    if (a / "trajectory.tum").read_bytes() != (b / "trajectory.tum").read_bytes():
+        return False
+    configs = [yaml.safe_load((f / "config.yaml").read_text()) for f in (a, b)]
+    if [{k: v for k, v in c.items() if k != "read_in_pieces"} for c in configs] != [configs[1]] * 2:
+        return False
     with np.load(a / "trajectory.npz") as x, np.load(b / "trajectory.npz") as y:
-        return x.files == y.files and all(np.array_equal(x[k], y[k]) for k in x.files)
+        arrays = [k for k in x.files if k != "metadata_json"]  # the metadata: config.yaml's
+        return x.files == y.files and all(np.array_equal(x[k], y[k]) for k in arrays)
 
 
 def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
@@ -160,9 +169,10 @@ def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
         out["log_mb"] = round(sum(p.stat().st_size for p in log.rglob("*")) / 1e6)
         for mode in ("chunked", "memory") if today else ("chunked",):
             folder = root / mode
+            how = "0" if mode == "memory" else "1" if hours <= 2.0 else "auto"
             out[mode] = {
-                "localize": _step("localize", log, folder, mode == "chunked"),
-                "map": _step("map", log, folder, mode == "chunked"),
+                "localize": _step("localize", log, folder, how),
+                "map": _step("map", log, folder, how),
             }
         if today:
             out["same_files"] = _same_files(root / "chunked", root / "memory")

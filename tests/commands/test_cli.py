@@ -35,6 +35,30 @@ def test_help_has_examples():
     assert result.exit_code == 0 and "undertow simulate" in result.output
 
 
+def test_localize_and_map_take_the_same_piece_options(monkeypatch):
+    """--in-pieces / --whole and --piece-s on both commands; a piece length alone asks for the
+    pieces, --whole wins over it (what reaches localize_file / map_file)."""
+    import undertow.commands.localization as localization
+    from undertow.errors import UndertowError
+
+    monkeypatch.setenv("COLUMNS", "200")  # one option per line in the help
+    for command in ("localize", "map"):
+        out = runner.invoke(app, [command, "--help"]).output
+        assert "--in-pieces" in out and "--whole" in out and "--piece-s" in out, out
+    seen = []
+
+    def localize_file(*args, **kwargs):
+        seen.append(kwargs)
+        raise UndertowError("stop here")
+
+    monkeypatch.setattr(localization, "localize_file", localize_file)
+    for extra in ([], ["--in-pieces"], ["--whole"], ["--piece-s", "30"],
+                  ["--piece-s", "30", "--whole"]):  # fmt: skip
+        runner.invoke(app, ["localize", "LOG", "--out", "o", "-q", *extra])
+    got = [(kw["in_pieces"], kw.get("piece_s")) for kw in seen]
+    assert got == [(None, None), (True, None), (False, None), (True, 30.0), (False, 30.0)]
+
+
 @pytest.mark.slow
 def test_simulate_localize_evaluate_map_end_to_end(tmp_path):
     """The README's workflow through the bag on disk, checked against the ground truth files."""

@@ -359,3 +359,26 @@ def test_chunked_without_a_folder_or_with_an_output_rate_is_refused_before_readi
         localize_file(missing, chunked=True)
     with pytest.raises(ConfigError, match="no output rate"):
         localize_file(missing, chunked=True, out_dir=tmp_path / "o", output_rate_hz=10.0)
+
+
+def test_a_bag_too_long_to_read_whole_is_read_in_pieces_says_so_and_records_it(run, monkeypatch):
+    """With the limit below the calm run's 48 s, `localize` reads it in pieces by itself: one
+    line says so, config.yaml records it (``read_in_pieces``) and is otherwise the whole
+    read's, as are the states (a log of under an hour: the same choices); --whole gives the
+    whole read's files byte for byte, with one line."""
+    import undertow.io
+
+    monkeypatch.setattr(undertow.io, "PIECES_ABOVE_S", 10.0)
+    today = run / "est"  # localized by default before the patch: read whole, nothing recorded
+    auto = _localize(run, "--out", str(run / "auto"))
+    said = [ln for ln in auto.output.splitlines() if "pieces" in ln]
+    assert auto.exit_code == 0 and len(said) == 1, auto.output
+    assert "read in 600 s pieces" in said[0] and "--whole reads it at once" in said[0]
+    doc = yaml.safe_load((run / "auto" / "config.yaml").read_text())
+    assert doc.pop("read_in_pieces")["policy"] == "auto"
+    assert doc == yaml.safe_load((today / "config.yaml").read_text())
+    assert (run / "auto" / "trajectory.tum").read_bytes() == (today / "trajectory.tum").read_bytes()
+    whole = _localize(run, "--out", str(run / "whole"), "--whole")
+    assert whole.exit_code == 0 and "read whole as asked (--whole" in whole.output, whole.output
+    for name in ("trajectory.tum", "config.yaml", "trajectory.npz"):
+        assert (run / "whole" / name).read_bytes() == (today / name).read_bytes()

@@ -276,3 +276,27 @@ def test_a_python_user_gets_the_map_and_warnings_of_the_cli(run, tmp_path):
     cli = runner.invoke(app, ["evaluate", "map", str(tmp_path / "cli"), str(gt), "--json"])
     assert cli.exit_code == 0, cli.output
     assert evaluate_map_file(tmp_path / "cli", gt).to_dict() == json.loads(cli.stdout)
+
+
+def test_a_too_long_bag_is_mapped_in_pieces_where_the_method_allows(run, tmp_path, monkeypatch):
+    """With the limit below the calm run's 48 s, `map --method csm` reads it in pieces by
+    itself (one line; ``read_in_pieces`` in config.yaml; CSM's counts those of --whole), and
+    a method that normalizes over the whole log reads it whole, saying why in one line."""
+    import undertow.io
+
+    monkeypatch.setattr(undertow.io, "PIECES_ABOVE_S", 10.0)
+    est, csm = ["--trajectory", str(run / "est")], ["--method", "csm", "--resolution", "0.2"]
+    auto = _map(run, tmp_path / "auto", *est, *csm)
+    said = [ln for ln in auto.output.splitlines() if "pieces" in ln]
+    assert auto.exit_code == 0 and len(said) == 1 and "--whole reads" in said[0], auto.output
+    doc = yaml.safe_load((tmp_path / "auto" / "config.yaml").read_text())
+    assert doc["result"]["read_in_pieces"]["policy"] == "auto"
+    whole = _map(run, tmp_path / "whole", *est, *csm, "--whole")
+    assert whole.exit_code == 0 and "read whole as asked (--whole" in whole.output, whole.output
+    assert "read_in_pieces" not in yaml.safe_load((tmp_path / "whole" / "config.yaml").read_text())
+    a, b = (np.load(tmp_path / f / "map.npz") for f in ("auto", "whole"))
+    order = [np.lexsort(np.asarray(m["cells"]).T[::-1]) for m in (a, b)]
+    for key in ("cells", "alpha", "beta"):
+        np.testing.assert_array_equal(a[key][order[0]], b[key][order[1]])
+    tpu = _map(run, tmp_path / "tpu", *est, "--resolution", "0.2")
+    assert "read whole (its index spans" in tpu.output and "the tpu method" in tpu.output

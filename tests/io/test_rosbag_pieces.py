@@ -106,3 +106,54 @@ def test_piece_length_must_be_positive_and_other_formats_come_whole(tmp_path):
         warnings.simplefilter("ignore")
         (only,) = list(iter_log_pieces(text, 1.0))
     assert len(only.dvl) == 1
+
+
+def test_the_bags_index_decides_the_pieces_and_an_asked_choice_wins(tmp_path, monkeypatch):
+    """:func:`undertow.io.piece_choice`: the span and message count of the bag's index (those
+    of its messages read one by one), pieces above either limit, whole below; --in-pieces and
+    --whole as asked; a file that is not a bag whole. The line is said only off today's path."""
+    from rosbags.highlevel import AnyReader
+
+    import undertow.io
+    from undertow.io import piece_choice
+    from undertow.io.msgdefs import dvl_typestore
+
+    path = write_log(full_log(n=60), tmp_path / "bag")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        whole = read_log(path)
+    times = np.concatenate([getattr(whole, name).t for name in whole.streams()])
+    with AnyReader([path], default_typestore=dvl_typestore()) as reader:
+        messages = sum(1 for _ in reader.messages())
+    short = piece_choice(path)
+    assert short.span_s == pytest.approx(times.max() - times.min(), abs=1e-6)
+    assert short.messages == messages
+    assert not short.pieces and short.policy == "auto" and short.line(path) is None
+    monkeypatch.setattr(undertow.io, "PIECES_ABOVE_S", short.span_s - 0.01)
+    long = piece_choice(path, piece_s=2.0)
+    assert long.pieces and long.policy == "auto" and long.piece_s == 2.0
+    assert "read in 2 s pieces" in long.line(path) and "--whole" in long.line(path)
+    asked = piece_choice(path, False)
+    assert not asked.pieces and "read whole as asked (--whole" in asked.line(path)
+    monkeypatch.setattr(undertow.io, "PIECES_ABOVE_S", short.span_s + 0.01)
+    assert not piece_choice(path).pieces
+    monkeypatch.setattr(undertow.io, "PIECES_ABOVE_MESSAGES", messages - 1)
+    assert piece_choice(path).pieces
+    asked = piece_choice(path, True)
+    assert asked.pieces and asked.policy == "asked" and "as asked (--in-pieces" in asked.line(path)
+    text = tmp_path / "a50.jsonl"
+    text.write_text('{"type": "velocity", "time_of_validity": 1}\n')
+    assert not piece_choice(text, True).pieces
+    with pytest.raises(ConfigError, match="piece_s"):
+        piece_choice(path, piece_s=0.0)
+
+
+def test_pieces_of_chosen_streams_are_those_streams_of_the_whole_read(tmp_path):
+    path = write_log(full_log(n=60), tmp_path / "bag")
+    whole, pieces = _pieces(path, 1.0, streams=("pressure", "dvl", "dvl_json"))
+    assert {name for piece in pieces for name in piece.streams()} == {"pressure", "dvl"}
+    for name in ("pressure", "dvl"):
+        got = [getattr(p, name) for p in pieces if getattr(p, name) is not None]
+        np.testing.assert_array_equal(np.concatenate([s.t for s in got]), getattr(whole, name).t)
+    np.testing.assert_array_equal(np.concatenate([p.dvl.altitude for p in pieces]),
+                                  whole.dvl.altitude)  # fmt: skip

@@ -147,6 +147,31 @@ TimeOption = Annotated[
     ),
 ]
 
+InPiecesOption = Annotated[
+    bool | None,
+    typer.Option(
+        "--in-pieces/--whole",
+        help="A ROS bag read in pieces of --piece-s seconds (bounded memory) or whole. "
+        "Default: in pieces when its index spans more than 2 h or 1.8 million messages, "
+        "said in one line (docs/localization.md).",
+        show_default=False,
+    ),
+]
+PieceSOption = Annotated[
+    float | None,
+    typer.Option(
+        "--piece-s", metavar="S", help="Seconds of log per piece (600); giving it asks for pieces."
+    ),
+]
+
+
+def pieces_option(in_pieces: bool | None, piece_s: float | None) -> dict:
+    """``in_pieces`` and ``piece_s`` for ``localize_file`` / ``map_file``: a piece length
+    given alone asks for the pieces."""
+    if piece_s is None:
+        return {"in_pieces": in_pieces}
+    return {"in_pieces": True if in_pieces is None else in_pieces, "piece_s": piece_s}
+
 
 def settings_with_time(config: Path | None, time: str | None):
     """The settings to pass a job: the ``--config`` path as given, or, with ``--time``, the

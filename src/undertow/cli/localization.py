@@ -10,7 +10,9 @@ import typer
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
+    InPiecesOption,
     OverwriteOption,
+    PieceSOption,
     TimeOption,
     TopicsOption,
     app,
@@ -18,6 +20,7 @@ from ._app import (
     err,
     evaluate_app,
     parse_triple,
+    pieces_option,
     print_json,
     print_warnings,
     progress_bar,
@@ -35,15 +38,6 @@ EstimatorOption = Annotated[
         help="ukf (the paper's filter) | factor-graph (GTSAM batch smoother) | isam2 (GTSAM "
         "incremental, online) | inekf (invariant EKF); the peers read the same sensors and "
         "noise, plus the accelerometer; needs undertow[peers]."
-    ),
-]
-
-
-InPiecesOption = Annotated[
-    bool,
-    typer.Option(
-        help="A long ROS bag read and filtered in 600 s pieces, the states on disk (bounded "
-        "memory; the log's choices from its first hour; docs/localization.md)."
     ),
 ]
 
@@ -87,7 +81,8 @@ def localize(
         typer.Option(help="Start position 'x,y,z' in m (default: ground truth if the log has it)."),
     ] = None,
     smooth: Annotated[bool, typer.Option(help="Unscented RTS smoothing (offline).")] = False,
-    in_pieces: InPiecesOption = False,
+    in_pieces: InPiecesOption = None,
+    piece_s: PieceSOption = None,
     estimator: EstimatorOption = "ukf",
     gate: Annotated[
         str | None,
@@ -113,18 +108,15 @@ def localize(
     from ..commands.localization import gate_option, localize_file
 
     condition = _wave_option(wave, wave_amplitude, wave_frequency)
-    options = {
-        "variant": variant,
-        "output_rate_hz": output_rate,
-        "initial_position": parse_triple(initial_position, "--initial-position"),
-    }
+    start = parse_triple(initial_position, "--initial-position")
+    options = {"variant": variant, "output_rate_hz": output_rate, "initial_position": start}
     with progress_bar(quiet) as progress:
         progress.add_task(_task_label(variant, estimator), total=None)
         result = localize_file(
             log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
             overwrite=overwrite, profile=profile, calibration=calibration,
             extrapolate=extrapolate, smooth=smooth, wave=condition, estimator=estimator,
-            chunked=in_pieces or None, **gate_option(gate),
+            **pieces_option(in_pieces, piece_s), **gate_option(gate),
             **{name: value for name, value in options.items() if value is not None},
         )  # fmt: skip
     print_warnings(result.warnings)

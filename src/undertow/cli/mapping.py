@@ -11,13 +11,16 @@ import typer
 from ..errors import UndertowError
 from ._app import (
     ConfigOption,
+    InPiecesOption,
     OverwriteOption,
+    PieceSOption,
     TimeOption,
     TopicsOption,
     app,
     console,
     err,
     evaluate_app,
+    pieces_option,
     print_json,
     progress_bar,
     settings_with_time,
@@ -52,15 +55,6 @@ TrajectoryFrameOption = Annotated[
         metavar="ned|enu",
         help="TUM trajectory only: ned (z down; undertow's) or enu (z up, body forward-left-up); "
         "default: detected from the log's depth (NED when it cannot be).",
-    ),
-]
-
-
-PieceOption = Annotated[
-    float | None,
-    typer.Option(
-        help="A long ROS bag read and mapped in pieces of S seconds (csm and bki; bounded "
-        "memory for the log, not for the map)."
     ),
 ]
 
@@ -103,7 +97,8 @@ def map_command(
             "| tcp://host:8786 (a running Dask scheduler)."
         ),
     ] = None,
-    piece_s: PieceOption = None,
+    in_pieces: InPiecesOption = None,
+    piece_s: PieceSOption = None,
     pose_std: PoseStdOption = None,
     trajectory_frame: TrajectoryFrameOption = None,
     config: ConfigOption = None,
@@ -133,7 +128,8 @@ def map_command(
                           prior=prior,
                           out_dir=out_dir, overwrite=overwrite, tiles=tiles,
                           scheduler=scheduler, pose_std=_pose_std(pose_std),
-                          trajectory_frame=frame, piece_s=piece_s, **given)  # fmt: skip
+                          trajectory_frame=frame, **pieces_option(in_pieces, piece_s),
+                          **given)  # fmt: skip
     print_warnings(result.warnings)
     if not quiet:
         _print_trajectory(result.metadata.get("trajectory", {}))

@@ -36,7 +36,7 @@ from ..evaluation.drift import (
     trajectory_drift,
 )
 from ..evaluation.trajectory import PoseStates, TrajectoryErrors, trajectory_rmse
-from ..io import detect_format, iter_log_pieces
+from ..io import PIECE_S, PieceChoice, iter_log_pieces, piece_choice
 from ..io.results import save_trajectory
 from ..io.rosbag import bag_topics
 from ..io.topics import LIVE_WAVE_TOPIC, TopicMap
@@ -81,8 +81,8 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
                   topics: str | Path | None = None, out_dir: str | Path | None = None,
                   overwrite: bool = False, profile=None, wave=None, calibration=None,
                   extrapolate: bool = False, smooth: bool = False, estimator: str = UKF,
-                  chunked: bool | None = None,
-                  **overrides) -> LocalizationResult:  # fmt: skip
+                  chunked: bool | None = None, in_pieces: bool | None = None,
+                  piece_s: float = PIECE_S, **overrides) -> LocalizationResult:  # fmt: skip
     """Localize the log at ``path`` with the paper's UKF (see
     :func:`~undertow.estimation.localizer.localize` for what it takes from the log and the
     calibration).
@@ -104,7 +104,16 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
     folder from it chunk by chunk (:mod:`undertow.trajectory_chunks`; the same files); None
     (default) does so for a log of more than :data:`STORE_ABOVE_ROWS` filter rows written to
     ``out_dir`` at every state. The result's trajectory is then the written trajectory.npz,
-    read lazily (:class:`~undertow.trajectory_chunks.NpzTrajectory`)."""
+    read lazily (:class:`~undertow.trajectory_chunks.NpzTrajectory`).
+
+    ``in_pieces``: read and filter a ROS bag in pieces of ``piece_s`` seconds, the states on
+    disk (:mod:`undertow.estimation.localizer_pieces`: memory bounded by a piece); None (default)
+    does so for a bag too long to read whole (:func:`~undertow.io.piece_choice`: its index spans
+    more than :data:`~undertow.io.PIECES_ABOVE_S`), False never. The whole log is read anyway
+    for what needs it (``wave="auto"``, a live session's wave decisions, an output rate, a peer
+    estimator, no ``out_dir``), said in one warning. A log read in pieces says so in one
+    warning and records it in the metadata (``read_in_pieces``,
+    :meth:`~undertow.io.PieceChoice.to_dict`)."""
     settings_path = None if isinstance(settings, Settings) else settings
     settings = as_settings(settings)
     params = {**settings.localizer_params(), **overrides}
@@ -117,17 +126,13 @@ def localize_file(path: str | Path, settings: Settings | str | Path | None = Non
         check_output_folder(out_dir, overwrite, inputs=inputs)
     profile, calibration = _read_options(profile, wave, calibration, extrapolate)
     caught: list[str] = []
-    if _in_pieces(path, chunked, estimator, params, wave, out_dir):
-        with collect_warnings(caught):
-            trajectory = _localize_in_pieces(
-                path,
-                topics,
-                settings,
-                params,
-                out_dir,
-                overwrite,
-                (profile, wave, calibration, extrapolate, smooth),
-            )
+    with collect_warnings(caught):
+        choice = _in_pieces(path, in_pieces, piece_s, (estimator, params, wave, out_dir))
+        if choice.pieces:
+            options = (profile, wave, calibration, extrapolate, smooth)
+            trajectory = _localize_in_pieces(path, topics, settings, params, (out_dir, overwrite),
+                                             options, choice)  # fmt: skip
+    if choice.pieces:
         return _result(trajectory, caught, out_dir)
     with collect_warnings(caught):
         log = load_log(path, topics, settings)
@@ -171,45 +176,77 @@ def _result(trajectory, caught: list[str], out_dir) -> LocalizationResult:
 STORE_ABOVE_ROWS = 200_000
 
 
-#: seconds of log per piece when a bag is localized in pieces (about 70 MB of a BlueROV2 survey's
-#: messages decoded; the states go to disk as they come)
-PIECE_S = 600.0
-
-
-def _in_pieces(path, chunked: bool | None, estimator: str, params: dict, wave,
-               out_dir) -> bool:  # fmt: skip
+def _in_pieces(path, in_pieces: bool | None, piece_s: float, run: tuple) -> PieceChoice:
     """Whether the log is read and filtered in pieces (:mod:`undertow.estimation.localizer_pieces`):
-    a ROS bag localized by the UKF into ``out_dir`` at every state when ``chunked`` is True
-    (``localize --in-pieces``; None keeps the whole read), with a wave condition that is not
-    estimated from the log and no live session's wave decisions (those need the whole log)."""
-    if estimator != UKF or out_dir is None or params.get("output_rate_hz") is not None:
-        return False
-    if not chunked or is_auto(wave) or detect_format(path) not in ("ros1", "ros2"):
-        return False
-    topics = bag_topics(path)
-    if LIVE_WAVE_TOPIC in topics:
-        return False
-    return bool(chunked)  # opt-in: the pieces decide from the first hour (docs/localization.md)
+    a ROS bag as :func:`~undertow.io.piece_choice` decides (``in_pieces`` True or False as
+    asked, None: by its size), localized by the UKF into ``out_dir`` (``run``: the estimator,
+    localizer options, wave and output folder) at every state, with a wave condition that is
+    not estimated from the log and no live session's wave decisions (those need the whole
+    log); the choice stated in one warning when it is not today's whole read."""
+    estimator, params, wave, out_dir = run
+    choice = piece_choice(path, in_pieces, piece_s)
+    if choice.pieces:
+        needs = _needs_whole(path, estimator, params, wave, out_dir)
+        choice = choice.blocked(needs) if needs else choice
+    line = choice.line(path)
+    if line:
+        warnings.warn(f"localize: {line}", stacklevel=3)
+    return choice
 
 
-def _localize_in_pieces(path, topics, settings: Settings, params: dict, out_dir,
-                        overwrite: bool, options: tuple) -> NpzTrajectory:  # fmt: skip
-    """The folder of the log at ``path`` localized in pieces of PIECE_S seconds, its states in
-    a store beside ``out_dir`` (removed after); the written trajectory.npz, read lazily."""
+def _needs_whole(path, estimator: str, params: dict, wave, out_dir) -> str | None:
+    """What of the run needs the whole log (None: nothing, the pieces can be read)."""
+    if estimator != UKF:
+        return f"the estimator {estimator}"
+    if out_dir is None:
+        return "a run without an output folder"
+    if params.get("output_rate_hz") is not None:
+        return "an output rate (--output-rate)"
+    if is_auto(wave):
+        return "--wave auto"
+    if LIVE_WAVE_TOPIC in bag_topics(path):
+        return "the replay of a live session's wave decisions"
+    return None
+
+
+#: what the first pass over a log read in pieces reads for the wave noise's site
+SITE_STREAMS = ("pressure", "depth", "ground_truth", "dvl", "dvl_json")
+
+
+def _localize_in_pieces(path, topics, settings: Settings, params: dict, out: tuple,
+                        options: tuple, choice: PieceChoice) -> NpzTrajectory:  # fmt: skip
+    """The folder ``out`` (out_dir, overwrite) of the log at ``path`` localized in pieces of
+    ``choice.piece_s`` seconds, its states in a store beside it (removed after); the written
+    trajectory.npz, read lazily. The wave noise's site, when a condition is extrapolated, is
+    the whole log's, from a first pass over :data:`SITE_STREAMS`."""
+    out_dir, overwrite = out
     profile, wave, calibration, extrapolate, smooth = options
     topic_map = TopicMap.from_yaml(topics) if topics else settings.topics
-    pieces = iter_log_pieces(path, PIECE_S, topic_map, options=settings.log)
-    pieces = (settings.apply_mounting(piece) for piece in pieces)
+
+    def read(streams=None):
+        pieces = iter_log_pieces(path, choice.piece_s, topic_map, options=settings.log,
+                                 streams=streams)  # fmt: skip
+        return (settings.apply_mounting(piece) for piece in pieces)
+
     store = _new_store(out_dir)
     try:
-        trajectory = localize_pieces(pieces, store, profile=profile, wave=wave,
+        trajectory = localize_pieces(read(), store, profile=profile, wave=wave,
                                      calibration=calibration, extrapolate=extrapolate,
-                                     smooth=smooth, **params)  # fmt: skip
+                                     smooth=smooth, site_pieces=lambda: _quiet(read(SITE_STREAMS)),
+                                     **params)  # fmt: skip
         trajectory.metadata.setdefault("estimator", UKF)
+        trajectory.metadata["read_in_pieces"] = choice.to_dict()
         save_stored_trajectory(trajectory, out_dir, overwrite)
     finally:
         store.remove()
     return NpzTrajectory.open(Path(out_dir) / "trajectory.npz")
+
+
+def _quiet(pieces):
+    """``pieces`` without their warnings (the pass that filters them states them)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield from pieces
 
 
 def _new_store(out_dir) -> TrajectoryStore:

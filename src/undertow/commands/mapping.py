@@ -29,7 +29,7 @@ from ..evaluation.surface import (
     hull_area,
 )
 from ..evaluation.truth import check_truth_options, load_truth, truth_kind
-from ..io import detect_format, iter_log_pieces
+from ..io import PIECE_S, PieceChoice, iter_log_pieces, piece_choice
 from ..io.export.georef import from_latlon, from_projected, parse_origin, parse_utm
 from ..io.export.geotiff import SUFFIXES as GEOTIFF_SUFFIXES
 from ..io.export.geotiff_read import read_map_geotiff
@@ -85,7 +85,8 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
              prior: OccupancyMap | str | Path | None = None, out_dir: str | Path | None = None,
              overwrite: bool = False, tiles: float | None = None, scheduler: str | None = None,
              pose_std=None, trajectory_frame: str | None = None,
-             piece_s: float | None = None, **overrides) -> MappingResult:  # fmt: skip
+             in_pieces: bool | None = None, piece_s: float = PIECE_S,
+             **overrides) -> MappingResult:  # fmt: skip
     """Occupancy map of the seafloor from a log's DVL beams and sonar ranges along a trajectory
     (a ``trajectory.npz`` with covariances, or its localization folder; or a TUM file, told by
     its content, with its pose standard deviations as columns or stated: ``pose_std`` (3 or 6
@@ -106,9 +107,13 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     tiles also written to ``out_dir/tiles``; a tile that fails twice is left out with a
     warning naming it.
 
-    ``piece_s``: read a bag in pieces of this many seconds and map them in turn
-    (:func:`~undertow.mapping.run.map_pieces`: a trajectory.npz, ``csm`` or ``bki``, no tiles);
-    None: the whole log at once."""
+    ``in_pieces``: read a ROS bag in pieces of ``piece_s`` seconds and map them in turn
+    (:func:`~undertow.mapping.run.map_pieces`: memory bounded by a piece and the map); None
+    (default) does so for a bag too long to read whole (:func:`~undertow.io.piece_choice`: its
+    index spans more than :data:`~undertow.io.PIECES_ABOVE_S`), False never. The whole log is
+    read anyway where the pieces cannot be mapped (a TUM trajectory, tiles, a method other
+    than :data:`~undertow.mapping.run.PIECE_METHODS`), said in one warning. A log mapped in
+    pieces says so in one warning and records it in the metadata (``read_in_pieces``)."""
     settings_path = None if isinstance(settings, Settings) else settings
     settings = as_settings(settings)
     config = mapping_config(settings, overrides)  # the options first, then the files
@@ -124,8 +129,9 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     caught: list[str] = []
     with collect_warnings(caught):
         given = _read_trajectory(trajectory_path, settings, stated)  # before the (longer) log
-        if _in_pieces(log_path, given, tiles, config, piece_s):
-            result = _map_in_pieces(log_path, given, topics, settings, config, prior, piece_s)
+        choice = _in_pieces(log_path, given, tiles, config, (in_pieces, piece_s))
+        if choice.pieces:
+            result = _map_in_pieces(log_path, given, topics, settings, config, prior, choice)
         else:
             result = None
     if result is None:
@@ -141,28 +147,35 @@ def map_file(log_path: str | Path, trajectory_path: str | Path,
     return result
 
 
-#: seconds of log per piece when a bag is mapped in pieces
-PIECE_S = 600.0
-
-
-def _in_pieces(log_path, given, tiles, config: MappingConfig, piece_s) -> bool:
-    """Map in pieces (:func:`~undertow.mapping.run.map_pieces`): a bag with a trajectory.npz,
-    no tiles, a method that allows it, and ``piece_s`` given."""
-    if isinstance(given, TumInput) or tiles is not None or config.method not in PIECE_METHODS:
-        return False
-    if detect_format(log_path) not in ("ros1", "ros2"):
-        return False
-    return piece_s is not None  # opt-in (`map --piece-s`): the pieces' sums differ in the last bits
+def _in_pieces(log_path, given, tiles, config: MappingConfig, asked: tuple) -> PieceChoice:
+    """Map in pieces (:func:`~undertow.mapping.run.map_pieces`): a ROS bag as
+    :func:`~undertow.io.piece_choice` decides (``asked``: ``in_pieces`` True or False, None by
+    its size; and ``piece_s``), with a trajectory.npz, no tiles and a method that allows it;
+    the choice stated in one warning when it is not today's whole read."""
+    in_pieces, piece_s = asked
+    choice = piece_choice(log_path, in_pieces, piece_s)
+    if choice.pieces and isinstance(given, TumInput):
+        choice = choice.blocked("a TUM trajectory (its frame is detected from the log)")
+    elif choice.pieces and tiles is not None:
+        choice = choice.blocked("a tiled map (--tiles)")
+    elif choice.pieces and config.method not in PIECE_METHODS:
+        choice = choice.blocked(f"the {config.method} method (pieces: "
+                                f"{' or '.join(PIECE_METHODS)})")  # fmt: skip
+    line = choice.line(log_path)
+    if line:
+        warnings.warn(f"map: {line}", stacklevel=3)
+    return choice
 
 
 def _map_in_pieces(log_path, given, topics, settings: Settings, config: MappingConfig, prior,
-                   piece_s) -> MappingResult:  # fmt: skip
+                   choice: PieceChoice) -> MappingResult:  # fmt: skip
     topic_map = TopicMap.from_yaml(topics) if topics else settings.topics
-    pieces = iter_log_pieces(log_path, piece_s or PIECE_S, topic_map, options=settings.log)
+    pieces = iter_log_pieces(log_path, choice.piece_s, topic_map, options=settings.log)
     pieces = (settings.apply_mounting(piece) for piece in pieces)
     trajectory, record = _trajectory_for_log(given, None, config)
     result = map_pieces(pieces, trajectory, config, prior=prior)
     result.metadata["trajectory"] = record
+    result.metadata["read_in_pieces"] = choice.to_dict()
     return result
 
 

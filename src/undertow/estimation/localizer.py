@@ -164,11 +164,13 @@ class Localizer:
             return StoredTrajectory(store, variant=cfg.variant, metadata=metadata)
         return Trajectory(out_t, out_x, out_P, variant=cfg.variant, metadata=metadata)
 
-    def wave_noise(self, log: Log):
+    def wave_noise(self, log: Log, site=None):
         """(noise, metadata): the run's wave noise (:class:`WaveNoise` for a constant condition,
         :class:`TrackNoise` for one that changes; for a live recording asked for no condition or
         "auto", the live session's own decisions: :mod:`.wave_schedule`) and its metadata
-        entries (module doc)."""
+        entries (module doc). ``site``: a callable giving the DVL's site of the whole log
+        (default :func:`~undertow.estimation.noise_physics.sensor_site` of ``log``), called
+        only when a condition is extrapolated by physics (elsewhere the site plays no part)."""
         schedule = recorded_schedule(self.wave, log)
         if schedule is not None:
             noise = schedule_noise(self.profile, schedule, self.extrapolate)
@@ -193,14 +195,15 @@ class Localizer:
                 a, f = float(wave.amplitude_m[0]), float(wave.frequency_hz[0])
                 wave = "calm" if a == 0 else (a, f)
         policy = PHYSICS if estimated and self.extrapolate == REFUSE else self.extrapolate
-        cfg, site = self.config, None
-        if policy == PHYSICS:
-            site = sensor_site(log, *depth_reference(log, cfg), default=self.profile.site())
+        cfg = self.config
+        if site is None:
+            site = lambda: sensor_site(log, *depth_reference(log, cfg),  # noqa: E731
+                                       default=self.profile.site())  # fmt: skip
+        noise = self._condition_noise(wave, policy, None)
+        if policy == PHYSICS and extrapolation_note(noise):  # the site plays a part
+            noise = self._condition_noise(wave, policy, site())
         if isinstance(wave, WaveTrack):
-            noise = self.profile.noise_track(wave, extrapolate=policy, site=site)
             meta["wave_track"] = wave.to_dict()
-        else:
-            noise = self.profile.noise(wave, extrapolate=policy, site=site)
         note = extrapolation_note(noise)
         if note and cfg.adds_wave_noise:
             warnings.warn(f"Localizer: {note}", RuntimeWarning, stacklevel=3)
@@ -211,6 +214,12 @@ class Localizer:
             **meta,
         }
         return noise, meta
+
+    def _condition_noise(self, wave, policy, site):
+        """The profile's noise of ``wave`` (a condition or a WaveTrack) at ``site``."""
+        if isinstance(wave, WaveTrack):
+            return self.profile.noise_track(wave, extrapolate=policy, site=site)
+        return self.profile.noise(wave, extrapolate=policy, site=site)
 
 
 def run_metadata(log: Log, cfg: LocalizerConfig, run: tuple, consistency, wave_meta: dict,

@@ -15,8 +15,12 @@ is made the same way here:
 - the depth-rate check judges a depth by the median of ``HALF_WINDOW`` depths on each side
   (:func:`~undertow.estimation.health.depth_jumps`): a piece is judged with the depths kept of
   the piece before and after it around its own (the pieces are taken one ahead);
-- the start (initial state, sensors present, the wave noise and its site, the calibration's
-  and the log's settings) comes from the first piece, which holds the log's first rows;
+- the start (initial state, sensors present, the wave noise, the calibration's and the log's
+  settings) comes from the first piece, which holds the log's first rows; the wave noise's site
+  (the DVL's median depth and the water depth, used only when a condition is extrapolated by
+  physics) is the whole log's when the caller gives ``site_pieces``: a first pass over the
+  log's depth, ground-truth and DVL streams alone (:func:`~.noise_physics.sensor_site` of
+  pieces), made only when a condition is extrapolated; without it, the first piece's;
 - the innovations' consistency report (:mod:`~undertow.estimation.consistency`) is per sensor
   over its evaluated innovations in time order: the whitened innovations are appended to one
   raw file per sensor beside the store and the report is made from them at the end (the IMU's
@@ -48,17 +52,28 @@ from .localizer import (
     run_metadata,
     sensor_coverage,
 )
-from .rows import dr_rows, dvl_rows, imu_rows, initial_state, merged_rows, pressure_rows
+from .noise_physics import sensor_site
+from .rows import (
+    depth_reference,
+    dr_rows,
+    dvl_rows,
+    imu_rows,
+    initial_state,
+    merged_rows,
+    pressure_rows,
+)
 from .smoother import smooth_store
 
 
 def localize_pieces(pieces: Iterable[Log], store: TrajectoryStore, variant: str | None = None,
                     profile=None, wave=None, calibration=None, extrapolate: bool = False,
-                    smooth: bool = False, store_rows: int = FILTER_ROWS,
+                    smooth: bool = False, store_rows: int = FILTER_ROWS, site_pieces=None,
                     **params) -> StoredTrajectory:  # fmt: skip
     """:func:`~undertow.estimation.localizer.localize` of the log the consecutive ``pieces``
     make, into ``store`` (see the module docstring): the same states, counts and metadata.
-    ``calibration``: a Calibration (read by the caller)."""
+    ``calibration``: a Calibration (read by the caller). ``site_pieces``: a callable giving
+    the log's pieces again (their depth, ground-truth and DVL streams suffice), for the wave
+    noise's site of the whole log (module docstring); None: the first piece's."""
     if variant is not None:
         params["variant"] = variant
     config = check_options(smooth, params)
@@ -74,7 +89,7 @@ def localize_pieces(pieces: Iterable[Log], store: TrajectoryStore, variant: str 
     if isinstance(wave, str) and wave.strip().lower() == "auto" or log.metadata.get("live_wave"):
         raise ConfigError("localize in pieces: wave 'auto' and a live session's wave decisions "
                           "need the whole log")  # fmt: skip
-    trajectory = _filter(localizer, first, ahead, store, store_rows)
+    trajectory = _filter(localizer, first, ahead, store, (store_rows, site_pieces))
     if smooth:
         meta = smooth_store(store, trajectory.metadata, localizer.config)
         trajectory = trajectory.replace(metadata=meta)
@@ -93,12 +108,18 @@ def _ahead(pieces: Iterator[Log]) -> Iterator[tuple[Log | None, Log, Log | None]
 
 
 def _filter(localizer: Localizer, first: tuple, rest: Iterator, store: TrajectoryStore,
-            rows: int) -> StoredTrajectory:  # fmt: skip
-    """Filter the pieces (``first`` and ``rest``: :func:`_ahead`'s triples) into ``store``."""
+            options: tuple) -> StoredTrajectory:  # fmt: skip
+    """Filter the pieces (``first`` and ``rest``: :func:`_ahead`'s triples) into ``store``
+    (``options``: the rows per append and ``site_pieces``)."""
     cfg, log = localizer.config, first[1]
+    rows, site_pieces = options
     unobserved, held = sensor_coverage(log, cfg)
     check_mounting(log.mounting)
-    noise, wave_meta = localizer.wave_noise(log)
+    site = None
+    if site_pieces is not None:
+        site = lambda: sensor_site(site_pieces(), *depth_reference(log, cfg),  # noqa: E731
+                                   default=localizer.profile.site())  # fmt: skip
+    noise, wave_meta = localizer.wave_noise(log, site=site)
     x0, P0 = initial_state(log, cfg)
     process, sensors = cfg.process_model(held=held), cfg.sensor_model(log.mounting)
     r_adapted = np.zeros((len(model.KIND_NAMES), 3, 3))

@@ -23,6 +23,7 @@ log being localized (:func:`sensor_site`).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -83,7 +84,7 @@ def orbital_velocity_amplitude(amplitude_m, frequency_hz, depth_m, water_depth_m
     return a * omega * k_h
 
 
-def sensor_site(log: Log, water_density: float | None = None,
+def sensor_site(log: Log | Iterable[Log], water_density: float | None = None,
                 surface_pressure: float | None = None, default: SensorSite | None = None
                 ) -> SensorSite | None:  # fmt: skip
     """The DVL's depth and the water depth of ``log``.
@@ -97,53 +98,74 @@ def sensor_site(log: Log, water_density: float | None = None,
     robust to the barometer's wave and spike excursions.
     h: the log's recorded still-water depth (``metadata["water_depth_m"]``, a simulated log),
     else d + the median DVL altitude, else deep water.
-    Without any depth source: ``default`` (the profile's own site) with that said, or None."""
-    water_density, surface_pressure = depth_reference(log.metadata, water_density,
-                                                      surface_pressure)  # fmt: skip
-    depth, where = _dvl_depths(log, water_density, surface_pressure)
-    if depth is None:
+    Without any depth source: ``default`` (the profile's own site) with that said, or None.
+
+    ``log`` may also be the consecutive pieces of one (:func:`undertow.io.iter_log_pieces`;
+    only their depth, ground-truth and DVL streams are read): the same site, as the median and
+    percentiles are of the same values in another grouping; the finite depths of one source and
+    the altitudes are kept, not the pieces."""
+    pieces = [log] if isinstance(log, Log) else log
+    found: list[list[np.ndarray]] = [[] for _ in DEPTH_SOURCES]
+    altitudes: list[np.ndarray] = []
+    first = None
+    for piece in pieces:
+        first = piece if first is None else first
+        rho, p0 = depth_reference(piece.metadata, water_density, surface_pressure)
+        for k, values in enumerate(_dvl_depths(piece, rho, p0)):
+            if values is not None and values.size:
+                found[k].append(values)
+        best = next((k for k, f in enumerate(found) if f), len(found))
+        found[best + 1 :] = [[] for _ in found[best + 1 :]]  # never chosen: not kept
+        if piece.dvl is not None and len(piece.dvl):
+            altitude = np.asarray(piece.dvl.altitude, float)
+            altitudes.append(altitude[np.isfinite(altitude) & (altitude > 0)])
+    best = next((k for k, f in enumerate(found) if f), None)
+    if best is None:
         if default is None:
             return None
         return SensorSite(default.sensor_depth_m, default.water_depth_m,
                           "DVL depth unknown (no pressure, depth or ground truth): the profile's"
                           )  # fmt: skip
+    depth = found[best][0] if len(found[best]) == 1 else np.concatenate(found[best])
     d = float(np.median(depth))
     lo, hi = (float(v) for v in np.percentile(depth, [10, 90]))
-    h, h_where = _water_depth(log, d)
-    source = f"DVL depth: median of the {where}; water depth: {h_where}"
+    h, h_where = _water_depth(first.metadata, altitudes, d)
+    source = f"DVL depth: median of the {DEPTH_SOURCES[best]}; water depth: {h_where}"
     return SensorSite(max(d, 0.0), h, source, (lo, hi))
 
 
-def _dvl_depths(log: Log, water_density: float, surface_pressure: float):
-    """(finite DVL depths, where from) or (None, None)."""
+#: where the DVL's depth is taken from, first found first (:func:`sensor_site`)
+DEPTH_SOURCES = ("barometer depth + lever arms", "vehicle's depth stream + lever arms",
+                 "ground truth z + lever arm")  # fmt: skip
+
+
+def _dvl_depths(log: Log, water_density: float, surface_pressure: float) -> list:
+    """The finite DVL depths of each of :data:`DEPTH_SOURCES` in ``log`` (None: no such
+    stream)."""
     dvl_z = float(log.mounting.dvl.translation[2])
-    candidates = []
+    candidates: list = [None] * len(DEPTH_SOURCES)
     if log.pressure is not None and len(log.pressure):
         baro = log.pressure.depth(water_density, surface_pressure)
-        candidates.append((baro + dvl_z - log.mounting.barometer.translation[2],
-                           "barometer depth + lever arms"))  # fmt: skip
+        candidates[0] = baro + dvl_z - log.mounting.barometer.translation[2]
     depth_stream = getattr(log, "depth", None)
     if depth_stream is not None and len(depth_stream):
         own = np.asarray(depth_stream.depth, float)
-        candidates.append((own + dvl_z - log.mounting.barometer.translation[2],
-                           "vehicle's depth stream + lever arms"))  # fmt: skip
+        candidates[1] = own + dvl_z - log.mounting.barometer.translation[2]
     if log.ground_truth is not None and len(log.ground_truth):
-        candidates.append((log.ground_truth.position[:, 2] + dvl_z, "ground truth z + lever arm"))
-    for values, where in candidates:
-        values = np.asarray(values, float)
-        values = values[np.isfinite(values)]
-        if values.size:
-            return values, where
-    return None, None
+        candidates[2] = log.ground_truth.position[:, 2] + dvl_z
+    for k, values in enumerate(candidates):
+        if values is not None:
+            values = np.asarray(values, float)
+            candidates[k] = values[np.isfinite(values)]
+    return candidates
 
 
-def _water_depth(log: Log, sensor_depth: float) -> tuple[float, str]:
-    recorded = log.metadata.get("water_depth_m") if isinstance(log.metadata, dict) else None
+def _water_depth(metadata: dict, altitudes: list, sensor_depth: float) -> tuple[float, str]:
+    recorded = metadata.get("water_depth_m") if isinstance(metadata, dict) else None
     if isinstance(recorded, (int, float)) and math.isfinite(recorded) and recorded > 0:
         return float(recorded), "recorded in the log's metadata"
-    if log.dvl is not None and len(log.dvl):
-        altitude = np.asarray(log.dvl.altitude, float)
-        altitude = altitude[np.isfinite(altitude) & (altitude > 0)]
+    if altitudes:
+        altitude = np.concatenate(altitudes)
         if altitude.size:
             return sensor_depth + float(np.median(altitude)), "DVL depth + median DVL altitude"
     return math.inf, "unknown (no altitude): deep water assumed"

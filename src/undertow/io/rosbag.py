@@ -180,7 +180,8 @@ class Head:
 
 def iter_rosbag_pieces(path, piece_s: float, topics: TopicMap | None = None,
                        options: LogOptions | None = None, decide_s: float = DECIDE_S,
-                       slack_s: float = PIECE_SLACK_S) -> Iterator[Log]:  # fmt: skip
+                       slack_s: float = PIECE_SLACK_S,
+                       streams: tuple[str, ...] | None = None) -> Iterator[Log]:  # fmt: skip
     """The bag at ``path`` as Logs of consecutive ``piece_s``-second windows of its time base,
     with its units resolved (:func:`~undertow.io.units.resolve_units`), each holding only its
     window (memory: a piece, not the log).
@@ -195,7 +196,8 @@ def iter_rosbag_pieces(path, piece_s: float, topics: TopicMap | None = None,
     window ``slack_s`` wider than the pieces' (plus the streams' clock offsets) on each side.
     The pieces' streams concatenated are those of :func:`~undertow.io.read_log` as long as each
     stream's times are in record order (no message sorted across a piece's edge) and the
-    decisions of the first ``decide_s`` seconds are those of the whole log."""
+    decisions of the first ``decide_s`` seconds are those of the whole log. ``streams``: the
+    pieces hold only these streams (their topics alone decoded; the choices as without it)."""
     if not (piece_s > 0 and decide_s > 0 and slack_s >= 0):
         raise ConfigError(f"pieces: piece_s {piece_s} and decide_s {decide_s} must be > 0, "
                           f"slack_s {slack_s} >= 0")  # fmt: skip
@@ -220,6 +222,8 @@ def iter_rosbag_pieces(path, piece_s: float, topics: TopicMap | None = None,
         head = Head(log, rows.time_base, kept, rows.depth_sign, gps)
         del log, rows  # the head's rows: only what they decided is kept
         windows = piece_windows(head.time_base, set(used.values()), reader, piece_s, slack_s)
+        if streams is not None:
+            conns = [c for c in conns if used[str(c.topic)] in streams]
         for a, b, start, stop in windows:
             with np.errstate(all="ignore"):
                 piece = _piece(reader, conns, used, path, topics, head, (a, b, start, stop),
@@ -281,6 +285,12 @@ def _storage(path: Path, recovered: Recovered | None) -> list[Path]:
 def bag_topics(path) -> dict[str, tuple[str, int]]:
     """``{topic: (message type, message count)}`` of a ROS 1/2 bag, from its index (no
     message is read); one ReaderError line for a file that is not a readable bag."""
+    return bag_index(path)[0]
+
+
+def bag_index(path) -> tuple[dict[str, tuple[str, int]], float]:
+    """(:func:`bag_topics`, the span of its record times in s) from the bag's index, no
+    message decoded; one ReaderError line for a file that is not a readable bag."""
     path = Path(path)
     try:
         reader = AnyReader(_storage(path, recover_crashed(path)), default_typestore=dvl_typestore())
@@ -294,7 +304,8 @@ def bag_topics(path) -> dict[str, tuple[str, int]]:
         for c in reader.connections:
             msgtype, count = topics.get(str(c.topic), (str(c.msgtype), 0))
             topics[str(c.topic)] = (msgtype, count + int(c.msgcount))
-        return topics
+        span = max(int(reader.end_time) - int(reader.start_time), 0) if topics else 0
+        return topics, span / 1e9
     finally:
         reader.close()
 
