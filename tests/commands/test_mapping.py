@@ -298,5 +298,7 @@ def test_a_too_long_bag_is_mapped_in_pieces_where_the_method_allows(run, tmp_pat
     order = [np.lexsort(np.asarray(m["cells"]).T[::-1]) for m in (a, b)]
     for key in ("cells", "alpha", "beta"):
         np.testing.assert_array_equal(a[key][order[0]], b[key][order[1]])
-    tpu = _map(run, tmp_path / "tpu", *est, "--resolution", "0.2")
-    assert "read whole (its index spans" in tpu.output and "the tpu method" in tpu.output
+    adaptive = _map(run, tmp_path / "adaptive", *est, "--method", "adaptive", "--resolution",
+                    "0.2")  # fmt: skip
+    said = adaptive.output
+    assert "read whole (its index spans" in said and "the adaptive method" in said, said

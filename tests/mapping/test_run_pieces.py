@@ -20,7 +20,8 @@ def _by_cell(occupancy):
 
 
 @pytest.mark.parametrize(
-    "method, rtol", [("csm", 0.0), pytest.param("bki", 2e-6, marks=pytest.mark.slow)]
+    "method, rtol",
+    [("csm", 0.0), ("tpu", 2e-6), pytest.param("bki", 2e-6, marks=pytest.mark.slow)],
 )
 def test_pieces_give_the_whole_logs_map(simulated_run, method, rtol):
     log = simulated_run("calm") / "log"

@@ -60,8 +60,9 @@ def map_log(
 
 
 #: the mappers whose map of samples integrated in pieces is the map of them all at once (the
-#: adaptive kernels normalize the pose variance over the session's samples)
-PIECE_METHODS = ("csm", "bki")
+#: adaptive kernels normalize the pose variance over the session's samples; tpu's lengths are
+#: each sample's own, capped by a setting)
+PIECE_METHODS = ("csm", "bki", "tpu")
 
 
 def map_pieces(pieces: Iterable[Log], trajectory, config: MappingConfig | None = None,
