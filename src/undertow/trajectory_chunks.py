@@ -210,9 +210,13 @@ class PoseTrack:
     def from_npz(cls, path: str | Path, chunk: int = CHUNK_STATES) -> PoseTrack:
         """The pose track of a trajectory.npz, its P read chunk by chunk (module doc)."""
         variant, metadata = npz_header(path)
+        # copies of each chunk's columns: a slice or einsum's diagonal is a view that would keep
+        # the whole chunk (18 x 18 floats a state for P) alive until the end
         t = np.concatenate([*npz_rows(path, "t", chunk), np.empty(0)])
-        pose = np.concatenate([*(x[:, :6] for x in npz_rows(path, "x", chunk)), np.empty((0, 6))])
-        var = [np.einsum("nii->ni", P[:, POSITION, POSITION]) for P in npz_rows(path, "P", chunk)]
+        pose = [x[:, :6].copy() for x in npz_rows(path, "x", chunk)]
+        pose = np.concatenate([*pose, np.empty((0, 6))])
+        var = [np.einsum("nii->ni", P[:, POSITION, POSITION]).copy()
+               for P in npz_rows(path, "P", chunk)]  # fmt: skip
         var = np.concatenate([*var, np.empty((0, 3))])
         if not (len(pose) == len(t) == len(var)):
             raise ReaderError(f"{npz_path(path)}: t, x and P differ in length")

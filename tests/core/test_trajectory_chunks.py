@@ -98,3 +98,23 @@ def test_a_file_that_is_not_a_trajectory_is_one_reader_error(tmp_path):
     np.savez(tmp_path / "other.npz", a=np.zeros(3))
     with pytest.raises(ReaderError, match="cannot read"):
         PoseTrack.from_npz(tmp_path / "other.npz")
+
+
+def test_the_pose_track_holds_one_chunk_of_covariances_at_a_time(tmp_path):
+    """P is 18 x 18 floats a state: reading the track must not keep every chunk alive (a
+    diagonal taken by einsum, or a column slice, is a view of its whole chunk). Measured with
+    tracemalloc, which numpy's allocations report to."""
+    import tracemalloc
+
+    traj = _random(20_000, seed=4)
+    traj.save_npz(tmp_path / "trajectory.npz")
+    p_bytes = traj.P.nbytes
+    del traj
+    tracemalloc.start()
+    try:
+        track = PoseTrack.from_npz(tmp_path / "trajectory.npz", chunk=500)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert len(track) == 20_000
+    assert peak < p_bytes / 4, (peak, p_bytes)  # about 3 % of P: the track and one chunk
