@@ -13,7 +13,8 @@ linearly and the JSON says so). The batch graph is linear in the log
 (undertow.peers.gtsam_solve); iSAM2 is not: GTSAM 4.3's ``ISAM2::update`` costs O(variables) per
 update whatever it re-eliminates (a Pose3 chain of C++ factors shows it too; GTSAM PR #2800
 describes a walk of the whole Bayes tree after each update, made opt-in there), so its cost per
-hour grows with the log's length, and a figure scaled from a shorter log is a lower bound.
+hour grows with the log's length, and a figure scaled from a shorter log is a lower bound. The
+hour's iSAM2 run alone takes about 21 min of CPU (docs/peers.md, Cost): this benchmark is long.
 """
 
 from __future__ import annotations
