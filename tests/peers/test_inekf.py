@@ -1,4 +1,5 @@
-"""inekf(log): the error conversions against numerical derivatives, a synthetic straight run
+"""inekf(log): the error conversions (and the DR-bias states' to the UKF's rpy offset) against
+numerical derivatives, a synthetic straight run
 through the Log adapter, and the refusal of a log without an accelerometer."""
 
 import numpy as np
@@ -7,8 +8,8 @@ from conftest import numeric_jacobian
 
 from undertow.errors import MissingStreamError
 from undertow.log import G0, Dvl, Imu, Log, Pressure
-from undertow.peers.inekf import from_ordinary_jacobian, inekf, ordinary_jacobian
-from undertow.peers.lie import se23_exp, se23_inverse, se23_log
+from undertow.peers.inekf import dr_bias_rpy, from_ordinary_jacobian, inekf, ordinary_jacobian
+from undertow.peers.lie import se23_exp, se23_inverse, se23_log, so3_exp
 from undertow.rotations import matrix_to_rpy, rpy_to_matrix
 
 
@@ -79,3 +80,24 @@ def test_inekf_refuses_a_log_without_accelerometer_in_one_line():
     with pytest.raises(MissingStreamError, match="accelerometer") as info:
         inekf(log)
     assert "\n" not in str(info.value)
+
+
+def test_dr_bias_states_map_to_the_rpy_offset_by_its_numerical_derivative():
+    """A world rotation b_d between the DR attitude and the vehicle's, R_m = Exp(b_d) R, is the
+    rpy offset rpy(Exp(b_d) R) - rpy(R) = T R^T b_d to first order: against central
+    differences of that offset, at a pitched and rolled attitude."""
+    rpy = np.array([0.2, -0.3, 2.5])
+    R = rpy_to_matrix(rpy)
+
+    class _Inputs:
+        x0 = np.zeros(18)
+
+    C = np.zeros((1, 18, 18))
+    C[0, 15:18, 15:18] = np.diag([1.0, 2.0, 3.0])
+    J = _numeric(lambda b: matrix_to_rpy(so3_exp(b) @ R) - rpy, n=3)
+    for k in range(3):
+        b = np.zeros((1, 9))
+        b[0, 6 + k] = 1e-7
+        out = dr_bias_rpy(_Inputs(), R[None], b, C)
+        assert np.allclose(out["dr_bias"][0] / 1e-7, J[:, k], rtol=1e-5, atol=1e-6)
+    assert np.allclose(out["dr_bias_cov"][0], J @ C[0, 15:18, 15:18] @ J.T, rtol=1e-5)

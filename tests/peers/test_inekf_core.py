@@ -227,3 +227,32 @@ def _position_cov(out, i):
 
     return ordinary_covariance(out.P[i : i + 1 or None], out.v[i : i + 1 or None],
                                out.p[i : i + 1 or None])[0, 6:9, 6:9]  # fmt: skip
+
+
+def test_dr_bias_states_split_a_heading_offset_as_the_two_state_closed_form():
+    """At rest, level, exact IMU, m attitude readings R_m = Rz(c) with variance s_n: the heading
+    error xi and the DR-bias b_d (about z) see z = xi + b_d + n, the rest of the state nothing,
+    so their posterior is the linear Kalman filter's in closed form,
+    P+ = (P0^-1 + m / s_n [[1, 1], [1, 1]])^-1, mean = P+ (m c / s_n) (1, 1)."""
+    model = _model(gyro_density=np.zeros(3), gyro_bias_walk=np.zeros(3),
+                   accel_bias_walk=np.zeros(3), dr_bias_walk=np.zeros(3))  # fmt: skip
+    s_r, s_b, s_n, c, m = 4e-4, 1e-3, 2.5e-5, 0.02, 10
+    P0 = np.zeros((18, 18))
+    P0[0:3, 0:3], P0[15:18, 15:18] = np.eye(3) * s_r, np.eye(3) * s_b
+    P0[6:9, 6:9] = np.eye(3) * 1e-2
+    ti = np.arange(0, 101) / RATE
+    ta = np.arange(1, m + 1) / m
+    no_dvl = (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)))
+    no_depth = (np.zeros(0), np.zeros(0), np.zeros(0))
+    out = run_inekf(ti, np.zeros((ti.size, 3)), np.tile([0.0, 0.0, -G], (ti.size, 1)),
+                    *no_dvl, *no_depth, t0=0.0, R0=np.eye(3), v0=np.zeros(3),
+                    p0=np.zeros(3), b0=np.zeros(9), P0=P0, model=model,
+                    attitude=(ta, np.tile(so3_exp(np.r_[0.0, 0.0, c]), (m, 1, 1)),
+                              np.tile(np.eye(3) * s_n, (m, 1, 1))))  # fmt: skip
+    post = np.linalg.inv(np.diag([1 / s_r, 1 / s_b]) + m / s_n * np.ones((2, 2)))
+    mean = post @ np.full(2, m * c / s_n)
+    yaw = np.arctan2(out.R[-1][1, 0], out.R[-1][0, 0])
+    assert out.b.shape == (m, 9) and out.P.shape == (m, 18, 18) and np.all(out.applied)
+    assert np.allclose([yaw, out.b[-1, 8]], mean, rtol=1e-6, atol=1e-12)
+    assert np.allclose(out.P[-1][np.ix_([2, 17], [2, 17])], post, rtol=1e-6)
+    assert np.allclose(out.b[-1, 6:8], 0.0, atol=1e-12)

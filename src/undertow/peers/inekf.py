@@ -9,7 +9,14 @@ the noise profile added to the DVL's covariance for the variants that add it), e
 - the DVL's dead-reckoning attitude, which the UKF fuses, is fused as an attitude
   observation (:func:`.inekf_core.update_attitude`) with the UKF's noise (rpy covariance
   mapped to a world rotation, N = E C E^T, E = R T(phi, theta)^-1) and the DR bias held at its
-  initial value x0[12:15] (the UKF estimates it). ``dr_attitude=False`` runs Potokar et al.'s
+  initial value x0[12:15] (the UKF estimates it), unless ``dr_bias=True``: then three DR-bias
+  states estimate what x0[12:15] leaves, as a world-frame rotation b_d (R_m = Exp(b_d) R), a
+  random walk with the UKF's density and mean drift mapped by E_0 = R_0 T_0^-1 (the drift
+  E_0 mu_b, the density the diagonal of E_0 diag(q_b) E_0^T: exact for a heading offset of a
+  level vehicle, the UKF's (1e-7, 1e-7, 1e-6) unchanged by a turn), started at 0 with
+  E_0 P0[DR] E_0^T, and written back as the UKF's rpy offset x0[12:15] + T R^T b_d (a
+  world rotation Exp(b_d) R = R Exp(R^T b_d) changes rpy by T R^T b_d to first order).
+  ``dr_attitude=False`` runs Potokar et al.'s
   filter as published (IMU, DVL, depth only): its heading is then the gyro's integral,
   observed only through the DVL's lever arm (the gyro bias), and drifts with the yaw-rate bias.
 
@@ -36,7 +43,7 @@ import numpy as np
 from ..errors import MissingStreamError
 from ..log import G0, Log
 from ..robot import Mounting
-from ..rotations import rpy_to_matrix
+from ..rotations import matrix_to_rpy, rpy_to_matrix
 from ..trajectory import Trajectory
 from .inekf_core import ATTITUDE, DEPTH, DVL, InekfModel, run_inekf
 from .inputs import PeerInputs, euler_rate_matrix, peer_inputs, to_trajectory
@@ -46,18 +53,21 @@ ESTIMATOR = "inekf"
 
 
 def inekf(log: Log, *, profile=None, wave=None, calibration=None, extrapolate: bool = False,
-          gravity_m_s2: float = G0, dr_attitude: bool = True, **params) -> Trajectory:  # fmt: skip
+          gravity_m_s2: float = G0, dr_attitude: bool = True, dr_bias: bool = False,
+          **params) -> Trajectory:  # fmt: skip
     """The InEKF's trajectory of ``log`` (options as :func:`.inputs.peer_inputs`: the noise
     profile, the wave, a calibration, LocalizerConfig fields, the accelerometer's settings);
-    ``dr_attitude``: fuse the DVL's dead-reckoning attitude as the UKF does (module doc); one
-    row after every DVL, depth and attitude measurement."""
+    ``dr_attitude``: fuse the DVL's dead-reckoning attitude as the UKF does, ``dr_bias``:
+    estimate its bias (three states, as the UKF; module doc); one row after every DVL, depth
+    and attitude measurement."""
     inputs = peer_inputs(log, profile=profile, wave=wave, calibration=calibration,
                          extrapolate=extrapolate, **params)  # fmt: skip
-    return run_on_inputs(inputs, gravity_m_s2=gravity_m_s2, dr_attitude=dr_attitude)
+    return run_on_inputs(inputs, gravity_m_s2=gravity_m_s2, dr_attitude=dr_attitude,
+                         dr_bias=dr_bias)  # fmt: skip
 
 
-def run_on_inputs(inputs: PeerInputs, gravity_m_s2: float = G0, dr_attitude: bool = True
-                  ) -> Trajectory:  # fmt: skip
+def run_on_inputs(inputs: PeerInputs, gravity_m_s2: float = G0, dr_attitude: bool = True,
+                  dr_bias: bool = False) -> Trajectory:  # fmt: skip
     """The filter on resolved :class:`.inputs.PeerInputs` (see :func:`inekf`)."""
     if not inputs.has_imu or not inputs.has_accelerometer:
         raise MissingStreamError(
@@ -67,9 +77,10 @@ def run_on_inputs(inputs: PeerInputs, gravity_m_s2: float = G0, dr_attitude: boo
         )
     if inputs.dvl_t.size + inputs.depth_t.size == 0:
         raise MissingStreamError("inekf needs a DVL or a depth stream; the log has neither")
-    model = inekf_model(inputs, gravity_m_s2)
-    R0, v0, p0, b0 = initial_estimate(inputs)
-    P0 = initial_covariance(inputs, R0, p0)
+    with_bias = bool(dr_bias and dr_attitude and inputs.dr_t.size)
+    R0, v0, p0, b0 = initial_estimate(inputs, with_bias)
+    model = inekf_model(inputs, gravity_m_s2, R0 if with_bias else None)
+    P0 = initial_covariance(inputs, R0, p0, with_bias)
     start = time.process_time()
     out = run_inekf(
         inputs.imu_t, inputs.gyro_rad_s, inputs.accel_m_s2,
@@ -83,12 +94,23 @@ def run_on_inputs(inputs: PeerInputs, gravity_m_s2: float = G0, dr_attitude: boo
     pose = np.empty((len(out.t), 6, 6))
     pose[:, :3, :3], pose[:, :3, 3:] = C[:, 0:3, 0:3], C[:, 0:3, 6:9]
     pose[:, 3:, :3], pose[:, 3:, 3:] = C[:, 6:9, 0:3], C[:, 6:9, 6:9]
+    dr = dr_bias_rpy(inputs, out.R, out.b, C) if with_bias else {}
+    meta = {**_summary(out, cpu_s), "dr_attitude": bool(dr_attitude), "dr_bias": with_bias}
     return to_trajectory(
         inputs, out.t, out.R, out.p, out.v, out.b[:, 0:3], pose,
         estimator=ESTIMATOR, attitude_error="world",
         velocity_cov=C[:, 3:6, 3:6], gyro_bias_cov=C[:, 9:12, 9:12],
-        metadata={"inekf": {**_summary(out, cpu_s), "dr_attitude": bool(dr_attitude)}},
+        metadata={"inekf": meta}, **dr,
     )  # fmt: skip
+
+
+def dr_bias_rpy(inputs: PeerInputs, R: np.ndarray, b: np.ndarray, C: np.ndarray) -> dict:
+    """The DR-bias states as the UKF's rpy offset: x0[12:15] + J b_d, covariance J C_dd J^T,
+    J = T(phi, theta) R^T (module doc)."""
+    J = euler_rate_matrix(matrix_to_rpy(R)) @ np.swapaxes(R, 1, 2)
+    cov = J @ C[:, 15:18, 15:18] @ np.swapaxes(J, 1, 2)
+    return {"dr_bias": inputs.x0[12:15] + np.einsum("nij,nj->ni", J, b[:, 6:9]),
+            "dr_bias_cov": 0.5 * (cov + np.swapaxes(cov, 1, 2))}  # fmt: skip
 
 
 def _summary(out, cpu_s: float) -> dict:
@@ -105,9 +127,10 @@ def _summary(out, cpu_s: float) -> dict:
     return summary
 
 
-def inekf_model(inputs: PeerInputs, gravity_m_s2: float = G0) -> InekfModel:
+def inekf_model(inputs: PeerInputs, gravity_m_s2: float = G0, R0=None) -> InekfModel:
     """The noise densities (s = sigma^2 dt at the IMU's median period), the DVL's lever arm
-    (its velocity already in the body frame: R_d = I), the gates of the UKF's config."""
+    (its velocity already in the body frame: R_d = I), the gates of the UKF's config; with
+    ``R0`` the DR bias's walk and drift mapped to the world frame (module doc)."""
     dt = float(np.median(np.diff(inputs.imu_t))) if inputs.imu_t.size > 1 else 0.01
     gate = inputs.config.sensor_model(Mounting()).gate  # (the gates need no mounting)
     cfg = inputs.config
@@ -125,7 +148,14 @@ def inekf_model(inputs: PeerInputs, gravity_m_s2: float = G0) -> InekfModel:
         gate_depth=float(gate[3]),
         gate_attitude=float(gate[2]),
         max_dt=float(cfg.max_dt_s),
+        **({} if R0 is None else _dr_bias_noise(inputs, R0)),
     )
+
+
+def _dr_bias_noise(inputs: PeerInputs, R0: np.ndarray) -> dict:
+    E = R0 @ np.linalg.inv(euler_rate_matrix(inputs.x0[3:6])[0])
+    walk = np.diag(E @ np.diag(inputs.dr_bias_walk_density) @ E.T)
+    return {"dr_bias_walk": walk.copy(), "dr_bias_drift": E @ inputs.dr_bias_drift_rad_s}
 
 
 def attitude_observations(inputs: PeerInputs):
@@ -140,51 +170,60 @@ def attitude_observations(inputs: PeerInputs):
     return inputs.dr_t, Rm, 0.5 * (N + np.swapaxes(N, 1, 2))
 
 
-def initial_estimate(inputs: PeerInputs):
-    """(R0, v0 world, p0, b0 = (b_g, b_a = 0)) from the UKF's x0."""
+def initial_estimate(inputs: PeerInputs, dr_bias: bool = False):
+    """(R0, v0 world, p0, b0 = (b_g, b_a = 0) or (b_g, b_a = 0, b_d = 0)) from the UKF's x0."""
     x0 = inputs.x0
     R0 = rpy_to_matrix(x0[3:6])
-    b0 = np.zeros(6)
+    b0 = np.zeros(9 if dr_bias else 6)
     b0[0:3] = x0[15:18]
     return R0, R0 @ x0[6:9], np.array(x0[0:3], float), b0
 
 
-def initial_covariance(inputs: PeerInputs, R0: np.ndarray, p0: np.ndarray) -> np.ndarray:
-    """P0 of e from the UKF's P0 blocks (position, rpy, body velocity, gyro bias) and the
-    accelerometer's initial bias std (module doc)."""
+def initial_covariance(inputs: PeerInputs, R0: np.ndarray, p0: np.ndarray,
+                       dr_bias: bool = False) -> np.ndarray:  # fmt: skip
+    """P0 of e from the UKF's P0 blocks (position, rpy, body velocity, gyro bias, and the DR
+    bias with ``dr_bias``) and the accelerometer's initial bias std (module doc)."""
     P = inputs.P0
+    n = 18 if dr_bias else 15
     idx = np.r_[0:3, 3:6, 6:9, 15:18]
-    Po = np.zeros((15, 15))
+    Po = np.zeros((n, n))
     Po[:12, :12] = P[np.ix_(idx, idx)]
     Po[12:15, 12:15] = np.diag(np.asarray(inputs.accel_bias_std_m_s2, float) ** 2)
-    M = from_ordinary_jacobian(R0, p0, inputs.x0[3:6])
+    if dr_bias:
+        Po[15:18, 15:18] = P[12:15, 12:15]
+    M = from_ordinary_jacobian(R0, p0, inputs.x0[3:6], n)
     return M @ Po @ M.T
 
 
-def from_ordinary_jacobian(R: np.ndarray, p: np.ndarray, rpy: np.ndarray) -> np.ndarray:
-    """M (15, 15): e = M (dp, d(rpy), d(nu body), db_g, db_a), to first order (module doc)."""
+def from_ordinary_jacobian(R: np.ndarray, p: np.ndarray, rpy: np.ndarray, n: int = 15
+                           ) -> np.ndarray:  # fmt: skip
+    """M (n, n): e = M (dp, d(rpy), d(nu body), db_g, db_a[, d(DR bias rpy)]), to first order
+    (module doc; the DR bias maps as the attitude, b_d = R T^-1 d)."""
     T = euler_rate_matrix(np.asarray(rpy, float))[0]
-    M = np.zeros((15, 15))
+    M = np.zeros((n, n))
     M[0:3, 3:6] = R @ np.linalg.inv(T)
     M[3:6, 6:9] = R
     M[6:9, 0:3] = np.eye(3)
     M[6:9, 3:6] = hat(np.asarray(p, float)) @ M[0:3, 3:6]
     M[9:15, 9:15] = np.eye(6)
+    if n > 15:
+        M[15:18, 15:18] = M[0:3, 3:6]
     return M
 
 
-def ordinary_jacobian(v: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """J (n, 15, 15): (d_theta, dv, dp, db_g, db_a) = J e, all world frame (module doc)."""
+def ordinary_jacobian(v: np.ndarray, p: np.ndarray, size: int = 15) -> np.ndarray:
+    """J (n, m, m): (d_theta, dv, dp, db_g, db_a[, db_d]) = J e, all world frame (module doc;
+    m = 15, or 18 with the DR-bias states)."""
     n = v.shape[0]
-    J = np.broadcast_to(np.eye(15), (n, 15, 15)).copy()
+    J = np.broadcast_to(np.eye(size), (n, size, size)).copy()
     J[:, 3:6, 0:3] = -_hats(v)
     J[:, 6:9, 0:3] = -_hats(p)
     return J
 
 
 def ordinary_covariance(P: np.ndarray, v: np.ndarray, p: np.ndarray) -> np.ndarray:
-    """J P J^T (n, 15, 15) with J = :func:`ordinary_jacobian`."""
-    J = ordinary_jacobian(v, p)
+    """J P J^T with J = :func:`ordinary_jacobian` (P of 15 or 18)."""
+    J = ordinary_jacobian(v, p, P.shape[-1])
     C = J @ P @ np.swapaxes(J, 1, 2)
     return 0.5 * (C + np.swapaxes(C, 1, 2))
 

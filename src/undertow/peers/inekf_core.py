@@ -66,6 +66,14 @@ Attitude (optional; the DVL's dead-reckoning attitude the paper's UKF fuses): a 
 R_m = Exp(n) R with n a world-frame rotation noise, z = Log(R_m R_hat^T) = xi_R + n, so
 H = [I, 0, 0, 0, 0], again independent of the estimate.
 
+DR-bias states (optional, as the paper's UKF estimates b^g): a world-frame rotation b_d
+between the DR attitude and the vehicle's, R_m = Exp(n) Exp(b_d) R, a random walk
+b_d' = b_d + mu_d dt + w (density q_d) appended to the error (e has 18 entries, db_d linear as
+the IMU biases; it enters no propagation, so A's columns for it are zero). The attitude
+innovation is then z = Log(Exp(-b_d_hat) R_m R_hat^T) = xi_R + db_d + n to first order,
+H = [I, 0, 0, 0, 0, I] (exact for rotations about one axis, e.g. a heading offset of a level
+vehicle). Without them (15 entries) the DR bias is whatever the caller removed from R_m.
+
 Updates are the Kalman gain K = P H^T S^-1, S = H P H^T + N, the Joseph form for P, and a gate
 on the normalized innovation squared (NIS = z^T S^-1 z; an innovation above the gate is
 counted and not applied).
@@ -80,7 +88,7 @@ from numba import njit
 
 from .lie import hat, se23_adjoint, se23_exp, se23_inverse, so3_exp, so3_log
 
-N_ERR = 15
+N_ERR = 15  # without the DR-bias states; 18 with them (the size of P decides)
 DVL, DEPTH, ATTITUDE = 1, 2, 3
 
 
@@ -100,12 +108,15 @@ class InekfModel(NamedTuple):
     gate_depth: float
     gate_attitude: float
     max_dt: float  # longest propagation step, s
+    dr_bias_walk: np.ndarray = np.zeros(3)  # (3,) q_d, rad^2/s (used with the DR-bias states)
+    dr_bias_drift: np.ndarray = np.zeros(3)  # (3,) mu_d, rad/s, world frame
 
 
 @njit(cache=True)
-def transition(R, v, p, dt, g):
-    """Phi = exp(A dt) = I + A dt + (A dt)^2/2 + (A dt)^3/6 (A nilpotent), at X = (R, v, p)."""
-    A = np.zeros((N_ERR, N_ERR))
+def transition(R, v, p, dt, g, n=N_ERR):
+    """Phi = exp(A dt) = I + A dt + (A dt)^2/2 + (A dt)^3/6 (A nilpotent), at X = (R, v, p);
+    ``n`` the error's size (18: the DR-bias states, whose rows and columns of A are 0)."""
+    A = np.zeros((n, n))
     A[0:3, 9:12] = -R
     A[3:6, 0:3] = hat(np.array([0.0, 0.0, g]))
     A[3:6, 9:12] = -(hat(v) @ R)
@@ -114,14 +125,15 @@ def transition(R, v, p, dt, g):
     A[6:9, 9:12] = -(hat(p) @ R)
     Ad = A * dt
     Ad2 = Ad @ Ad
-    return np.eye(N_ERR) + Ad + 0.5 * Ad2 + (Ad2 @ Ad) / 6.0
+    return np.eye(n) + Ad + 0.5 * Ad2 + (Ad2 @ Ad) / 6.0
 
 
 @njit(cache=True)
-def process_noise(R, v, p, dt, model):
-    """Q_d = Phi Q_c Phi^T dt (Hartley et al. 2020, section V-B), and Phi."""
-    Phi = transition(R, v, p, dt, model.gravity)
-    Qc = np.zeros((N_ERR, N_ERR))
+def process_noise(R, v, p, dt, model, n=N_ERR):
+    """Q_d = Phi Q_c Phi^T dt (Hartley et al. 2020, section V-B), and Phi (q_d on the DR-bias
+    states when n = 18)."""
+    Phi = transition(R, v, p, dt, model.gravity, n)
+    Qc = np.zeros((n, n))
     Ad = se23_adjoint(R, v, p)
     s = np.zeros(9)
     s[0:3] = model.gyro_density
@@ -130,13 +142,16 @@ def process_noise(R, v, p, dt, model):
     for i in range(3):
         Qc[9 + i, 9 + i] = model.gyro_bias_walk[i]
         Qc[12 + i, 12 + i] = model.accel_bias_walk[i]
+        if n > N_ERR:
+            Qc[15 + i, 15 + i] = model.dr_bias_walk[i]
     return Phi, Phi @ Qc @ Phi.T * dt
 
 
 @njit(cache=True)
 def propagate(R, v, p, b, P, omega_m, f_m, dt, model):
-    """One IMU step of length dt: the mean (R, v, p) and P, returned (b is constant)."""
-    Phi, Qd = process_noise(R, v, p, dt, model)
+    """One IMU step of length dt: the mean (R, v, p) and P, returned (b is constant; the DR
+    bias's drift is :func:`_advance`'s)."""
+    Phi, Qd = process_noise(R, v, p, dt, model, P.shape[0])
     P = Phi @ P @ Phi.T + Qd
     P = 0.5 * (P + P.T)
     acc = R @ (f_m - b[3:6])
@@ -154,7 +169,7 @@ def dvl_innovation(R, v, b, y, cov, omega_m, model):
     omega = omega_m - b[0:3]
     y_b = Rd @ y - np.cross(omega, r)
     z = R @ y_b - v
-    H = np.zeros((3, N_ERR))
+    H = np.zeros((3, 9 + b.size))
     H[0:3, 3:6] = np.eye(3)
     rx = hat(r)
     H[0:3, 9:12] = R @ rx
@@ -163,12 +178,12 @@ def dvl_innovation(R, v, b, y, cov, omega_m, model):
 
 
 @njit(cache=True)
-def depth_innovation(R, p, d, model):
+def depth_innovation(R, p, d, model, n=N_ERR):
     """(z, H_l) of a depth d: the scalar row in the left-invariant error (module doc)."""
     r = model.baro_r
     z = np.empty(1)
     z[0] = d - p[2] - (R[2, 0] * r[0] + R[2, 1] * r[1] + R[2, 2] * r[2])
-    H = np.zeros((1, N_ERR))
+    H = np.zeros((1, n))
     e3R = R[2, :].copy()
     H[0, 0:3] = -(e3R @ hat(r))
     H[0, 6:9] = e3R
@@ -183,26 +198,26 @@ def kalman(P, z, H, N, gate):
     Si = np.linalg.inv(S)
     nis = z @ Si @ z
     if not nis <= gate:
-        return np.zeros(N_ERR), P, nis, False
+        return np.zeros(P.shape[0]), P, nis, False
     K = P @ H.T @ Si
-    IKH = np.eye(N_ERR) - K @ H
+    IKH = np.eye(P.shape[0]) - K @ H
     P = IKH @ P @ IKH.T + K @ N @ K.T
     return K @ z, 0.5 * (P + P.T), nis, True
 
 
 @njit(cache=True)
-def error_frame(R, v, p):
-    """T = blockdiag(Ad_X, I6): xi_right = T xi_left (left to right-invariant error)."""
-    T = np.eye(N_ERR)
+def error_frame(R, v, p, n=N_ERR):
+    """T = blockdiag(Ad_X, I): xi_right = T xi_left (left to right-invariant error)."""
+    T = np.eye(n)
     T[0:9, 0:9] = se23_adjoint(R, v, p)
     return T
 
 
 @njit(cache=True)
 def right_correct(R, v, p, b, dx):
-    """X <- exp(dxi) X, b <- b + db: a right-invariant correction dx = (dxi (9), db (6))."""
+    """X <- exp(dxi) X, b <- b + db: a right-invariant correction dx = (dxi (9), db (6 or 9))."""
     dR, dv, dp = se23_exp(dx[0:9].copy())
-    return dR @ R, dR @ v + dv, dR @ p + dp, b + dx[9:15]
+    return dR @ R, dR @ v + dv, dR @ p + dp, b + dx[9:]
 
 
 @njit(cache=True)
@@ -218,10 +233,15 @@ def update_dvl(R, v, p, b, P, y, cov, omega_m, model):
 @njit(cache=True)
 def update_attitude(R, v, p, b, P, Rm, cov, model):
     """An attitude update (right-invariant): Rm = Exp(n) R, n ~ N(0, cov) in the world frame,
-    z = Log(Rm R_hat^T) = xi_R + n, H = [I, 0, 0, 0, 0]."""
-    z = so3_log(Rm @ R.T)
-    H = np.zeros((3, N_ERR))
+    z = Log(Rm R_hat^T) = xi_R + n, H = [I, 0, 0, 0, 0]; with the DR-bias states (b of 9)
+    Rm = Exp(n) Exp(b_d) R, z = Log(Exp(-b_d_hat) Rm R_hat^T), H = [I, 0, 0, 0, 0, I]."""
+    H = np.zeros((3, P.shape[0]))
     H[0:3, 0:3] = np.eye(3)
+    if b.size > 6:
+        z = so3_log(so3_exp(-b[6:9]) @ Rm @ R.T)
+        H[0:3, 15:18] = np.eye(3)
+    else:
+        z = so3_log(Rm @ R.T)
     dx, P, nis, ok = kalman(P, z, H, cov, model.gate_attitude)
     if ok:
         R, v, p, b = right_correct(R, v, p, b, dx)
@@ -232,16 +252,17 @@ def update_attitude(R, v, p, b, P, Rm, cov, model):
 def update_depth(R, v, p, b, P, d, var, model):
     """A depth update in the left-invariant error (module doc): X <- X exp(dxi)."""
     Ri, vi, pi = se23_inverse(R, v, p)
-    Tl = error_frame(Ri, vi, pi)  # right -> left
+    n = P.shape[0]
+    Tl = error_frame(Ri, vi, pi, n)  # right -> left
     Pl = Tl @ P @ Tl.T
-    z, H = depth_innovation(R, p, d, model)
+    z, H = depth_innovation(R, p, d, model, n)
     N = np.full((1, 1), var)
     dx, Pl, nis, ok = kalman(Pl, z, H, N, model.gate_depth)
     if ok:
         dR, dv, dp = se23_exp(dx[0:9].copy())
         R, v, p = R @ dR, R @ dv + v, R @ dp + p
-        b = b + dx[9:15]
-    Tr = error_frame(R, v, p)  # left -> right, at the updated estimate
+        b = b + dx[9:]
+    Tr = error_frame(R, v, p, n)  # left -> right, at the updated estimate
     P = Tr @ Pl @ Tr.T
     return R, v, p, b, 0.5 * (P + P.T), nis, ok
 
@@ -254,8 +275,8 @@ class InekfRun(NamedTuple):
     R: np.ndarray  # (M, 3, 3) body to world
     v: np.ndarray  # (M, 3) world velocity, m/s
     p: np.ndarray  # (M, 3) world position, m
-    b: np.ndarray  # (M, 6) gyro bias rad/s, accelerometer bias m/s^2
-    P: np.ndarray  # (M, 15, 15) covariance of the invariant error e
+    b: np.ndarray  # (M, 6 or 9) gyro bias rad/s, accelerometer bias m/s^2 (, DR bias rad)
+    P: np.ndarray  # (M, 15 or 18, ...) covariance of the invariant error e
     omega: np.ndarray  # (M, 3) the held gyro reading less the bias, rad/s (body)
     nis: np.ndarray  # (M,) normalized innovation squared
     applied: np.ndarray  # (M,) bool: the update passed the gate
@@ -263,12 +284,16 @@ class InekfRun(NamedTuple):
 
 @njit(cache=True)
 def _advance(R, v, p, b, P, t, t_end, omega_m, f_m, model):
-    """Propagate from t to t_end with the held IMU reading, in steps of at most max_dt."""
+    """Propagate from t to t_end with the held IMU reading, in steps of at most max_dt (the DR
+    bias, when b has it, moves by its mean drift mu_d dt)."""
+    if b.size > 6 and t_end > t:
+        b = b.copy()
+        b[6:9] += model.dr_bias_drift * (t_end - t)
     while t_end - t > 1e-12:
         dt = min(t_end - t, model.max_dt)
         R, v, p, P = propagate(R, v, p, b, P, omega_m, f_m, dt, model)
         t += dt
-    return R, v, p, P, t_end
+    return R, v, p, b, P, t_end
 
 
 @njit(cache=True)
@@ -286,7 +311,7 @@ def run_kernel(imu_t, gyro, accel, dvl_t, dvl_y, dvl_cov, dep_t, dep_d, dep_var,
     m = dvl_t.size + dep_t.size + att_t.size
     o_t, o_k = np.empty(m), np.empty(m, np.int64)
     o_R, o_v, o_p = np.empty((m, 3, 3)), np.empty((m, 3)), np.empty((m, 3))
-    o_b, o_P, o_w = np.empty((m, 6)), np.empty((m, N_ERR, N_ERR)), np.empty((m, 3))
+    o_b, o_P, o_w = np.empty((m, b.size)), np.empty((m, P.shape[0], P.shape[0])), np.empty((m, 3))
     o_nis, o_ok = np.empty(m), np.zeros(m, np.bool_)
     i = max(_first_at_or_after(imu_t, t0) - 1, 0)  # the reading held at t0
     omega_m, f_m = gyro[i].copy(), accel[i].copy()
@@ -299,7 +324,7 @@ def run_kernel(imu_t, gyro, accel, dvl_t, dvl_y, dvl_cov, dep_t, dep_d, dep_var,
         tk = dep_t[k] if k < dep_t.size else big
         tq = att_t[q] if q < att_t.size else big
         te = min(min(ti, tj), min(tk, tq))
-        R, v, p, P, t = _advance(R, v, p, b, P, t, te, omega_m, f_m, model)
+        R, v, p, b, P, t = _advance(R, v, p, b, P, t, te, omega_m, f_m, model)
         if ti == te:  # a new IMU reading (a non-finite one keeps the previous)
             if np.all(np.isfinite(gyro[i])) and np.all(np.isfinite(accel[i])):
                 omega_m, f_m = gyro[i].copy(), accel[i].copy()
@@ -338,7 +363,8 @@ def run_inekf(imu_t, gyro, accel, dvl_t, dvl_y, dvl_cov, depth_t, depth, depth_v
     """The filter over whole streams (plain arrays, time-ordered; body-frame IMU, DVL-frame
     velocities with their (3, 3) covariances, depths with their variances, optionally
     ``attitude`` = (t, R (m, 3, 3) body to world, world-frame covariance (m, 3, 3))), started at
-    t0 from X0 = (R0, v0, p0), b0 = (b_g, b_a) and the invariant-error covariance P0 (15, 15).
+    t0 from X0 = (R0, v0, p0), b0 = (b_g, b_a) and the invariant-error covariance P0 (15, 15);
+    with b0 = (b_g, b_a, b_d) and P0 (18, 18) the DR-bias states run too (module doc).
 
     Between readings the last IMU sample is held (zero-order hold); a measurement time between
     two IMU samples is reached by a partial step. Rows with non-finite values are skipped; the
