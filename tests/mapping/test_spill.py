@@ -98,3 +98,25 @@ def test_without_a_budget_nothing_spills():
     cells = np.random.default_rng(1).integers(-500, 500, (20_000, 3))
     grid.add_mass(cells, np.ones(len(cells)), np.ones(len(cells)))
     assert grid.n_chunks > 1000 and len(grid.spill) == 0 and grid.spill.file_bytes == 0
+
+
+def test_a_view_that_stops_taking_its_boxes_does_not_stop_the_spill(monkeypatch):
+    """A live view records the boxes written (track_touched) and takes them when it draws; one
+    that stops drawing (its client gone) must neither keep every chunk in memory (only the
+    latest boxes' tiles stay) nor grow the record without bound (merged into one box). Here a
+    write is a leg 7 m on: two latest boxes kept (16 are seconds of a survey)."""
+    from undertow.mapping import grid as grid_module
+
+    monkeypatch.setattr(grid_module, "KEEP_TOUCHED", 2)
+
+    fans = [multibeam_fan(np.random.default_rng(0), 2, 24, leg, [0, 0, 0]) for leg in range(40)]
+    budget_mb = 400 * CHUNK_BYTES / 1e6
+    mapper = make_mapper("csm", resolution=0.1, resident_mb=budget_mb)
+    mapper.grid.track_touched()
+    for o, v, r, var in fans * 8:  # 320 writes along 280 m, never taken
+        mapper.integrate(expand(o, v, r, var, np.full(len(r), 0.6), np.full(len(r), 2), 0.1, {}))
+    grid = mapper.grid
+    assert len(grid.spill) > grid.n_chunks and grid.n_chunks * CHUNK_BYTES <= budget_mb * 1e6
+    assert 320 > grid_module.MAX_TOUCHED
+    taken = grid.take_touched()  # the merged box and the latest cover every chunk held
+    assert np.array_equal(taken, np.arange(grid.n_chunks))

@@ -51,6 +51,10 @@ READOUT_BYTES_PER_CELL = 100  # cells(): indices, keys, alpha and beta as float6
 RAY_PARALLEL_MIN_SAMPLES = 1 << 16  # scatter_rays: fewer samples stay on the calling thread
 LOW_WATER = 0.75  # a spill brings the chunks held down to this share of the resident budget
 READOUT_BATCH = 8192  # chunks read out at once when some are spilled
+MAX_TOUCHED = 256  # boxes kept for take_touched; beyond, they are merged into one
+KEEP_TOUCHED = 16  # the latest of them whose tiles a spill keeps
+SPILL_RETRY = 4  # writes over the budget before a spill that freed too little is tried again
+# (or once the chunks held grew by an eighth of the budget's low water)
 
 
 def peak_bytes(chunks: float, cells_bound: float) -> float:
@@ -82,8 +86,11 @@ class ChunkedGrid:
         self._n = np.zeros(1, np.int64)
         self._allocate(max(int(capacity), 8))
         self._touched: list | None = None  # boxes (lo, hi) in m written since taken
+        self._merged = None  # older such boxes merged into one (a view that stopped taking)
         self.resident_bytes = None if resident_bytes is None else float(resident_bytes)
         self.spill = ChunkSpill(spill_dir)
+        self._writes = 0  # writes over the budget
+        self._spill_again = (0, 0)  # a spill is tried again at this write or chunk count
         self._born = 0  # chunks created so far: the next chunk's birth number
 
     def track_touched(self) -> None:
@@ -102,6 +109,9 @@ class ChunkedGrid:
         lo, hi = np.asarray(extent[0]) - r, np.asarray(extent[1]) + r
         if self._touched is not None:
             self._touched.append((lo, hi))
+            if len(self._touched) > MAX_TOUCHED:  # a view that stopped taking them: one box
+                merged = [] if self._merged is None else [self._merged]
+                self._merged, self._touched = _union([*merged, *self._touched]), []
         if len(self.spill):
             span, pad = CHUNK * self.resolution, 2 * self.resolution
             tiles = self.spill.tiles_in(np.floor((lo - pad) / span).astype(np.int64),
@@ -139,16 +149,21 @@ class ChunkedGrid:
 
     def _spill_far(self, extent) -> None:
         """Spill whole tiles, the farthest from the centre of the write box ``extent`` first,
-        until the chunks held are LOW_WATER of the budget; the tiles of the boxes written
-        since :meth:`take_touched` (a view still to redraw them) and of ``extent`` stay."""
+        until the chunks held are LOW_WATER of the budget; the tiles of ``extent`` and of the
+        KEEP_TOUCHED latest boxes not yet taken by :meth:`take_touched` (a view about to redraw
+        them) stay. A chunk spilled before the view takes its box keeps the view's last drawing
+        of it until it is written again."""
         n, span = self.n_chunks, CHUNK * self.resolution
+        self._writes += 1
         target = int(LOW_WATER * self.resident_bytes / CHUNK_BYTES)
+        if self._writes < self._spill_again[0] and n < self._spill_again[1]:
+            return
         tiles, inverse, counts = np.unique(tiles_of(self._keys[:n]), axis=0, return_inverse=True,
                                            return_counts=True)  # fmt: skip
         inverse = inverse.reshape(-1)
         centre = (np.asarray(extent[0]) + np.asarray(extent[1])) / 2 / (span * TILE)
         far = np.linalg.norm(tiles + 0.5 - centre, axis=1)
-        for lo, hi in [*(self._touched or []), (extent[0], extent[1])]:
+        for lo, hi in [*(self._touched or [])[-KEEP_TOUCHED:], (extent[0], extent[1])]:
             t_lo = np.floor(np.asarray(lo) / (span * TILE))
             t_hi = np.floor(np.asarray(hi) / (span * TILE))
             far[np.all((tiles >= t_lo) & (tiles <= t_hi), axis=1)] = -1.0
@@ -156,6 +171,11 @@ class ChunkedGrid:
         order = order[far[order] >= 0]
         k = int(np.searchsorted(np.cumsum(counts[order]), n - target)) + 1
         out = np.isin(inverse, order[:k])
+        # too little to spill (the rest is near the writes): again some writes or chunks later
+        if out.sum() < (n - target) // 2:
+            self._spill_again = (self._writes + SPILL_RETRY, n + max(target // 8, 1))
+        else:
+            self._spill_again = (0, 0)
         if not out.any():
             return
         gone, keep = np.flatnonzero(out), np.flatnonzero(~out)
@@ -172,9 +192,9 @@ class ChunkedGrid:
         """Indices of the chunks that the writes since the last call may have changed (every
         chunk written, and maybe a few neighbours: the boxes are the samples' extents widened
         by the kernels' reach), sorted; the record is then cleared."""
-        boxes = self._touched or []
+        boxes = [*(self._touched or []), *([] if self._merged is None else [self._merged])]
         if self._touched is not None:
-            self._touched = []
+            self._touched, self._merged = [], None
         n = self.n_chunks
         if not boxes or n == 0:
             return np.zeros(0, np.int64)
@@ -451,6 +471,11 @@ class ChunkedGrid:
             alpha[held], beta[held] = self._alpha[part[held]], self._beta[part[held]]
             alpha[~held], beta[~held] = self.spill.read(slots_out[part[~held] - n])
             yield _massed_cells(keys, alpha, beta)
+
+
+def _union(boxes) -> tuple[np.ndarray, np.ndarray]:
+    """The box (lo, hi) around ``boxes``."""
+    return (np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0))
 
 
 def _massed_cells(keys, alpha, beta) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
