@@ -203,8 +203,26 @@ class PoseTrack:
     variant: str = ""
     metadata: dict = field(default_factory=dict)
 
+    #: roll-pitch-yaw unwrapped along the whole track (numpy.unwrap), when known: a window of
+    #: the track carries its part, so that its angles are those of the whole, not re-unwrapped
+    unwrapped_orientation: np.ndarray | None = None
+
     def __len__(self) -> int:
         return int(self.t.size)
+
+    def window(self, t0: float, t1: float) -> PoseTrack:
+        """The states from the last one at or before ``t0`` to the first at or after ``t1``
+        (the whole track's ends where these fall outside it): interpolation at any time in
+        [t0, t1] gives the whole track's values, and a time outside the track is outside the
+        window too. Its angles are the whole track's unwrapped ones (computed once)."""
+        if self.unwrapped_orientation is None:
+            object.__setattr__(self, "unwrapped_orientation", np.unwrap(self.orientation, axis=0))
+        i0 = max(int(np.searchsorted(self.t, t0, side="right")) - 1, 0)
+        i1 = min(int(np.searchsorted(self.t, t1, side="left")) + 1, len(self))
+        part = slice(i0, max(i1, i0 + 1))
+        return PoseTrack(self.t[part], self.position[part], self.orientation[part],
+                         self.position_variance[part], self.variant, self.metadata,
+                         self.unwrapped_orientation[part])  # fmt: skip
 
     @classmethod
     def from_npz(cls, path: str | Path, chunk: int = CHUNK_STATES) -> PoseTrack:

@@ -43,3 +43,28 @@ def test_pieces_give_the_whole_logs_map(simulated_run, method, rtol):
 def test_adaptive_kernels_need_the_whole_log():
     with pytest.raises(ConfigError, match="whole log"):
         map_pieces([], None, MappingConfig(method="adaptive", variance_bounds=None))
+
+
+def test_a_pose_track_is_read_per_piece_through_its_window(simulated_run, tmp_path):
+    """map_pieces interpolates each piece in its window of a lazy PoseTrack (not the day's
+    track): the same map bit for bit as with the whole trajectory; the window's angles are the
+    whole track's unwrapped ones (a heading that wraps across pieces)."""
+    from undertow.trajectory_chunks import PoseTrack
+
+    log = simulated_run("calm") / "log"
+    config = MappingConfig(method="tpu", resolution=0.2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        truth = localize(read_log(log))
+        truth.x[:, 8] += np.linspace(0.0, 9.0, len(truth))  # yaw turning through +-pi
+        truth.save_npz(tmp_path / "trajectory.npz")
+        track = PoseTrack.from_npz(tmp_path / "trajectory.npz")
+        whole = map_pieces(iter_log_pieces(log, 4.0), truth, config)
+        windows = map_pieces(iter_log_pieces(log, 4.0), track, config)
+    for name in ("cells", "alpha", "beta"):
+        np.testing.assert_array_equal(getattr(whole.map, name), getattr(windows.map, name))
+    part = track.window(track.t[10] + 1e-3, track.t[20])
+    assert part.t[0] == track.t[10] and part.t[-1] == track.t[20]
+    np.testing.assert_array_equal(
+        part.unwrapped_orientation, np.unwrap(track.orientation, axis=0)[10:21]
+    )

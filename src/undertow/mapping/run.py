@@ -90,7 +90,7 @@ def map_pieces(pieces: Iterable[Log], trajectory, config: MappingConfig | None =
         if not any(r is not None and len(r) for r in ranges):
             continue
         try:
-            samples = samples_from_config(log, trajectory, config)
+            samples = samples_from_config(log, _window(trajectory, ranges), config)
             mapper.integrate(samples)
         except MemoryError:
             raise out_of_memory(config.resolution) from None
@@ -112,6 +112,16 @@ def map_pieces(pieces: Iterable[Log], trajectory, config: MappingConfig | None =
         occupancy = dataclasses.replace(mapper.occupancy(), metadata=meta)
     metadata = map_metadata(mapper.metadata(), counts, occupancy, config, trajectory, first)
     return MappingResult(occupancy, config, metadata)
+
+
+def _window(trajectory, ranges):
+    """The part of a lazy :class:`~undertow.trajectory_chunks.PoseTrack` around the times of
+    ``ranges`` (the same poses: :meth:`~undertow.trajectory_chunks.PoseTrack.window`), so that a
+    piece's interpolation costs its window, not the day; any other trajectory as it is."""
+    if not hasattr(trajectory, "window"):
+        return trajectory
+    times = [r.t for r in ranges if r is not None and len(r)]
+    return trajectory.window(min(float(t[0]) for t in times), max(float(t[-1]) for t in times))
 
 
 def sample_counts(samples) -> dict:

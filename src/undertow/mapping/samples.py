@@ -147,8 +147,11 @@ class RaySamples(Samples):
 
 
 def _interpolate_pose(trajectory: Trajectory, t: np.ndarray):
-    """Position (linear), rpy (on unwrapped angles) and position variance at times t."""
-    ang = np.unwrap(trajectory.orientation, axis=0)
+    """Position (linear), rpy (on unwrapped angles) and position variance at times t (the
+    angles unwrapped along the whole trajectory: a window of a PoseTrack carries them)."""
+    ang = getattr(trajectory, "unwrapped_orientation", None)
+    if ang is None:
+        ang = np.unwrap(trajectory.orientation, axis=0)
     return pose_at(trajectory.t, trajectory.position, ang, trajectory.position_variance, t)
 
 
