@@ -228,18 +228,28 @@ class PoseTrack:
     def from_npz(cls, path: str | Path, chunk: int = CHUNK_STATES) -> PoseTrack:
         """The pose track of a trajectory.npz, its P read chunk by chunk (module doc)."""
         variant, metadata = npz_header(path)
-        # copies of each chunk's columns: a slice or einsum's diagonal is a view that would keep
-        # the whole chunk (18 x 18 floats a state for P) alive until the end
+        # each chunk's columns copied into arrays of the track's length (10 floats a state):
+        # neither a list of chunks joined at the end nor a view (a slice, einsum's diagonal)
+        # that would keep its whole chunk (18 x 18 floats a state for P) alive
         t = np.concatenate([*npz_rows(path, "t", chunk), np.empty(0)])
-        pose = [x[:, :6].copy() for x in npz_rows(path, "x", chunk)]
-        pose = np.concatenate([*pose, np.empty((0, 6))])
-        var = [np.einsum("nii->ni", P[:, POSITION, POSITION]).copy()
-               for P in npz_rows(path, "P", chunk)]  # fmt: skip
-        var = np.concatenate([*var, np.empty((0, 3))])
-        if not (len(pose) == len(t) == len(var)):
+        n = len(t)
+        position, orientation, var = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+        k = 0
+        for x in npz_rows(path, "x", chunk):
+            if k + len(x) > n:
+                break
+            position[k : k + len(x)] = x[:, POSITION]
+            orientation[k : k + len(x)] = x[:, ORIENTATION]
+            k += len(x)
+        j = 0
+        for P in npz_rows(path, "P", chunk):
+            if j + len(P) > n:
+                break
+            var[j : j + len(P)] = np.einsum("nii->ni", P[:, POSITION, POSITION])
+            j += len(P)
+        if not (k == j == n):
             raise ReaderError(f"{npz_path(path)}: t, x and P differ in length")
-        return cls(t, np.ascontiguousarray(pose[:, POSITION]),
-                   np.ascontiguousarray(pose[:, ORIENTATION]), var, variant, metadata)  # fmt: skip
+        return cls(t, position, orientation, var, variant, metadata)
 
 
 @dataclass(frozen=True, eq=False)
