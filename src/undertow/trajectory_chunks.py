@@ -215,8 +215,11 @@ class PoseTrack:
         (the whole track's ends where these fall outside it): interpolation at any time in
         [t0, t1] gives the whole track's values, and a time outside the track is outside the
         window too. Its angles are the whole track's unwrapped ones (computed once)."""
-        if self.unwrapped_orientation is None:
-            object.__setattr__(self, "unwrapped_orientation", np.unwrap(self.orientation, axis=0))
+        if self.unwrapped_orientation is None:  # column by column: a day's temporaries a third
+            ang = np.empty_like(self.orientation)
+            for j in range(ang.shape[1]):
+                ang[:, j] = np.unwrap(self.orientation[:, j])
+            object.__setattr__(self, "unwrapped_orientation", ang)
         i0 = max(int(np.searchsorted(self.t, t0, side="right")) - 1, 0)
         i1 = min(int(np.searchsorted(self.t, t1, side="left")) + 1, len(self))
         part = slice(i0, max(i1, i0 + 1))
