@@ -15,6 +15,7 @@ Tests marked ``slow`` (heavy fixtures, clusters, long logs, end-to-end command c
 out by ``make test-fast`` (``pytest -m "not slow"``); ``make test`` runs everything.
 """
 
+import contextlib
 import dataclasses
 import os
 from pathlib import Path
@@ -80,6 +81,29 @@ def numeric_jacobian(fun, n: int, h: float = 1e-6) -> np.ndarray:
         e[j] = h
         cols.append((fun(e) - fun(-e)) / (2 * h))
     return np.stack(cols, axis=1)
+
+
+def same_map(a, b) -> bool:
+    """Two mappers hold the same map bit for bit: the same chunks in the same order and the same
+    cells, alpha and beta."""
+    n = a.grid.n_chunks
+    keys = np.array_equal(a.grid.chunk_mass(np.arange(n))[0],
+                          b.grid.chunk_mass(np.arange(b.grid.n_chunks))[0])  # fmt: skip
+    ca, cb = a.grid.cells(), b.grid.cells()
+    return keys and all(np.array_equal(x, y) for x, y in zip(ca, cb, strict=True))
+
+
+@contextlib.contextmanager
+def numba_threads(threads: int):
+    """numba's thread count set to ``threads`` inside the block."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
 
 
 def one_error_line(result):

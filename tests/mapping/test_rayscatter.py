@@ -7,7 +7,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pytest
-from conftest import multibeam_fan
+from conftest import multibeam_fan, numba_threads, same_map
 
 from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
@@ -49,22 +49,11 @@ def _samples(rays, written: bool):
 
 
 def _map(batches, written: bool, bounds=BOUNDS, threads: int = 1):
-    before = numba.get_num_threads()
-    numba.set_num_threads(threads)
-    try:
+    with numba_threads(threads):
         mapper = make_mapper("adaptive", variance_bounds=bounds)
         for rays in batches:  # the grid starts small and grows in between and within batches
             mapper.integrate(_samples(rays, written))
         return mapper
-    finally:
-        numba.set_num_threads(before)
-
-
-def _same_map(a, b) -> bool:
-    n = a.grid.n_chunks
-    keys = np.array_equal(a.grid._keys[:n], b.grid._keys[: b.grid.n_chunks])
-    ca, cb = a.grid.cells(), b.grid.cells()
-    return keys and all(np.array_equal(x, y) for x, y in zip(ca, cb, strict=True))
 
 
 @pytest.mark.parametrize("bounds", [BOUNDS, None])  # fixed bounds, and the session's
@@ -73,7 +62,7 @@ def test_the_rays_give_the_written_samples_map_bit_for_bit(make, bounds):
     batches = [make(seed) for seed in range(3)]
     written, rays = _map(batches, True, bounds), _map(batches, False, bounds)
     assert written.grid.n_chunks > 64  # grown, and resumed after each growth
-    assert _same_map(written, rays)
+    assert same_map(written, rays)
     occupancy = rays.occupancy()
     assert len(occupancy) > 1000 and np.all(occupancy.alpha >= rays.alpha0)
 
@@ -86,7 +75,7 @@ def test_the_rays_on_two_threads_give_the_serial_map_bit_for_bit(monkeypatch, ma
     batches = [make(seed) for seed in range(3)]
     serial = _map(batches, True)
     monkeypatch.setattr(grid_module, "RAY_PARALLEL_MIN_SAMPLES", 1)
-    assert _same_map(serial, _map(batches, False, threads=2))
+    assert same_map(serial, _map(batches, False, threads=2))
 
 
 def test_ray_samples_are_the_written_samples():

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 import pytest
-from conftest import multibeam_fan
+from conftest import multibeam_fan, numba_threads, same_map
 
 from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
@@ -47,22 +47,11 @@ def _samples(rays, written: bool):
 
 
 def _map(batches, written: bool, wave=WAVE, threads: int = 1, max_length: float = 2.0):
-    before = numba.get_num_threads()
-    numba.set_num_threads(threads)
-    try:
+    with numba_threads(threads):
         mapper = make_mapper("tpu", wave=wave, max_length=max_length)
         for rays in batches:  # the grid starts small and grows in between and within batches
             mapper.integrate(_samples(rays, written))
         return mapper
-    finally:
-        numba.set_num_threads(before)
-
-
-def _same_map(a, b) -> bool:
-    n = a.grid.n_chunks
-    keys = np.array_equal(a.grid._keys[:n], b.grid._keys[: b.grid.n_chunks])
-    ca, cb = a.grid.cells(), b.grid.cells()
-    return keys and all(np.array_equal(x, y) for x, y in zip(ca, cb, strict=True))
 
 
 @pytest.mark.parametrize(("wave", "max_length"), [(WAVE, 2.0), (None, 2.0), (WAVE, 1.7)])
@@ -72,11 +61,11 @@ def test_the_rays_give_the_written_samples_map_bit_for_bit(wave, max_length):
     written = _map(batches, True, wave, max_length=max_length)
     rays = _map(batches, False, wave, max_length=max_length)
     assert written.grid.n_chunks > 64  # grown, and resumed after each growth
-    assert _same_map(written, rays)
+    assert same_map(written, rays)
     occupancy = rays.occupancy()
     assert len(occupancy) > 1000 and np.all(occupancy.alpha >= rays.alpha0)
     if wave is not None:  # the wave is in play: without it the map differs
-        assert not _same_map(rays, _map(batches, False, None, max_length=max_length))
+        assert not same_map(rays, _map(batches, False, None, max_length=max_length))
 
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread")
@@ -86,7 +75,7 @@ def test_the_rays_on_two_threads_give_the_serial_map_bit_for_bit(monkeypatch):
     batches = [_fan(seed) for seed in range(3)]
     serial = _map(batches, True)
     monkeypatch.setattr(grid_module, "RAY_PARALLEL_MIN_SAMPLES", 1)
-    assert _same_map(serial, _map(batches, False, threads=2))
+    assert same_map(serial, _map(batches, False, threads=2))
 
 
 def test_the_hits_and_the_extent_are_the_written_training_samples():

@@ -42,14 +42,18 @@ class GridOccupancy:
 
     def __len__(self) -> int:
         if self._len is None:
-            self._len = sum(len(cells) for cells, _, _ in self._mapper.grid.iter_cells())
+            self.n_occupied(float(self.metadata.get("occupied_threshold", OCCUPIED_THRESHOLD)))
         return self._len
 
     def n_occupied(self, threshold: float = OCCUPIED_THRESHOLD) -> int:
-        """Cells with mean occupancy E[theta] = alpha / (alpha + beta) > ``threshold``."""
+        """Cells with mean occupancy E[theta] = alpha / (alpha + beta) > ``threshold`` (the
+        cells counted in the same pass)."""
         if threshold not in self._occupied:
-            self._occupied[threshold] = sum(int(np.count_nonzero(a / (a + b) > threshold))
-                                            for _, a, b in self.parts())  # fmt: skip
+            cells = occupied = 0
+            for _, a, b in self.parts():
+                cells += len(a)
+                occupied += int(np.count_nonzero(a / (a + b) > threshold))
+            self._len, self._occupied[threshold] = cells, occupied
         return self._occupied[threshold]
 
     def load(self) -> OccupancyMap:

@@ -100,6 +100,19 @@ def _ray_scales(i, var, var_lo, var_hi, l_min, l_max, res, lengths, rot):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def free_points(ray, k0, m, n, origin, direction, f, rot, pts, scales):
+    """Free samples k0 .. k0 + m - 1 of ``ray`` into block columns n .. n + m - 1: the points
+    o + (k f) v and their kernel's axes and lengths (``rot``: (3, 5), the ray's rotation and
+    lengths as :func:`block_weights` reads them)."""
+    for j in range(3):
+        o, v = origin[ray, j], direction[ray, j]
+        for t in range(m):
+            pts[j, n + t] = o + ((k0 + t) * f) * v
+        for q in range(4):
+            scales[q, j, n : n + m] = rot[j, q + 1]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def ray_meets(i, k0, m, origin, direction, f, lj, axis, res, first, stop):
     """Whether the supports of ray i's free samples k0 .. k0 + m - 1 reach the cells [first,
     stop) along ``axis``: their coordinates along it are monotone in k, so their supports span
@@ -337,12 +350,7 @@ def ray_scatter_slab(start, axis, first, stop, origin, direction, r, var, sig, r
             if not ray_meets(ray, k0, m, origin, direction, f, lengths[axis], axis, res, first,
                               stop):  # fmt: skip
                 continue  # (a slab thread: none of these samples reaches its cells)
-            for j in range(3):  # o + (k f) v
-                o, v = origin[ray, j], direction[ray, j]
-                for t in range(m):
-                    pts[j, n + t] = o + ((k0 + t) * f) * v
-                for q in range(4):
-                    scales[q, j, n : n + m] = rot[j, q + 1]
+            free_points(ray, k0, m, n, origin, direction, f, rot, pts, scales)
             sigs[n : n + m] = sig[ray]
             n += m
         if n == 0:

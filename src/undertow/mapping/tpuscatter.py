@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from .chunks import CHUNK_SHIFT, find_or_insert, same_box, set_box
-from .rayscatter import BLOCK, block_cells, block_weights, ray_meets
+from .rayscatter import BLOCK, block_cells, block_weights, free_points, ray_meets
 from .samples import SENSOR_SONAR
 from .tpu import KERNEL_STD, wavenumbers
 
@@ -247,12 +247,7 @@ def tpu_scatter_slab(start, axis, first, stop, origin, direction, rows, f, sig, 
             if not ray_meets(ray, k0, m, origin, direction, f, l_free[axis], axis, res, first,
                              stop):  # fmt: skip
                 continue  # (a slab thread: none of these samples reaches its cells)
-            for j in range(3):  # o + (k f) v
-                o, v = origin[ray, j], direction[ray, j]
-                for t in range(m):
-                    pts[j, n + t] = o + ((k0 + t) * f) * v
-                for q in range(4):
-                    scales[q, j, n : n + m] = free_rot[j, q + 1]
+            free_points(ray, k0, m, n, origin, direction, f, free_rot, pts, scales)
             for t in range(m):
                 sigs[n + t], where[n + t] = sig[ray], row - m + t
             n += m
