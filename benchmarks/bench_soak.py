@@ -8,9 +8,12 @@ reported. ``chunked``: the bag read and filtered in 600 s pieces, the states on 
 integrated piece by piece: what `localize` and `map` do by default with a bag whose index
 spans more than 2 hours (``undertow.io.PIECES_ABOVE_S``; asked for with ``in_pieces=True``
 below that); when ``today`` is set (default up to 2 hours) also ``memory``: the whole log read
-and filtered in memory (the path before issue 27), with whether the two wrote the same files
-(TUM and npz arrays, config.yaml bytes but for the ``read_in_pieces`` record). Target: peak
-RSS under 2 GB at 24 hours. The hours are ``UNDERTOW_SOAK_HOURS`` (default 1).
+and filtered in memory (the path before issue 27), with ``compare``: whether the two wrote the
+same trajectory (TUM bytes, npz arrays) and where their config.yaml differ (:func:`_compare`;
+the 1-hour log is 4086 s: its pieces' first hour misses the last 486 s in the evidence figures
+of the log's choices, the same choices). Target: peak
+RSS under 2 GB at 24 hours. The hours are ``UNDERTOW_SOAK_HOURS`` (default 24: about 75 min
+of wall time here), run with the 1-hour log beside it (``UNDERTOW_SOAK_HOURS=1``: that one).
 
 Live (:func:`bench_live`, :mod:`soak_live`): ``serve`` plays the closed field survey again and
 again at 20x into `live` (all three links, view and map on) for ``UNDERTOW_SOAK_LIVE_HOURS`` of
@@ -144,18 +147,32 @@ def _step(step: str, log: Path, out, chunked: str = "0") -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def _same_files(a: Path, b: Path) -> bool:
+def _compare(a: Path, b: Path) -> dict:
+    """What the two runs' folders share: ``same_trajectory`` (trajectory.tum's bytes and every
+    array of trajectory.npz but its metadata, which is config.yaml's) and ``config_differs_at``
+    (the dotted keys where the config.yaml differ: the pieces' ``read_in_pieces`` record, and
+    for a log longer than the pieces' first hour the evidence figures of the log's choices,
+    which the pieces take from that hour)."""
     import numpy as np
     import yaml
 
-    if (a / "trajectory.tum").read_bytes() != (b / "trajectory.tum").read_bytes():
-        return False
-    configs = [yaml.safe_load((f / "config.yaml").read_text()) for f in (a, b)]
-    if [{k: v for k, v in c.items() if k != "read_in_pieces"} for c in configs] != [configs[1]] * 2:
-        return False
+    same = (a / "trajectory.tum").read_bytes() == (b / "trajectory.tum").read_bytes()
     with np.load(a / "trajectory.npz") as x, np.load(b / "trajectory.npz") as y:
-        arrays = [k for k in x.files if k != "metadata_json"]  # the metadata: config.yaml's
-        return x.files == y.files and all(np.array_equal(x[k], y[k]) for k in arrays)
+        arrays = [k for k in x.files if k != "metadata_json"]
+        same = same and x.files == y.files and all(np.array_equal(x[k], y[k]) for k in arrays)
+    configs = [_flat(yaml.safe_load((f / "config.yaml").read_text())) for f in (a, b)]
+    keys = sorted(k for k in configs[0].keys() | configs[1].keys()
+                  if configs[0].get(k) != configs[1].get(k))  # fmt: skip
+    return {"same_trajectory": same, "config_differs_at": keys}
+
+
+def _flat(doc, prefix: str = "") -> dict:
+    if not isinstance(doc, dict):
+        return {prefix: doc}
+    out = {}
+    for k, v in doc.items():
+        out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
+    return out
 
 
 def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
@@ -175,7 +192,7 @@ def bench_offline(hours: float = 24.0, today: bool | None = None) -> dict:
                 "map": _step("map", log, folder, how),
             }
         if today:
-            out["same_files"] = _same_files(root / "chunked", root / "memory")
+            out["compare"] = _compare(root / "chunked", root / "memory")
     return out
 
 
@@ -188,11 +205,12 @@ def bench_live(hours: float = 3.0) -> dict:
 
 
 def main() -> dict:
-    """``UNDERTOW_SOAK_HOURS`` (offline, default 1) and ``UNDERTOW_SOAK_LIVE_HOURS`` (live,
-    default 3; 0 skips it)."""
+    """``UNDERTOW_SOAK_HOURS`` (offline, default 24, printed beside the 1-hour run) and
+    ``UNDERTOW_SOAK_LIVE_HOURS`` (live, default 3; 0 skips it)."""
     live_hours = float(os.environ.get("UNDERTOW_SOAK_LIVE_HOURS", "3"))
     out = {"live": bench_live(live_hours)} if live_hours > 0 else {}
-    out["offline"] = bench_offline(float(os.environ.get("UNDERTOW_SOAK_HOURS", "1")))
+    hours = float(os.environ.get("UNDERTOW_SOAK_HOURS", "24"))
+    out["offline"] = {f"{h:g}h": bench_offline(h) for h in sorted({1.0, hours})}
     return out
 
 
