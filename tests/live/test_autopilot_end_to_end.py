@@ -94,27 +94,28 @@ class Run:
         return next((t for t, s in self.texts() if fragment in s), None)
 
 
-def _live_settings(robot, **live) -> Settings:
+def _live_settings(robot, rate=RATE, **live) -> Settings:
     ends = robot.endpoints
     return Settings(live=LiveSettings(dvl=ends.dvl, sonar=ends.sonar, mavlink=ends.mavlink_listen,
-                                      wave=WAVE, time_scale=RATE, reorder_s=0.3 * RATE,
+                                      wave=WAVE, time_scale=rate, reorder_s=0.3 * rate,
                                       map=False, idle_stop_s=60.0, autopilot=True,
                                       **live))  # fmt: skip
 
 
-def _drive(log, out, *, faults=None, serve_kw=None, handover_s=None, late_s=None,
+def _drive(log, out, *, faults=None, serve_kw=None, handover_s=None, late_s=None, rate=RATE,
            **live) -> Run:  # fmt: skip
     """Serve ``log`` with its autopilot and run ``live --autopilot`` against it until the data
     ends. ``handover_s``: stop that session after so many wall seconds of playback and start a
     new one (a restart of undertow and its filter) for the rest; ``late_s``: start undertow
-    that many wall seconds after the robot (and its autopilot) started."""
+    that many wall seconds after the robot (and its autopilot) started; ``rate``: the playback's
+    speed-up (default ``RATE``)."""
     port = _free_udp_port()
     kw = {"autopilot_params": EXTNAV, **(serve_kw or {})}
     wait = None if late_s else 10.0  # (late: playing before any client)
-    robot = serve(log, rate=RATE, dvl_port=0, ping_port=0, mavlink=f"udpout:127.0.0.1:{port}",
+    robot = serve(log, rate=rate, dvl_port=0, ping_port=0, mavlink=f"udpout:127.0.0.1:{port}",
                   faults=faults, wait_for_clients=wait, autopilot=True, **kw)  # fmt: skip
     robot.open()
-    settings = _live_settings(robot, **live)
+    settings = _live_settings(robot, rate, **live)
     if late_s:
         robot.start()
         time.sleep(late_s)
@@ -273,7 +274,10 @@ def test_a_restart_of_undertow_is_a_reset_the_autopilot_takes(dive, tmp_path, mo
     estimate at once instead of gating the step between the two sessions' frames."""
     draws = iter([10, 20])
     monkeypatch.setattr(gate_module, "random", SimpleNamespace(randrange=lambda n: next(draws)))
-    run = _drive(_cut(dive, 36.0), tmp_path, handover_s=12.0 / RATE, autopilot_origin=ORIGIN)
+    # at 2x, not RATE: the gap is about 3 s of log time (the new filter's start) plus the new
+    # session's start-up in wall time times the rate, 4x of which passed 7 s on a loaded machine
+    run = _drive(_cut(dive, 36.0), tmp_path, handover_s=12.0 / 2.0, autopilot_origin=ORIGIN,
+                 rate=2.0)
     first, second = (Estimate(r) for r in run.results)
     assert {r["reset_counter"] for r in first.sent} == {10}
     assert {r["reset_counter"] for r in second.sent} == {20}
