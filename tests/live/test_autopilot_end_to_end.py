@@ -276,8 +276,9 @@ def test_a_restart_of_undertow_is_a_reset_the_autopilot_takes(dive, tmp_path, mo
     monkeypatch.setattr(gate_module, "random", SimpleNamespace(randrange=lambda n: next(draws)))
     # at 2x, not RATE: the gap is about 3 s of log time (the new filter's start) plus the new
     # session's start-up in wall time times the rate, 4x of which passed 7 s on a loaded machine
-    run = _drive(_cut(dive, 36.0), tmp_path, handover_s=12.0 / 2.0, autopilot_origin=ORIGIN,
-                 rate=2.0)
+    run = _drive(
+        _cut(dive, 36.0), tmp_path, handover_s=12.0 / 2.0, autopilot_origin=ORIGIN, rate=2.0
+    )
     first, second = (Estimate(r) for r in run.results)
     assert {r["reset_counter"] for r in first.sent} == {10}
     assert {r["reset_counter"] for r in second.sent} == {20}
