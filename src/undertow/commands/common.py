@@ -12,7 +12,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import ReaderError
-from ..io import read_log
+from ..io import iter_log_pieces, read_log
 from ..io.clock import check_policy
 from ..io.read_options import LogOptions
 from ..io.topics import TopicMap
@@ -33,6 +33,20 @@ def load_log(path: str | Path, topics: str | Path | None = None,
         options = options.model_copy(update={"time": check_policy(time)})
     log = read_log(path, topics=topic_map, options=options)
     return settings.apply_mounting(log) if settings else log
+
+
+def load_log_pieces(
+    path: str | Path,
+    piece_s: float,
+    topics: str | Path | None,
+    settings: Settings,
+    streams: tuple[str, ...] | None = None,
+) -> Iterator[Log]:
+    """:func:`load_log` in pieces of ``piece_s`` seconds (:func:`~undertow.io.iter_log_pieces`;
+    ``streams``: only these streams), each piece with the settings' mounting applied."""
+    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics
+    pieces = iter_log_pieces(path, piece_s, topic_map, options=settings.log, streams=streams)
+    return (settings.apply_mounting(piece) for piece in pieces)
 
 
 def as_settings(settings: Settings | str | Path | None) -> Settings:

@@ -36,10 +36,10 @@ from ..evaluation.drift import (
     trajectory_drift,
 )
 from ..evaluation.trajectory import PoseStates, TrajectoryErrors, trajectory_rmse
-from ..io import PIECE_S, PieceChoice, iter_log_pieces, piece_choice
+from ..io import PIECE_S, PieceChoice, piece_choice
 from ..io.results import save_trajectory
 from ..io.rosbag import bag_topics
-from ..io.topics import LIVE_WAVE_TOPIC, TopicMap
+from ..io.topics import LIVE_WAVE_TOPIC
 from ..io.trajectory_stream import save_stored_trajectory
 from ..io.tum import read_tum
 from ..peers import UKF
@@ -47,7 +47,7 @@ from ..peers import resolve as resolve_estimator
 from ..settings import Settings
 from ..trajectory import Trajectory
 from ..trajectory_chunks import NpzTrajectory, TrajectoryStore
-from .common import as_settings, collect_warnings, load_log
+from .common import as_settings, collect_warnings, load_log, load_log_pieces
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,12 +221,9 @@ def _localize_in_pieces(path, topics, settings: Settings, params: dict, out: tup
     the whole log's, from a first pass over :data:`SITE_STREAMS`."""
     out_dir, overwrite = out
     profile, wave, calibration, extrapolate, smooth = options
-    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics
 
     def read(streams=None):
-        pieces = iter_log_pieces(path, choice.piece_s, topic_map, options=settings.log,
-                                 streams=streams)  # fmt: skip
-        return (settings.apply_mounting(piece) for piece in pieces)
+        return load_log_pieces(path, choice.piece_s, topics, settings, streams)
 
     store = _new_store(out_dir)
     try:

@@ -29,13 +29,12 @@ from ..evaluation.surface import (
     hull_area,
 )
 from ..evaluation.truth import check_truth_options, load_truth, truth_kind
-from ..io import PIECE_S, PieceChoice, iter_log_pieces, piece_choice
+from ..io import PIECE_S, PieceChoice, piece_choice
 from ..io.export.georef import from_latlon, from_projected, parse_origin, parse_utm
 from ..io.export.geotiff import SUFFIXES as GEOTIFF_SUFFIXES
 from ..io.export.geotiff_read import read_map_geotiff
 from ..io.ply import read_ply, write_map_ply
 from ..io.results import save_map
-from ..io.topics import TopicMap
 from ..io.trajectory_input import (
     TrajectoryOptions,
     TumInput,
@@ -60,7 +59,7 @@ from ..occupancy import MAP_FILE, OccupancyMap
 from ..settings import Settings
 from ..trajectory import Trajectory
 from ..trajectory_chunks import PoseTrack
-from .common import as_settings, collect_warnings, load_log, npz_file
+from .common import as_settings, collect_warnings, load_log, load_log_pieces, npz_file
 
 #: options that only one mapping method uses: giving one for another method is an error
 METHOD_OPTIONS = {"length_scale": "bki", "variance_bounds": "adaptive"}
@@ -169,9 +168,7 @@ def _in_pieces(log_path, given, tiles, config: MappingConfig, asked: tuple) -> P
 
 def _map_in_pieces(log_path, given, topics, settings: Settings, config: MappingConfig, prior,
                    choice: PieceChoice) -> MappingResult:  # fmt: skip
-    topic_map = TopicMap.from_yaml(topics) if topics else settings.topics
-    pieces = iter_log_pieces(log_path, choice.piece_s, topic_map, options=settings.log)
-    pieces = (settings.apply_mounting(piece) for piece in pieces)
+    pieces = load_log_pieces(log_path, choice.piece_s, topics, settings)
     trajectory, record = _trajectory_for_log(given, None, config)
     result = map_pieces(pieces, trajectory, config, prior=prior)
     result.metadata["trajectory"] = record
