@@ -107,6 +107,31 @@ def test_a_wide_beams_footprint_adds_to_the_horizontal_std():
     assert dvl[0][0] == 0.0  # a narrow DVL beam has no footprint term
 
 
+def test_a_wide_beams_first_return_falls_short_of_the_floor_on_its_axis():
+    """s_d = r (sec(b / 2) - 1): the nearest floor in a cone of full angle b over a plane of
+    slope b / 2 (found by brute force over the cone's rays) is that much shallower than the
+    floor on the axis; on gentler slopes it is less. It enters sigma_v (the DVL's does not)."""
+    b, h = 25.0, 2.5  # full beam angle (deg); the floor's depth under the sensor on the axis
+    half = math.radians(b / 2)
+    polar = np.linspace(0.0, half, 401)[:, None]
+    azimuth = np.linspace(0.0, 2 * np.pi, 721)[None, :]
+    ux, uz = np.sin(polar) * np.cos(azimuth), np.cos(polar) + 0 * azimuth
+    first = {}
+    for slope in (half, half / 2, 0.0):  # the plane z = h + x tan(slope), z down
+        with np.errstate(divide="ignore"):
+            along = h / (uz - ux * math.tan(slope))  # range to the plane along each ray
+        first[slope] = along[along > 0].min()  # the first return
+    r = first[half]
+    assert h - r == pytest.approx(r * (1 / math.cos(half) - 1), abs=1e-6)
+    assert 0 < h - first[half / 2] < h - r and h - first[0.0] == pytest.approx(0.0, abs=1e-12)
+    _, _, sv, s_r = hit_sigmas(_hit(z=r, var=(0.0, 0.0, 1e-4), sensor=SENSOR_SONAR),
+                               (0.005, 0.01, 0.01), 0.005, b)  # fmt: skip
+    s_d = h - r  # the shortfall on that plane, r (sec(b / 2) - 1)
+    assert sv[0] == pytest.approx(math.sqrt(1e-4 + s_r[0] ** 2 + s_d**2))
+    dvl = hit_sigmas(_hit(z=r, var=(0.0, 0.0, 1e-4)), (0.005, 0.01, 0.01), 0.005, b)
+    assert dvl[2][0] == pytest.approx(math.sqrt(1e-4 + 0.005**2))
+
+
 def test_the_waves_range_noise_is_the_orbital_displacement_between_sensor_and_floor():
     """s_w = a K_s(d) / sqrt 2, K_s = sinh(k (h - d)) / sinh(k h): a at the surface (d = 0),
     0 on the floor (d = h), with k from the dispersion relation in depth h."""

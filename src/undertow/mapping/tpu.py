@@ -7,12 +7,20 @@ and a range r_i of standard deviation s_r = s_0 + f r_i (s_0 per sensor: ``range
 ``range_std_sonar``, ``range_std_multibeam``; f = ``range_std_fraction`` for the sonar and the
 multibeam, 0 for the DVL) has the per-axis uncertainty
 
-    sigma_x^2 = s_x^2 + s_b^2,   sigma_y^2 = s_y^2 + s_b^2,   sigma_v^2 = s_z^2 + s_r^2 + s_w^2
+    sigma_x^2 = s_x^2 + s_b^2,   sigma_y^2 = s_y^2 + s_b^2,
+    sigma_v^2 = s_z^2 + s_r^2 + s_w^2 + s_d^2
 
 (z down; beams near vertical). s_b is a wide beam's footprint: a first return may come from
 anywhere in a cone of full angle b (``sonar_beam_width_deg``, the sonar's; the DVL's and the
-multibeam's beams are narrow, s_b = 0), a disk of radius R = r tan(b / 2) whose per-axis
-standard deviation is R / 2. s_w is the waves' share (the paper's point: waves corrupt the
+multibeam's beams are narrow, s_b = s_d = 0), a disk of radius R = r tan(b / 2) whose per-axis
+standard deviation is R / 2. s_d is the same beam's shortfall in depth: the first return is the
+nearest floor in the cone, not the floor on the axis, so the hit placed on the axis at range r
+lies above that floor, by r (sec s - 1) on a plane of slope s < b / 2 (the slope error of a
+wide-beam echo sounder: X. Lurton, "An Introduction to Underwater Acoustics", 2nd ed. 2010,
+sec. 8.2; IHO C-13 Manual on Hydrography, ch. 3). s_d = r (sec(b / 2) - 1), the largest
+shortfall on a plane, is taken as one standard deviation: relief steeper than the cone (a step,
+a rock) falls short by more. It lowers the hit's weight (below), so where the narrow beams
+reach a column they decide its depth. s_w is the waves' share (the paper's point: waves corrupt the
 acoustic measurements): the RMS vertical orbital displacement between the sensor at depth d
 and the floor at depth h of the linear wave of amplitude a and frequency f the trajectory's
 filter used, s_w = a K_s(d) / sqrt(2), K_s = sinh(k (h - d)) / sinh(k h), k from
@@ -163,9 +171,12 @@ def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
     s_w = wave_range_std(samples, rows, wave, resolution)
     s_r = np.hypot(s0[sensor] + fraction[sensor] * rng, s_w)
     half = np.deg2rad(sonar_beam_width_deg) / 2.0
-    s_b2 = np.where(sensor == SENSOR_SONAR, (rng * np.tan(half) / 2.0) ** 2, 0.0)
-    return (np.sqrt(var[:, 0] + s_b2), np.sqrt(var[:, 1] + s_b2), np.sqrt(var[:, 2] + s_r**2),
-            s_r)  # fmt: skip
+    tan_half = np.tan(half)
+    sonar = sensor == SENSOR_SONAR
+    s_b2 = np.where(sonar, (rng * tan_half / 2.0) ** 2, 0.0)
+    s_d2 = np.where(sonar, (rng * (np.sqrt(1.0 + tan_half * tan_half) - 1.0)) ** 2, 0.0)
+    return (np.sqrt(var[:, 0] + s_b2), np.sqrt(var[:, 1] + s_b2),
+            np.sqrt(var[:, 2] + s_r**2 + s_d2), s_r)  # fmt: skip
 
 
 def lattice_weights(z, sigma_v, resolution: float):

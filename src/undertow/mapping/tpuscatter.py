@@ -117,10 +117,12 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
     the wave's s_w (:func:`_wave_std` of the exponentials ``e`` (2, R) and ``m`` (R,) of
     :func:`wave_arguments`' arguments; 0 where ``e`` is empty: no wave), its range ||m - o||,
     s_r' = hypot(s_0 + f ||m - o||, s_w), the footprint s_b (the sonar:
-    ||m - o|| tan(b / 2) / 2), sigma_x,y = sqrt(s_x,y^2 + s_b^2), sigma_v = sqrt(s_z^2 +
-    s_r'^2), l_x,y = clip(sigma / c, l_0, l_cap), the weight and the lattice of
+    ||m - o|| tan(b / 2) / 2) and shortfall s_d (the sonar: ||m - o|| (sec(b / 2) - 1)),
+    sigma_x,y = sqrt(s_x,y^2 + s_b^2), sigma_v = sqrt(s_z^2 + s_r'^2 + s_d^2),
+    l_x,y = clip(sigma / c, l_0, l_cap), the weight and the lattice of
     :mod:`undertow.mapping.tpu` (``unknown``: the sensor taken for a code outside 0 .. 2)."""
     n = r.shape[0]
+    shortfall = np.sqrt(1.0 + tan_half * tan_half) - 1.0  # sec(b / 2) - 1
     hx, hy = np.empty(n), np.empty(n)
     hl, hz, hw = np.empty((n, 2)), np.empty((n, 3)), np.empty((n, 3))
     for i in range(n):
@@ -133,12 +135,14 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
         s = s if 0 <= s < 3 else unknown
         s_w = _wave_std(e[0, i], e[1, i], m[i], amplitude) if e.shape[1] == n else 0.0
         s_r = np.hypot(s0[s] + fraction[s] * rng, s_w)
-        s_b2 = 0.0
+        s_b2, s_d2 = 0.0, 0.0
         if s == SENSOR_SONAR:
             s_b = rng * tan_half / 2.0
             s_b2 = s_b * s_b
+            s_d = rng * shortfall
+            s_d2 = s_d * s_d
         sx, sy = np.sqrt(var[i, 0] + s_b2), np.sqrt(var[i, 1] + s_b2)
-        sv = np.sqrt(var[i, 2] + s_r * s_r)
+        sv = np.sqrt(var[i, 2] + s_r * s_r + s_d2)
         lx = min(max(sx / KERNEL_STD, base), max_length)
         ly = min(max(sy / KERNEL_STD, base), max_length)
         precision = s_r * s_r / (sv * sv) if sv > 0 else 1.0
