@@ -25,10 +25,53 @@ OCCUPIED_THRESHOLD = 0.5
 MAP_FILE = "a map.npz written by `undertow map` (or its folder)"
 
 
+#: what each column of :attr:`ColumnStats.sums` holds, per (x, y) column of the map
+COLUMN_SUMS = ("weight", "weight_var_v", "weight_var_x", "weight_var_y")
+
+
+@dataclass(frozen=True, eq=False)
+class ColumnStats:
+    """Per (x, y) column (index i = floor(x / res), j = floor(y / res)): the hit evidence it
+    received and that evidence's uncertainties, sum_i w_i, sum_i w_i sigma_v,i^2,
+    sum_i w_i s_x,i^2, sum_i w_i s_y,i^2 (:data:`COLUMN_SUMS`; w_i the kernel-weighted mass of
+    hit i in the column, sigma_v,i its vertical standard deviation, s_x,i and s_y,i its pose's
+    horizontal ones). Written by the ``tpu`` mapper; read by
+    :func:`~undertow.mapping.surface.evidence_surface`."""
+
+    cells: np.ndarray
+    sums: np.ndarray
+
+    def __post_init__(self) -> None:
+        cells = np.asarray(self.cells, dtype=np.int64).reshape(-1, 2)
+        sums = np.asarray(self.sums, dtype=float).reshape(-1, len(COLUMN_SUMS))
+        if len(cells) != len(sums):
+            raise DataError(f"ColumnStats: {len(cells)} columns but {len(sums)} rows of sums")
+        object.__setattr__(self, "cells", cells)
+        object.__setattr__(self, "sums", sums)
+
+    def __len__(self) -> int:
+        return int(self.cells.shape[0])
+
+    @classmethod
+    def merged(cls, parts) -> ColumnStats:
+        """The sums of several ColumnStats added column by column (tiles, a prior)."""
+        parts = [p for p in parts if p is not None and len(p)]
+        if not parts:
+            return cls(np.zeros((0, 2), np.int64), np.zeros((0, len(COLUMN_SUMS))))
+        cells = np.concatenate([p.cells for p in parts])
+        sums = np.concatenate([p.sums for p in parts])
+        unique, inverse = np.unique(cells, axis=0, return_inverse=True)
+        out = np.zeros((len(unique), sums.shape[1]))
+        np.add.at(out, inverse.reshape(-1), sums)
+        return cls(unique, out)
+
+
 @dataclass(frozen=True, eq=False)
 class OccupancyMap:
     """Posterior Beta(alpha, beta) per mapped cell; ``alpha``/``beta`` include the priors
-    ``alpha0``/``beta0`` (kept to recover the evidence alpha - alpha0, beta - beta0)."""
+    ``alpha0``/``beta0`` (kept to recover the evidence alpha - alpha0, beta - beta0).
+    ``columns``: the hits' uncertainties per (x, y) column (:class:`ColumnStats`, the ``tpu``
+    mapper's; None for the others and for maps written before them)."""
 
     cells: np.ndarray
     alpha: np.ndarray
@@ -37,6 +80,7 @@ class OccupancyMap:
     alpha0: float
     beta0: float
     metadata: dict = field(default_factory=dict)
+    columns: ColumnStats | None = None
 
     def __post_init__(self) -> None:
         cells = np.asarray(self.cells, dtype=np.int64).reshape(-1, 3)
@@ -120,6 +164,7 @@ class OccupancyMap:
                 fh, cells=self.cells, alpha=self.alpha, beta=self.beta,
                 resolution=self.resolution, alpha0=self.alpha0, beta0=self.beta0,
                 metadata=np.array(json.dumps(self.metadata, default=str)),
+                **column_arrays(self.columns),
             )  # fmt: skip
         return path
 
@@ -138,11 +183,20 @@ class OccupancyMap:
                     cells=d["cells"], alpha=d["alpha"], beta=d["beta"],
                     resolution=float(d["resolution"]), alpha0=float(d["alpha0"]),
                     beta0=float(d["beta0"]), metadata=json.loads(str(d["metadata"])),
+                    columns=(ColumnStats(d["column_cells"], d["column_sums"])
+                             if "column_cells" in d else None),
                 )  # fmt: skip
         except FileNotFoundError as exc:
             raise ReaderError(f"{path}: no such map file") from exc
         except (KeyError, ValueError, OSError) as exc:
             raise ReaderError(f"{path}: not an undertow map ({exc})") from exc
+
+
+def column_arrays(columns: ColumnStats | None) -> dict:
+    """The arrays ``map.npz`` stores a map's :class:`ColumnStats` in (none without them)."""
+    if columns is None:
+        return {}
+    return {"column_cells": columns.cells, "column_sums": columns.sums}
 
 
 _KINDS = {

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..io.npz_parts import write_npz_parts
 from ..io.ply import write_ply_parts
-from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
+from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap, column_arrays
 
 
 class GridOccupancy:
@@ -60,7 +60,13 @@ class GridOccupancy:
         """The map formed whole in memory."""
         whole = self._mapper.occupancy()
         return OccupancyMap(whole.cells, whole.alpha, whole.beta, self.resolution, self.alpha0,
-                            self.beta0, self.metadata)  # fmt: skip
+                            self.beta0, self.metadata, whole.columns)  # fmt: skip
+
+    def columns(self):
+        """The map's column sums (:class:`~undertow.occupancy.ColumnStats`; a ``tpu`` map's,
+        else None), whole: a column's four sums to a layer of cells."""
+        grid = getattr(self._mapper, "columns", None)
+        return None if grid is None else grid.stats()
 
     def save(self, path):
         """``map.npz`` as :meth:`OccupancyMap.save <undertow.occupancy.OccupancyMap.save>`,
@@ -75,7 +81,8 @@ class GridOccupancy:
                     "beta": (np.float64, (n,), column(2))}  # fmt: skip
         small = {"resolution": np.array(self.resolution), "alpha0": np.array(self.alpha0),
                  "beta0": np.array(self.beta0),
-                 "metadata": np.array(json.dumps(self.metadata, default=str))}  # fmt: skip
+                 "metadata": np.array(json.dumps(self.metadata, default=str)),
+                 **column_arrays(self.columns())}  # fmt: skip
         return write_npz_parts(path, streamed, small)
 
     def write_ply(self, path, threshold: float = OCCUPIED_THRESHOLD):

@@ -27,6 +27,7 @@ kernels (see :mod:`undertow.mapping.kernels`).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from pathlib import Path
@@ -35,6 +36,7 @@ import numpy as np
 
 from ..errors import ConfigError, DataError
 from ..occupancy import OccupancyMap
+from .columns import ColumnGrid
 from .config import MappingConfig, Method
 from .grid import ChunkedGrid, points_extent
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
@@ -133,8 +135,9 @@ class Mapper:
                 "mapping.max_memory_gb): use a coarser resolution or raise the limit"
             )
 
-    def seed(self, prior: OccupancyMap | str | Path) -> None:
-        """Add a saved map's evidence (alpha - alpha_0, beta - beta_0 per cell) to this map."""
+    def seed(self, prior: OccupancyMap | str | Path) -> OccupancyMap:
+        """Add a saved map's evidence (alpha - alpha_0, beta - beta_0 per cell) to this map;
+        returns the prior map."""
         if not isinstance(prior, OccupancyMap):
             self.seeded_from = str(prior)
             prior = OccupancyMap.load(prior)
@@ -143,6 +146,7 @@ class Mapper:
                 f"prior map resolution {prior.resolution} m differs from {self.resolution} m"
             )
         self.grid.add_mass(prior.cells, prior.alpha - prior.alpha0, prior.beta - prior.beta0)
+        return prior
 
     def metadata(self) -> dict:
         """Parameters and bookkeeping, stored with the map."""
@@ -258,6 +262,8 @@ class TpuBkiMapper(Mapper):
         self.base_length, self.max_length = float(base_length), float(max_length)
         self.range_std = tuple(float(v) for v in range_std)  # DVL, sonar, multibeam
         self.range_std_fraction = float(range_std_fraction)
+        #: the hits' uncertainties per column (:mod:`~undertow.mapping.columns`)
+        self.columns = ColumnGrid(self.resolution, self.grid.resident_bytes)
 
     def _settings(self) -> dict:
         return {"resolution": self.resolution, "base_length": self.base_length,
@@ -284,6 +290,7 @@ class TpuBkiMapper(Mapper):
                 self._check_need(need, n, limit_gb)
                 try:
                     self.grid.scatter_tpu(rays, hits, cap, (lo, hi, finite), n)
+                    self.columns.add_rays(rays, hits, cap)
                 except MemoryError:
                     raise out_of_memory(self.resolution) from None
                 return
@@ -301,6 +308,21 @@ class TpuBkiMapper(Mapper):
         training = Samples.from_points(points, label, weight, lengths / cap)
         bounds = (np.zeros(3), np.ones(3))
         self._grid_scatter(MODE_PRODUCT, training, bounds, np.zeros(3), cap)
+        try:
+            self.columns.add_samples(samples, float(cap[0]), **self._settings())
+        except MemoryError:
+            raise out_of_memory(self.resolution) from None
+
+    def seed(self, prior) -> None:
+        """:meth:`Mapper.seed`, and the prior's column sums (a ``tpu`` map's)."""
+        prior = super().seed(prior)
+        self.columns.add_stats(prior.columns)
+        return prior
+
+    def occupancy(self) -> OccupancyMap:
+        """:meth:`Mapper.occupancy` with the column sums (:class:`~undertow.occupancy.
+        ColumnStats`)."""
+        return dataclasses.replace(super().occupancy(), columns=self.columns.stats())
 
     def metadata(self) -> dict:
         return {**super().metadata(), "base_length": self.base_length,

@@ -154,7 +154,8 @@ def default_estimator(occupancy: OccupancyMap) -> str:
 
 
 def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, *,
-                occupied_only: bool = False, estimator: str | None = None) -> Surface:  # fmt: skip
+                occupied_only: bool = False, estimator: str | None = None,
+                uncertainty: str | None = None) -> Surface:  # fmt: skip
     """The seafloor surface ``occupancy`` implies (equations in the module doc): per column a
     depth d and its standard deviation s; no data where no cell's mean exceeds ``threshold``.
     ``estimator``: ``first-occupied`` (the expected first occupied depth), ``evidence``
@@ -162,7 +163,7 @@ def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, 
     map's (cell i has centre (i + 1/2) res), over the bounding box of the map's columns.
     ``occupied_only``: only the occupied cells (mean > threshold, the paper's map points) enter
     the expectation; cells below the threshold then neither stop a column nor pull its depth
-    up."""
+    up. ``uncertainty``: the evidence surface's std (:func:`evidence_surface`)."""
     estimator = default_estimator(occupancy) if estimator is None else estimator
     if estimator not in SURFACE_ESTIMATORS:
         raise DataError(f"surface estimator {estimator!r}: expected one of {SURFACE_ESTIMATORS}")
@@ -172,7 +173,7 @@ def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, 
         empty = np.zeros((0, 0))
         return Surface(0.0, 0.0, float(occupancy.resolution), empty, empty, empty.astype(bool))
     if estimator == "evidence":
-        return evidence_surface(occupancy, threshold)
+        return evidence_surface(occupancy, threshold, uncertainty=uncertainty)
     return _first_occupied(occupancy, threshold)
 
 
@@ -212,11 +213,16 @@ def _grid(ij, covered, depth_by_column, var_by_column, res: float) -> Surface:
     return Surface(x0, y0, res, depth, std, np.isfinite(depth))
 
 
-def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD) -> Surface:
-    """The evidence surface of ``occupancy`` (module doc): per column the mean d and standard
-    deviation s of the cells' hit evidence w_k = alpha_k - alpha_0, with the least variance of
-    a distribution on cells of size r with mean d removed; data where a cell's mean exceeds
-    ``threshold`` and the column holds evidence."""
+def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, *,
+                     uncertainty: str | None = None) -> Surface:  # fmt: skip
+    """The evidence surface of ``occupancy`` (module doc): per column the mean d of the
+    cells' hit evidence w_k = alpha_k - alpha_0 and its standard deviation s, the hits'
+    propagated uncertainty (``uncertainty="propagated"``, the default for a map with
+    :class:`~undertow.occupancy.ColumnStats`) or the evidence's spread with the least
+    variance of a distribution on cells of size r with mean d removed (``"spread"``, the
+    default without them); data where a cell's mean exceeds ``threshold`` and the column
+    holds evidence."""
+    uncertainty = _uncertainty(occupancy, uncertainty)
     res = float(occupancy.resolution)
     if len(occupancy) == 0:
         empty = np.zeros((0, 0))
@@ -235,7 +241,69 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     f -= np.floor(f)
     var = np.maximum(spread - f * (1.0 - f) * res * res, 0.0)
     covered = (np.maximum.reduceat(p, starts) > threshold) & (total > 0)
-    return _grid(cells[starts, :2], covered, d, var, res)
+    surface = _grid(cells[starts, :2], covered, d, var, res)
+    if uncertainty == "spread":
+        return surface
+    return propagated_std(surface, occupancy.columns)
+
+
+#: The depth std of the evidence surface: the hits' propagated uncertainty, or their spread
+UNCERTAINTIES = ("propagated", "spread")
+
+
+def _uncertainty(occupancy: OccupancyMap, uncertainty: str | None) -> str:
+    """The checked ``uncertainty`` of :func:`evidence_surface` (None: its default)."""
+    if uncertainty is None:
+        return "spread" if occupancy.columns is None else "propagated"
+    if uncertainty not in UNCERTAINTIES:
+        raise DataError(f"surface uncertainty {uncertainty!r}: expected one of {UNCERTAINTIES}")
+    if uncertainty == "propagated" and occupancy.columns is None:
+        raise DataError(
+            "surface uncertainty 'propagated' needs the map's column sums (a tpu map written "
+            "by this version); use 'spread'"
+        )
+    return uncertainty
+
+
+def propagated_std(surface: Surface, columns) -> Surface:
+    """``surface`` with its std replaced, in the columns ``columns``
+    (:class:`~undertow.occupancy.ColumnStats`) holds, by the propagated uncertainty of the
+    column's hits (module doc):
+
+        s^2 = V / W + (X / W) (dd/dx)^2 + (Y / W) (dd/dy)^2,
+
+    the slope dd/dx by central differences of the surface's depths (one-sided beside a column
+    without data, 0 with neither neighbour)."""
+    ny, nx = surface.shape
+    res = surface.resolution
+    i0 = int(round(surface.x0 / res - 0.5))
+    j0 = int(round(surface.y0 / res - 0.5))
+    ci, cj = columns.cells[:, 0] - i0, columns.cells[:, 1] - j0
+    inside = (ci >= 0) & (ci < nx) & (cj >= 0) & (cj < ny) & (columns.sums[:, 0] > 0)
+    means = np.full((ny, nx, 3), np.nan)
+    means[cj[inside], ci[inside]] = columns.sums[inside, 1:] / columns.sums[inside, :1]
+    gx, gy = _slope(surface.depth, 1, res), _slope(surface.depth, 0, res)
+    var = means[..., 0] + means[..., 1] * gx * gx + means[..., 2] * gy * gy
+    std = np.where(surface.coverage & np.isfinite(var), np.sqrt(np.maximum(var, 0.0)),
+                   surface.std)  # fmt: skip
+    return Surface(surface.x0, surface.y0, res, surface.depth, std, surface.coverage)
+
+
+def _slope(depth: np.ndarray, axis: int, res: float) -> np.ndarray:
+    """dd/d(axis) of a depth grid by central differences, one-sided where a neighbour has no
+    data, 0 where neither has."""
+    ahead = np.full(depth.shape, np.nan)
+    behind = np.full(depth.shape, np.nan)
+    inner = [slice(None)] * 2
+    outer = [slice(None)] * 2
+    inner[axis], outer[axis] = slice(1, None), slice(None, -1)
+    diff = depth[tuple(inner)] - depth[tuple(outer)]
+    ahead[tuple(outer)] = diff  # d[k + 1] - d[k] at k
+    behind[tuple(inner)] = diff  # d[k] - d[k - 1] at k
+    both = np.stack([ahead, behind])
+    n = np.sum(np.isfinite(both), axis=0)
+    total = np.nansum(both, axis=0)
+    return np.where(n > 0, total / np.maximum(n, 1), 0.0) / res
 
 
 def surface_from_points(points, resolution: float, origin: tuple[float, float] | None = None,

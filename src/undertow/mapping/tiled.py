@@ -48,7 +48,7 @@ import numpy as np
 
 from .._util.dask import check_scheduler, describe_exception
 from ..errors import ConfigError, DataError, ReaderError
-from ..occupancy import OccupancyMap
+from ..occupancy import ColumnStats, OccupancyMap, column_arrays
 from .config import MappingConfig
 from .mappers import mapper_from_config
 from .samples import Samples
@@ -186,7 +186,8 @@ def subset(samples: Samples, index: np.ndarray) -> Samples:
 
 @dataclass
 class TileResult:
-    """One tile's owned cells and their evidence mass (alpha - alpha_0, beta - beta_0)."""
+    """One tile's owned cells and their evidence mass (alpha - alpha_0, beta - beta_0), and
+    its owned columns' sums (a ``tpu`` map's, else None)."""
 
     tile: TileId
     cells: np.ndarray
@@ -195,6 +196,7 @@ class TileResult:
     n_samples: int = 0
     seconds: float = 0.0
     grid_bytes: int = 0
+    columns: ColumnStats | None = None
 
 
 def map_tile(tile: TileId, samples: Samples, config: MappingConfig, tiling: Tiling,
@@ -209,8 +211,13 @@ def map_tile(tile: TileId, samples: Samples, config: MappingConfig, tiling: Tili
         mapper.integrate(samples)
     cells, alpha, beta = mapper.grid.cells()
     own = np.all(tiling.tiles_of_cells(cells) == np.asarray(tile), axis=1)
+    columns = getattr(mapper, "columns", None)
+    if columns is not None:
+        columns = columns.stats()
+        mine = np.all(tiling.tiles_of_cells(columns.cells) == np.asarray(tile), axis=1)
+        columns = ColumnStats(columns.cells[mine], columns.sums[mine])
     return TileResult(tile, cells[own], alpha[own], beta[own], len(samples),
-                      time.perf_counter() - start, mapper.grid.nbytes)  # fmt: skip
+                      time.perf_counter() - start, mapper.grid.nbytes, columns)  # fmt: skip
 
 
 def _tile_task(tile: TileId, source, config, tiling, bounds) -> TileResult:
@@ -421,7 +428,8 @@ def map_tiled(samples: Samples, config: MappingConfig, tile_size: float, *,
     else:
         cells, a, b = collector.arrays()
         merged = OccupancyMap(cells, config.alpha0 + a, config.beta0 + b, config.resolution,
-                              config.alpha0, config.beta0, meta)  # fmt: skip
+                              config.alpha0, config.beta0, meta,
+                              tile_columns(collector.results))  # fmt: skip
     failed = {tile_name(t): why for t, why in sorted(run.failures.items())}
     if failed:
         first = next(iter(failed.items()))
@@ -479,7 +487,8 @@ def write_tile(tile_dir: str | Path, result: TileResult) -> Path:
     path = Path(tile_dir) / f"tile_{tile_name(result.tile)}.npz"
     tmp = path.with_suffix(".tmp.npz")
     np.savez(tmp, cells=result.cells, alpha_mass=result.alpha_mass,
-             beta_mass=result.beta_mass, tile=np.asarray(result.tile))  # fmt: skip
+             beta_mass=result.beta_mass, tile=np.asarray(result.tile),
+             **column_arrays(result.columns))  # fmt: skip
     os.replace(tmp, path)
     return path
 
@@ -501,7 +510,10 @@ def iter_tiles(tile_dir: str | Path) -> Iterable[TileResult]:
         try:
             with np.load(path, allow_pickle=False) as d:
                 tile = tuple(int(v) for v in d["tile"])
-                yield TileResult(tile, d["cells"], d["alpha_mass"], d["beta_mass"])
+                columns = (ColumnStats(d["column_cells"], d["column_sums"])
+                           if "column_cells" in d else None)  # fmt: skip
+                yield TileResult(tile, d["cells"], d["alpha_mass"], d["beta_mass"],
+                                 columns=columns)  # fmt: skip
         except (KeyError, ValueError, OSError) as exc:
             raise ReaderError(f"{path}: not a map tile ({exc})") from None
 
@@ -529,4 +541,11 @@ def read_tiles(tile_dir: str | Path) -> OccupancyMap:
         if n > 0 and not np.all(np.floor_divide(t.cells[:, :2], n) == t.tile):
             raise DataError(f"{tile_dir}: tile {tile_name(t.tile)} holds cells of another tile")
     return OccupancyMap(cells, alpha0 + a, beta0 + b, resolution, alpha0, beta0,
-                        doc.get("metadata", {}))  # fmt: skip
+                        doc.get("metadata", {}), tile_columns(tiles))  # fmt: skip
+
+
+def tile_columns(tiles) -> ColumnStats | None:
+    """The column sums of the tiles merged (each tile holds the columns it owns), or None when
+    the tiles have none (not a ``tpu`` map)."""
+    parts = [t.columns for t in tiles if t.columns is not None]
+    return ColumnStats.merged(parts) if parts else None

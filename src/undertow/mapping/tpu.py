@@ -196,12 +196,12 @@ def lattice_weights(z, sigma_v, resolution: float):
     return centres, np.stack([w_minus, w_zero, w_plus], axis=1)
 
 
-def tpu_training(samples: Samples, *, resolution: float, base_length: float, max_length: float,
-                 range_std, range_std_fraction: float, sonar_beam_width_deg: float = 0.0,
-                 wave=None):  # fmt: skip
-    """The samples the ``tpu`` mapper scatters with the product kernel, and their per-axis
-    length scales: (points (M, 3), label (M,), weight (M,), lengths (M, 3)). Free samples
-    first, in order, then every hit's three vertical cells (module doc)."""
+def tpu_hit_weights(samples: Samples, *, resolution: float, base_length: float,
+                    max_length: float, range_std, range_std_fraction: float,
+                    sonar_beam_width_deg: float = 0.0, wave=None):  # fmt: skip
+    """Per hit of ``samples`` (label 1, in order; module doc): (x, y, l_x, l_y, weight
+    sigma_0 (l_0 / l_x) (l_0 / l_y) s_r'^2 / sigma_v^2, sigma_v^2, the pose's horizontal
+    variances (n, 2))."""
     sx, sy, sv, s_r = hit_sigmas(samples, range_std, range_std_fraction, sonar_beam_width_deg,
                                  wave, resolution)  # fmt: skip
     hit = samples.label > 0.5
@@ -209,6 +209,23 @@ def tpu_training(samples: Samples, *, resolution: float, base_length: float, max
     ly = np.clip(sy / KERNEL_STD, base_length, max_length)
     precision = np.divide(s_r * s_r, sv * sv, out=np.ones_like(sv), where=sv > 0)
     weight = samples.sigma0[hit] * (base_length / lx) * (base_length / ly) * precision
+    points = samples.points[hit]
+    return (points[:, 0], points[:, 1], lx, ly, weight, sv * sv,
+            samples.pose_variance[hit, :2])  # fmt: skip
+
+
+def tpu_training(samples: Samples, *, resolution: float, base_length: float, max_length: float,
+                 range_std, range_std_fraction: float, sonar_beam_width_deg: float = 0.0,
+                 wave=None):  # fmt: skip
+    """The samples the ``tpu`` mapper scatters with the product kernel, and their per-axis
+    length scales: (points (M, 3), label (M,), weight (M,), lengths (M, 3)). Free samples
+    first, in order, then every hit's three vertical cells (module doc)."""
+    settings = {"resolution": resolution, "base_length": base_length, "max_length": max_length,
+                "range_std": range_std, "range_std_fraction": range_std_fraction,
+                "sonar_beam_width_deg": sonar_beam_width_deg, "wave": wave}  # fmt: skip
+    _, _, lx, ly, weight, var_v, _ = tpu_hit_weights(samples, **settings)
+    sv = np.sqrt(var_v)
+    hit = samples.label > 0.5
     free = ~hit
     lengths_free = np.tile([base_length, base_length, resolution / 2], (int(free.sum()), 1))
     centres, w = lattice_weights(samples.points[hit, 2], sv, resolution)

@@ -45,8 +45,9 @@ _TWO_PI = 2.0 * np.pi
 
 class TpuHits(NamedTuple):
     """Per hit (ray) i: the point's x, y (o + r v), its lengths along x and y as the scatter
-    takes them (``l``, (R, 2)), its three cells' z (R, 3) and weights (R, 3; 0: left out); and
-    the free samples' lengths (3,), as the scatter takes them."""
+    takes them (``l``, (R, 2)), its three cells' z (R, 3) and weights (R, 3; 0: left out); the
+    free samples' lengths (3,), as the scatter takes them; and the hit's weight (R,) and
+    vertical variance sigma_v^2 (R,)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -54,6 +55,8 @@ class TpuHits(NamedTuple):
     z: np.ndarray
     w: np.ndarray
     l_free: np.ndarray
+    weight: np.ndarray
+    var_v: np.ndarray
 
 
 def tpu_hits(rays, *, resolution: float, base_length: float, max_length: float, range_std,
@@ -73,10 +76,10 @@ def tpu_hits(rays, *, resolution: float, base_length: float, max_length: float, 
         e, m = np.exp(args[:2]), np.expm1(args[2])
     tan_half = float(np.tan(np.deg2rad(sonar_beam_width_deg) / 2.0))
     l_free = (np.array([base_length, base_length, res / 2]) / cap) * cap
-    out = hit_lattice(rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor, e, m,
+    *out, weight, var_v = hit_lattice(rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor, e, m,
                       amplitude, s0, fraction, int(np.argmax(s0)), tan_half, float(base_length),
                       float(max_length), cap, res)  # fmt: skip
-    return TpuHits(*out, l_free)
+    return TpuHits(*out, l_free, weight, var_v)
 
 
 @njit(cache=True, error_model="numpy")
@@ -113,7 +116,8 @@ def _wave_std(e1, e2, m, amplitude):
 @njit(cache=True, error_model="numpy")
 def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fraction, unknown,
                 tan_half, base, max_length, cap, res):  # fmt: skip
-    """(x, y, l (R, 2), z (R, 3), w (R, 3)) of :class:`TpuHits`: per ray the hit m = o + r v,
+    """(x, y, l (R, 2), z (R, 3), w (R, 3), weight, var_v) of :class:`TpuHits`: per ray the
+    hit m = o + r v,
     the wave's s_w (:func:`_wave_std` of the exponentials ``e`` (2, R) and ``m`` (R,) of
     :func:`wave_arguments`' arguments; 0 where ``e`` is empty: no wave), its range ||m - o||,
     s_r' = hypot(s_0 + f ||m - o||, s_w), the footprint s_b (the sonar:
@@ -125,6 +129,7 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
     shortfall = np.sqrt(1.0 + tan_half * tan_half) - 1.0  # sec(b / 2) - 1
     hx, hy = np.empty(n), np.empty(n)
     hl, hz, hw = np.empty((n, 2)), np.empty((n, 3)), np.empty((n, 3))
+    h_weight, h_var = np.empty(n), np.empty(n)
     for i in range(n):
         m0 = origin[i, 0] + r[i] * direction[i, 0]
         m1 = origin[i, 1] + r[i] * direction[i, 1]
@@ -161,7 +166,8 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
         w_zero = max(1.0 - w_minus - w_plus, 0.0)
         hz[i, 0], hz[i, 1], hz[i, 2] = zc + res * -1.0, zc + res * 0.0, zc + res * 1.0
         hw[i, 0], hw[i, 1], hw[i, 2] = weight * w_minus, weight * w_zero, weight * w_plus
-    return hx, hy, hl, hz, hw
+        h_weight[i], h_var[i] = weight, sv * sv
+    return hx, hy, hl, hz, hw, h_weight, h_var
 
 
 @njit(cache=True, error_model="numpy")
