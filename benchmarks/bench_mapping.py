@@ -472,7 +472,8 @@ KM_RES, KM_ALTITUDE, KM_BATCH_PINGS = 1.0, 10.0, 1000
 
 def km_config(bounds) -> MappingConfig:
     """The adaptive BKI at 1 m: the paper's length scales and free spacing scaled by 10."""
-    return MappingConfig(resolution=KM_RES, l_min=(1.0, 1.0, 0.5), l_max=(1.8, 1.8, 0.8),
+    return MappingConfig(method="adaptive", resolution=KM_RES, l_min=(1.0, 1.0, 0.5),
+                         l_max=(1.8, 1.8, 0.8),
                          free_resolution=KM_RES,
                          variance_bounds=tuple(tuple(map(float, b)) for b in bounds))  # fmt: skip
 

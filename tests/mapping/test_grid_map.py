@@ -20,14 +20,18 @@ from undertow.mapping.run import map_pieces
 from undertow.occupancy import OccupancyMap
 
 
-def test_a_map_past_its_budget_is_written_part_by_part_as_the_whole_map(simulated_run, tmp_path):
+@pytest.mark.parametrize("method", ["csm", "tpu"])
+def test_a_map_past_its_budget_is_written_part_by_part_as_the_whole_map(
+    simulated_run, tmp_path, method
+):
+    """(tpu: with its column sums, which go to map.npz whole.)"""
     log = simulated_run("calm") / "log"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         truth = localize(read_log(log))
         maps = {}
         for name, resident in (("whole", None), ("parts", 6 * CHUNK_BYTES / 1e6)):
-            config = MappingConfig(method="csm", resolution=0.1, resident_mb=resident)
+            config = MappingConfig(method=method, resolution=0.1, resident_mb=resident)
             maps[name] = map_pieces(iter_log_pieces(log, 4.0), truth, config)
     whole, parts = maps["whole"], maps["parts"]
     assert isinstance(whole.map, OccupancyMap) and isinstance(parts.map, GridOccupancy)
@@ -41,6 +45,10 @@ def test_a_map_past_its_budget_is_written_part_by_part_as_the_whole_map(simulate
     for field in ("cells", "alpha", "beta"):
         assert np.array_equal(getattr(a, field), getattr(b, field))
     assert (a.resolution, a.alpha0, a.beta0) == (b.resolution, b.alpha0, b.beta0)
+    assert (a.columns is None) == (method == "csm") == (b.columns is None)
+    if method == "tpu":
+        assert np.array_equal(a.columns.cells, b.columns.cells) and len(a.columns) > 100
+        assert np.array_equal(a.columns.sums, b.columns.sums)
     loaded = parts.map.load()
     assert np.array_equal(loaded.alpha, a.alpha) and loaded.metadata == a.metadata
     assert (tmp_path / "whole" / "map.ply").read_bytes() == (

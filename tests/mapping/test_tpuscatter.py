@@ -68,6 +68,18 @@ def test_the_rays_give_the_written_samples_map_bit_for_bit(wave, max_length):
         assert not same_map(rays, _map(batches, False, None, max_length=max_length))
 
 
+def test_the_column_sums_from_the_rays_are_the_written_samples_sums():
+    """The per-column sums (mapping/columns.py) by the ray scatter and by the generic scatter
+    of written samples: the same columns and sums (to rounding: the hits' sigma_v^2 and
+    weights are formed in two places)."""
+    batches = [_fan(seed) for seed in range(3)]
+    written = _map(batches, True).occupancy().columns
+    rays = _map(batches, False).occupancy().columns
+    assert len(rays) > 1000
+    np.testing.assert_array_equal(written.cells, rays.cells)
+    np.testing.assert_allclose(written.sums, rays.sums, rtol=1e-9, atol=1e-300)
+
+
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread")
 def test_the_rays_on_two_threads_give_the_serial_map_bit_for_bit(monkeypatch):
     """Slabs of cells on numba's threads, the chunks placed in a pass before (the path of large
@@ -75,7 +87,10 @@ def test_the_rays_on_two_threads_give_the_serial_map_bit_for_bit(monkeypatch):
     batches = [_fan(seed) for seed in range(3)]
     serial = _map(batches, True)
     monkeypatch.setattr(grid_module, "RAY_PARALLEL_MIN_SAMPLES", 1)
-    assert same_map(serial, _map(batches, False, threads=2))
+    parallel = _map(batches, False, threads=2)
+    assert same_map(serial, parallel)
+    np.testing.assert_allclose(parallel.occupancy().columns.sums,
+                               serial.occupancy().columns.sums, rtol=1e-9)  # fmt: skip
 
 
 def test_the_hits_and_the_extent_are_the_written_training_samples():

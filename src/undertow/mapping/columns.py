@@ -5,12 +5,16 @@ hits leave there (the same across-floor kernel, weight and lengths as the map's 
 :mod:`undertow.mapping.tpu`), the hits' evidence and its uncertainties (:data:`~undertow.
 occupancy.COLUMN_SUMS`):
 
-    W = sum_i w_i,   V = sum_i w_i sigma_v,i^2,   X = sum_i w_i s_x,i^2,   Y = sum_i w_i s_y,i^2,
+    W = sum_i w_i,   V = sum_i w_i sigma_v,i^2,   X = sum_i w_i (c l_x,i)^2,
+    Y = sum_i w_i (c l_y,i)^2,
 
 sigma_v,i the hit's vertical standard deviation (pose, range, waves, a wide beam's shortfall)
-and s_x,i, s_y,i its pose's horizontal ones. The surface reads V / W, X / W and Y / W as the
-column's vertical and horizontal uncertainty (:func:`~undertow.mapping.surface.
-evidence_surface`).
+and c l_x,i, c l_y,i the standard deviations of its kernel across the floor (c =
+:data:`~undertow.mapping.tpu.KERNEL_STD`; the pose's and a wide beam's horizontal
+uncertainty, at least the base kernel's): how far from where it was placed the map spreads
+it. The surface reads V / W, X / W and Y / W as the column's vertical and horizontal
+uncertainty (:func:`~undertow.mapping.surface.evidence_surface`). The sums are float32, as
+the map's masses.
 
 They are kept in a second :class:`~undertow.mapping.grid.ChunkedGrid` of the map's resolution
 whose cells (i, j, c) hold sum c of column (i, j) as alpha mass: each hit is scattered as its
@@ -73,12 +77,12 @@ class ColumnGrid:
     def add_samples(self, samples: Samples, cap: float, **settings) -> None:
         """Add the hits of written ``samples`` (the generic product scatter; ``settings`` as
         :func:`~undertow.mapping.tpu.tpu_training`'s)."""
-        x, y, lx, ly, weight, var_v, var_xy = tpu_hit_weights(samples, **settings)
+        x, y, lx, ly, weight, var_v = tpu_hit_weights(samples, **settings)
         n = len(x)
         if n == 0:
             return
-        masses = np.stack([weight, weight * var_v, weight * var_xy[:, 0],
-                           weight * var_xy[:, 1]], axis=1).reshape(-1)  # fmt: skip
+        masses = np.stack([weight, weight * var_v, weight * (KERNEL_STD * lx) ** 2,
+                           weight * (KERNEL_STD * ly) ** 2], axis=1).reshape(-1)  # fmt: skip
         points = np.stack([np.repeat(x, len(COLUMN_SUMS)), np.repeat(y, len(COLUMN_SUMS)),
                            self._channels(n).reshape(-1)], axis=1)  # fmt: skip
         lengths = np.repeat(np.stack([lx, ly, np.full(n, self.resolution / 2)], 1),

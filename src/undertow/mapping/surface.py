@@ -27,13 +27,34 @@ carry their total propagated uncertainty: :mod:`undertow.mapping.tpu`): per colu
 each cell's hit evidence w_k = alpha_k - alpha_0 (the kernel-weighted hits it received),
 
     d = sum_k w_k z_k / sum_k w_k,
-    s^2 = max(sum_k w_k (z_k - d)^2 / sum_k w_k - f (1 - f) r^2, 0),  f = frac(d / r - 1/2),
 
-the mean and the spread of where the hits say the floor is. The tpu mapper places each hit
+the mean of where the hits say the floor is. Its standard deviation s is, by default, the
+**propagated uncertainty** of the column's hits (the map's :class:`~undertow.occupancy.
+ColumnStats`: :mod:`undertow.mapping.columns`), their vertical uncertainty plus their
+horizontal uncertainty carried through the floor's slope,
+
+    s^2 = V / W + (X / W) (dd/dx)^2 + (Y / W) (dd/dy)^2,
+
+V / W the hits' mean sigma_v^2 in the column, X / W and Y / W the mean variances of their
+kernels across the floor, dd/dx and dd/dy central differences of the surface's depths (one-
+sided beside a column without data). This is how hydrography combines a sounding's vertical
+and horizontal uncertainty over a sloping floor (TVU' = sqrt(TVU^2 + (THU tan(slope))^2):
+Hare, Eakins and Amante, "Modelling bathymetric uncertainty", International Hydrographic
+Review 6, 2011; IHO S-44 6th ed. 2020). It does not shrink with the number of hits: the
+pose's errors, which dominate it, are shared by the hits of a pass.
+
+The **spread** (``uncertainty="spread"``; the std of a map without column sums, written
+before them) is where the hits' evidence lies about d,
+
+    s^2 = max(sum_k w_k (z_k - d)^2 / sum_k w_k - f (1 - f) r^2, 0),  f = frac(d / r - 1/2):
+
+the tpu mapper places each hit
 on the cells with its depth and its vertical variance kept, plus the least variance a
 distribution on cells of size r can have with that mean, f (1 - f) r^2; the same term,
 taken at the column's mean, is removed again (exact for a column of hits at one depth; for
-hits spread over several cells it is small next to their spread). The free-space evidence
+hits spread over several cells it is small next to their spread). The spread adds the hits'
+scatter to their modelled variance, which counts their noise twice where they agree, and
+the floor's relief under a wide kernel where they do not. The free-space evidence
 (beta_k) decides, with alpha_k, which columns hold data: those with a cell whose mean
 occupancy exceeds the threshold, as for the first-occupied surface. It does not reweight
 the hits: a cell's mean is a ratio of the hit and free evidence it received, and weighting

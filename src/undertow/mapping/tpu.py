@@ -200,8 +200,7 @@ def tpu_hit_weights(samples: Samples, *, resolution: float, base_length: float,
                     max_length: float, range_std, range_std_fraction: float,
                     sonar_beam_width_deg: float = 0.0, wave=None):  # fmt: skip
     """Per hit of ``samples`` (label 1, in order; module doc): (x, y, l_x, l_y, weight
-    sigma_0 (l_0 / l_x) (l_0 / l_y) s_r'^2 / sigma_v^2, sigma_v^2, the pose's horizontal
-    variances (n, 2))."""
+    sigma_0 (l_0 / l_x) (l_0 / l_y) s_r'^2 / sigma_v^2, sigma_v^2)."""
     sx, sy, sv, s_r = hit_sigmas(samples, range_std, range_std_fraction, sonar_beam_width_deg,
                                  wave, resolution)  # fmt: skip
     hit = samples.label > 0.5
@@ -210,8 +209,7 @@ def tpu_hit_weights(samples: Samples, *, resolution: float, base_length: float,
     precision = np.divide(s_r * s_r, sv * sv, out=np.ones_like(sv), where=sv > 0)
     weight = samples.sigma0[hit] * (base_length / lx) * (base_length / ly) * precision
     points = samples.points[hit]
-    return (points[:, 0], points[:, 1], lx, ly, weight, sv * sv,
-            samples.pose_variance[hit, :2])  # fmt: skip
+    return points[:, 0], points[:, 1], lx, ly, weight, sv * sv
 
 
 def tpu_training(samples: Samples, *, resolution: float, base_length: float, max_length: float,
@@ -223,7 +221,7 @@ def tpu_training(samples: Samples, *, resolution: float, base_length: float, max
     settings = {"resolution": resolution, "base_length": base_length, "max_length": max_length,
                 "range_std": range_std, "range_std_fraction": range_std_fraction,
                 "sonar_beam_width_deg": sonar_beam_width_deg, "wave": wave}  # fmt: skip
-    _, _, lx, ly, weight, var_v, _ = tpu_hit_weights(samples, **settings)
+    _, _, lx, ly, weight, var_v = tpu_hit_weights(samples, **settings)
     sv = np.sqrt(var_v)
     hit = samples.label > 0.5
     free = ~hit

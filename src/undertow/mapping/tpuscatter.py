@@ -76,9 +76,10 @@ def tpu_hits(rays, *, resolution: float, base_length: float, max_length: float, 
         e, m = np.exp(args[:2]), np.expm1(args[2])
     tan_half = float(np.tan(np.deg2rad(sonar_beam_width_deg) / 2.0))
     l_free = (np.array([base_length, base_length, res / 2]) / cap) * cap
-    *out, weight, var_v = hit_lattice(rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor, e, m,
-                      amplitude, s0, fraction, int(np.argmax(s0)), tan_half, float(base_length),
-                      float(max_length), cap, res)  # fmt: skip
+    *out, weight, var_v = hit_lattice(rays.origin, rays.direction, rays.r, rays.var, rays.sig,
+                                      rays.sensor, e, m, amplitude, s0, fraction,
+                                      int(np.argmax(s0)), tan_half, float(base_length),
+                                      float(max_length), cap, res)  # fmt: skip
     return TpuHits(*out, l_free, weight, var_v)
 
 
