@@ -1,9 +1,10 @@
 """The ``tpu`` mapper's per-column uncertainties: :class:`ColumnGrid`.
 
-Beside the map's cells, the ``tpu`` mapper sums per (x, y) column, with the weights w_i its
-hits leave there (the same across-floor kernel, weight and lengths as the map's cells:
-:mod:`undertow.mapping.tpu`), the hits' evidence and its uncertainties (:data:`~undertow.
-occupancy.COLUMN_SUMS`):
+Beside the map's cells, the ``tpu`` mapper sums per (x, y) column, with the weight each hit
+leaves there, w_i = w k(|dx|; l_x) k(|dy|; l_y) (its weight w and kernel across the floor,
+the sparse kernel of ``eq:kernel`` at the column's centre, as the map's product kernel weighs
+the hit's cells: :mod:`undertow.mapping.tpu`), the hits' evidence and its uncertainties
+(:data:`~undertow.occupancy.COLUMN_SUMS`):
 
     W = sum_i w_i,   V = sum_i w_i sigma_v,i^2,   X = sum_i w_i (c l_x,i)^2,
     Y = sum_i w_i (c l_y,i)^2,
@@ -13,30 +14,34 @@ and c l_x,i, c l_y,i the standard deviations of its kernel across the floor (c =
 :data:`~undertow.mapping.tpu.KERNEL_STD`; the pose's and a wide beam's horizontal
 uncertainty, at least the base kernel's): how far from where it was placed the map spreads
 it. The surface reads V / W, X / W and Y / W as the column's vertical and horizontal
-uncertainty (:func:`~undertow.mapping.surface.evidence_surface`). The sums are float32, as
-the map's masses.
-
-They are kept in a second :class:`~undertow.mapping.grid.ChunkedGrid` of the map's resolution
-whose cells (i, j, c) hold sum c of column (i, j) as alpha mass: each hit is scattered as its
-lattice is (:func:`~undertow.mapping.tpuscatter.tpu_scatter_slab`, or the generic product
-scatter for written samples), with its vertical cells replaced by the cells c = 0 .. 3 and
-their weights by w sigma^2 (the vertical kernel, half a cell, keeps each in its own cell). The
-grid spills as the map's does, with an eighth of its resident budget.
+uncertainty (:func:`~undertow.mapping.surface.evidence_surface`). The sums are kept in a
+second :class:`~undertow.mapping.grid.ChunkedGrid` of the map's resolution whose cells
+(i, j, c) hold sum c of column (i, j) as alpha mass (float32, as the map's masses), written by
+:func:`add_column_sums` (one kernel evaluation per column for the four sums); it spills as
+the map's grid does, with an eighth of its resident budget.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from ..occupancy import COLUMN_SUMS, ColumnStats
-from .grid import ChunkedGrid, points_extent
-from .kernels import MODE_PRODUCT
+from .chunks import CHUNK_SHIFT, find_or_insert
+from .grid import ChunkedGrid
+from .kernels import sincos
 from .samples import Samples
 from .tpu import KERNEL_STD, tpu_hit_weights
-from .tpuscatter import TpuHits, tpu_extent
+from .tpuscatter import TpuHits
 
 #: the share of the map's resident budget the column sums may hold in memory
 RESIDENT_SHARE = 1 / 8
+#: the columns a hit's sums reach: within this fraction of its kernel's length, where the
+#: kernel is above 0.75 % of its peak (k(0.75 l) = 1/6 - 1/(2 pi)); a column beyond it holds
+#: less than 0.2 % of the kernel's mass across the floor (0.1 % beyond 0.75 l along each axis)
+SUPPORT = 0.75
 
 
 class ColumnGrid:
@@ -47,56 +52,38 @@ class ColumnGrid:
         budget = None if resident_bytes is None else resident_bytes * RESIDENT_SHARE
         self.grid = ChunkedGrid(self.resolution, resident_bytes=budget)
 
-    def _channels(self, n: int) -> np.ndarray:
-        """The cells' centres z of the sums c = 0 .. 3, (n, 4)."""
-        return np.tile((np.arange(len(COLUMN_SUMS)) + 0.5) * self.resolution, (n, 1))
+    def add_rays(self, hits: TpuHits, extent) -> None:
+        """Add hits given as :class:`~undertow.mapping.tpuscatter.TpuHits`; ``extent``: a box
+        holding them (:func:`~undertow.mapping.tpuscatter.tpu_extent`'s)."""
+        self._add(hits.x, hits.y, hits.l, hits.weight, hits.var_v, extent)
 
-    def add_rays(self, rays, hits: TpuHits, cap: float) -> None:
-        """Add the hits of ``rays`` (:class:`~undertow.mapping.samples.Rays`; their free
-        samples are not scattered) with their :class:`TpuHits`."""
-        n = len(hits.x)
-        if n == 0:
-            return
-        spread = (KERNEL_STD * hits.l) ** 2
-        masses = np.stack([hits.weight, hits.weight * hits.var_v, hits.weight * spread[:, 0],
-                           hits.weight * spread[:, 1]], axis=1)  # fmt: skip
-        masses = np.where(np.isfinite(masses), masses, 0.0)
-        z = self._channels(n)
-        hits_only = rays._replace(rows=np.zeros(n + 1, dtype=rays.rows.dtype))
-        zero = np.zeros((n, 2))
-        for part in (slice(0, 3), slice(3, 4)):  # three cells a pass: a hit's lattice
-            w = np.concatenate([masses[:, part], zero], axis=1)[:, :3]
-            zz = np.concatenate([z[:, part], z[:, :2]], axis=1)[:, :3]
-            pass_hits = hits._replace(z=np.ascontiguousarray(zz), w=np.ascontiguousarray(w))
-            lo, hi, finite, count = tpu_extent(hits_only.origin, hits_only.direction,
-                                               hits_only.rows, hits_only.f, pass_hits.x,
-                                               pass_hits.y, pass_hits.z, pass_hits.w)  # fmt: skip
-            if count:
-                self.grid.scatter_tpu(hits_only, pass_hits, cap, (lo, hi, finite), count)
-
-    def add_samples(self, samples: Samples, cap: float, **settings) -> None:
-        """Add the hits of written ``samples`` (the generic product scatter; ``settings`` as
+    def add_samples(self, samples: Samples, **settings) -> None:
+        """Add the hits of written ``samples`` (``settings`` as
         :func:`~undertow.mapping.tpu.tpu_training`'s)."""
         x, y, lx, ly, weight, var_v = tpu_hit_weights(samples, **settings)
+        if len(x):
+            extent = (np.array([x.min(), y.min(), 0.0]), np.array([x.max(), y.max(), 0.0]), True)
+            self._add(x, y, np.stack([lx, ly], axis=1), weight, var_v, extent)
+
+    def _add(self, x, y, l, weight, var_v, extent) -> None:
+        """Add hits at (x, y) with kernel lengths l (n, 2), weights w and sigma_v^2; hits with
+        a value not finite, or w or l not positive, are left out (a hit without weight adds
+        nothing to the map either)."""
         n = len(x)
         if n == 0:
             return
-        masses = np.stack([weight, weight * var_v, weight * (KERNEL_STD * lx) ** 2,
-                           weight * (KERNEL_STD * ly) ** 2], axis=1).reshape(-1)  # fmt: skip
-        points = np.stack([np.repeat(x, len(COLUMN_SUMS)), np.repeat(y, len(COLUMN_SUMS)),
-                           self._channels(n).reshape(-1)], axis=1)  # fmt: skip
-        lengths = np.repeat(np.stack([lx, ly, np.full(n, self.resolution / 2)], 1),
-                            len(COLUMN_SUMS), axis=0)  # fmt: skip
-        keep = np.isfinite(masses) & (masses > 0)
-        caps = np.full(3, cap)
-        training = Samples.from_points(points[keep], np.ones(int(keep.sum())), masses[keep],
-                                       lengths[keep] / caps)  # fmt: skip
-        if len(training):
-            self.grid.scatter(MODE_PRODUCT, training.points, training.label, training.sigma0,
-                              training.pose_variance, (np.zeros(3), np.ones(3)), np.zeros(3),
-                              caps, points_extent(training.points))  # fmt: skip
+        res = self.resolution
+        box = (np.array([extent[0][0], extent[0][1], 0.0]),
+               np.array([extent[1][0], extent[1][1], len(COLUMN_SUMS) * res]), True)  # fmt: skip
+        self.grid.write(add_column_sums, n, (x, y, l, weight, var_v, res), box, self.reach(l))
 
-    def add_stats(self, stats: ColumnStats) -> None:
+    @staticmethod
+    def reach(l) -> float:
+        """The largest kernel length of ``l`` (m; 0 when none is finite)."""
+        finite = l[np.isfinite(l)]
+        return float(finite.max()) if finite.size else 0.0
+
+    def add_stats(self, stats: ColumnStats | None) -> None:
         """Add sums already made (a prior map's)."""
         if stats is None or not len(stats):
             return
@@ -115,4 +102,81 @@ class ColumnGrid:
         columns, inverse = np.unique(cells[:, :2], axis=0, return_inverse=True)
         sums = np.zeros((len(columns), k))
         np.add.at(sums, (inverse.reshape(-1), cells[:, 2]), alpha)
-        return ColumnStats(columns, sums)
+        keep = sums[:, 0] > 0
+        return ColumnStats(columns[keep], sums[keep])
+
+
+@njit(cache=True, inline="always")
+def _kernel(d, l):
+    """The sparse kernel of ``eq:kernel`` (sigma_0 = 1) at distance d >= 0, length l."""
+    if d >= l:
+        return 0.0
+    r = d / l
+    sn, cs = sincos(2.0 * math.pi * r)
+    return (2.0 + cs) * (1.0 - r) / 3.0 + sn / (2.0 * math.pi)
+
+
+@njit(cache=True)
+def add_column_sums(start, x, y, l, weight, var_v, res, table_keys, table_vals, chunk_keys,
+                    n_chunks, alpha, beta):  # fmt: skip
+    """From hit ``start``: add (w, w sigma_v^2, w (c l_x)^2, w (c l_y)^2) k(|dx|; l_x)
+    k(|dy|; l_y) to cells (i, j, 0 .. 3) of every column (i, j) whose centre ((i + 1/2) res,
+    ...) lies within :data:`SUPPORT` of the hit's kernel lengths (module doc). A hit starts
+    only when the chunk arrays have room for every chunk it may place; returns the first hit
+    without that room (the caller grows the arrays and resumes there), or n."""
+    kx, ky = np.empty(0), np.empty(0)
+    last_x, last_y, last = np.int64(1) << 40, np.int64(0), -1  # the last chunk found
+    m = np.empty(4)
+    for s in range(start, x.shape[0]):
+        lx, ly, w = l[s, 0], l[s, 1], weight[s]
+        m[0], m[1] = w, w * var_v[s]
+        m[2], m[3] = w * (KERNEL_STD * lx) ** 2, w * (KERNEL_STD * ly) ** 2
+        if not (
+            w > 0.0
+            and lx > 0.0
+            and ly > 0.0
+            and np.isfinite(x[s])
+            and np.isfinite(y[s])
+            and np.isfinite(m[1])
+            and np.isfinite(m[2])
+            and np.isfinite(m[3])
+        ):
+            continue
+        rx, ry = SUPPORT * lx, SUPPORT * ly
+        i0 = int(math.ceil((x[s] - rx) / res - 0.5))
+        i1 = int(math.floor((x[s] + rx) / res - 0.5))
+        j0 = int(math.ceil((y[s] - ry) / res - 0.5))
+        j1 = int(math.floor((y[s] + ry) / res - 0.5))
+        if i1 < i0 or j1 < j0:
+            continue
+        spans = ((i1 >> CHUNK_SHIFT) - (i0 >> CHUNK_SHIFT) + 1) * (
+            (j1 >> CHUNK_SHIFT) - (j0 >> CHUNK_SHIFT) + 1
+        )
+        if n_chunks[0] + spans > chunk_keys.shape[0]:  # room for every chunk it may place
+            return s
+        if kx.shape[0] < i1 - i0 + 1:
+            kx = np.empty(2 * (i1 - i0 + 1))
+        if ky.shape[0] < j1 - j0 + 1:
+            ky = np.empty(2 * (j1 - j0 + 1))
+        for i in range(i0, i1 + 1):
+            kx[i - i0] = _kernel(abs((i + 0.5) * res - x[s]), lx)
+        for j in range(j0, j1 + 1):
+            ky[j - j0] = _kernel(abs((j + 0.5) * res - y[s]), ly)
+        for cx in range(i0 >> CHUNK_SHIFT, (i1 >> CHUNK_SHIFT) + 1):
+            ia, ib = max(i0, cx << CHUNK_SHIFT), min(i1, ((cx + 1) << CHUNK_SHIFT) - 1)
+            for cy in range(j0 >> CHUNK_SHIFT, (j1 >> CHUNK_SHIFT) + 1):
+                ja, jb = max(j0, cy << CHUNK_SHIFT), min(j1, ((cy + 1) << CHUNK_SHIFT) - 1)
+                if cx != last_x or cy != last_y:
+                    last = find_or_insert(cx, cy, 0, table_keys, table_vals, chunk_keys,
+                                          n_chunks)  # fmt: skip
+                    last_x, last_y = cx, cy
+                for i in range(ia, ib + 1):
+                    wx = kx[i - i0]
+                    if wx == 0.0:
+                        continue
+                    for j in range(ja, jb + 1):
+                        k = wx * ky[j - j0]
+                        cell = alpha[last, i & 7, j & 7]
+                        for c in range(4):
+                            cell[c] += m[c] * k
+    return x.shape[0]

@@ -105,6 +105,8 @@ class ChunkedGrid:
         widened by the reach for :meth:`take_touched`, and take back the spilled tiles the write
         may reach (the box widened by two more cells: a support's cells are rounded outwards).
         Returns the chunks held then (the chunks after it are the write's new ones)."""
+        if self._touched is None and not len(self.spill):
+            return self.n_chunks  # (nothing to note, nothing to take back)
         r = max(float(np.max(reach)), self.resolution)
         lo, hi = np.asarray(extent[0]) - r, np.asarray(extent[1]) + r
         if self._touched is not None:
@@ -427,14 +429,21 @@ class ChunkedGrid:
 
     def add_mass(self, cells, d_alpha, d_beta) -> None:
         """Add evidence mass to given cells (seeding from a prior map)."""
-        start, n = 0, cells.shape[0]
-        if n == 0:
+        if cells.shape[0] == 0:
             return
         extent = points_extent((cells + 0.5) * self.resolution)
+        self.write(add_mass_to_cells, cells.shape[0], (cells, d_alpha, d_beta), extent, 0.0)
+
+    def write(self, kernel, n: int, args: tuple, extent, reach) -> None:
+        """Run a compiled writer of n items, ``kernel(start, *args, table_keys, table_vals,
+        chunk_keys, n_chunks, alpha, beta)``, which returns the first item whose chunks did
+        not fit (n when done): the arrays grow and it resumes there. ``extent`` of the items
+        (:func:`points_extent`) and ``reach`` (m) as a scatter's, for the spill."""
         self._check_extent(extent)
-        n0 = self._begin_write(extent, 0.0)
+        n0 = self._begin_write(extent, reach)
+        start = 0
         while start < n:
-            start = add_mass_to_cells(start, cells, d_alpha, d_beta, *self._tables())
+            start = kernel(start, *args, *self._tables())
             if start < n:
                 self._grow()
         self._end_write(n0, extent)

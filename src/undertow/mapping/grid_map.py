@@ -64,9 +64,8 @@ class GridOccupancy:
 
     def columns(self):
         """The map's column sums (:class:`~undertow.occupancy.ColumnStats`; a ``tpu`` map's,
-        else None), whole: a column's four sums to a layer of cells."""
-        grid = getattr(self._mapper, "columns", None)
-        return None if grid is None else grid.stats()
+        else None), whole."""
+        return self._mapper.column_stats()
 
     def save(self, path):
         """``map.npz`` as :meth:`OccupancyMap.save <undertow.occupancy.OccupancyMap.save>`,

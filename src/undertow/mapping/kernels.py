@@ -86,7 +86,7 @@ _TWO_OVER_PI, _THIRD, _INV_2PI = 2.0 / np.pi, 1.0 / 3.0, 1.0 / _TWO_PI
 
 
 @njit(cache=True, inline="always")
-def _sincos(x):
+def sincos(x):
     """(sin x, cos x) for |x| < 2^20 pi / 2, within about 1 ulp of libm (fdlibm's kernels; one
     range reduction and no call for both)."""
     k = np.floor(x * _TWO_OVER_PI + 0.5)
@@ -287,7 +287,7 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
         # w[j, a] = k(|d_a|; l_j) (``eq:kernel``, unit sigma_0) at the support's cell centres
         # along axis j, d_a = d_0 + a res. The angles 2 pi d_a / l_j are equally spaced, so
         # cos and sin follow by the angle-addition recurrence from those of the first angle
-        # (:func:`_sincos`) and of the step; with sin(2 pi |d| / l) = sign(d) sin(2 pi d / l)
+        # (:func:`sincos`) and of the step; with sin(2 pi |d| / l) = sign(d) sin(2 pi d / l)
         # this is ``eq:kernel`` to rounding. ``rot[j]`` caches (l, cos, sin) of the step: the
         # samples of one ray share their length scales.
         for j in range(3):
@@ -298,7 +298,7 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
                 rot[j, 0], rot[j, 1], rot[j, 2] = lj, np.cos(step), np.sin(step)
             cd, sd = rot[j, 1], rot[j, 2]
             inv_l = 1.0 / lj
-            sn, cs = _sincos(_TWO_PI * d0 * inv_l)
+            sn, cs = sincos(_TWO_PI * d0 * inv_l)
             for a in range(cnt[j]):
                 d = d0 + a * res
                 r = abs(d) * inv_l

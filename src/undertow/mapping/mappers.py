@@ -27,7 +27,6 @@ kernels (see :mod:`undertow.mapping.kernels`).
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import os
 from pathlib import Path
@@ -163,7 +162,12 @@ class Mapper:
         except MemoryError:
             raise out_of_memory(self.resolution) from None
         return OccupancyMap(cells, self.alpha0 + a, self.beta0 + b, self.resolution,
-                            self.alpha0, self.beta0, self.metadata())  # fmt: skip
+                            self.alpha0, self.beta0, self.metadata(),
+                            self.column_stats())  # fmt: skip
+
+    def column_stats(self):
+        """The map's :class:`~undertow.occupancy.ColumnStats`; None: the mapper keeps none."""
+        return None
 
 
 class CsmMapper(Mapper):
@@ -290,7 +294,7 @@ class TpuBkiMapper(Mapper):
                 self._check_need(need, n, limit_gb)
                 try:
                     self.grid.scatter_tpu(rays, hits, cap, (lo, hi, finite), n)
-                    self.columns.add_rays(rays, hits, cap)
+                    self.columns.add_rays(hits, (lo, hi, finite))
                 except MemoryError:
                     raise out_of_memory(self.resolution) from None
                 return
@@ -309,7 +313,7 @@ class TpuBkiMapper(Mapper):
         bounds = (np.zeros(3), np.ones(3))
         self._grid_scatter(MODE_PRODUCT, training, bounds, np.zeros(3), cap)
         try:
-            self.columns.add_samples(samples, float(cap[0]), **self._settings())
+            self.columns.add_samples(samples, **self._settings())
         except MemoryError:
             raise out_of_memory(self.resolution) from None
 
@@ -319,10 +323,10 @@ class TpuBkiMapper(Mapper):
         self.columns.add_stats(prior.columns)
         return prior
 
-    def occupancy(self) -> OccupancyMap:
-        """:meth:`Mapper.occupancy` with the column sums (:class:`~undertow.occupancy.
-        ColumnStats`)."""
-        return dataclasses.replace(super().occupancy(), columns=self.columns.stats())
+    def column_stats(self):
+        """The column sums (:class:`~undertow.occupancy.ColumnStats`,
+        :meth:`~undertow.mapping.columns.ColumnGrid.stats`)."""
+        return self.columns.stats()
 
     def metadata(self) -> dict:
         return {**super().metadata(), "base_length": self.base_length,

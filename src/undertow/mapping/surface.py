@@ -69,6 +69,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..errors import DataError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
@@ -287,9 +288,9 @@ def _uncertainty(occupancy: OccupancyMap, uncertainty: str | None) -> str:
 
 
 def propagated_std(surface: Surface, columns) -> Surface:
-    """``surface`` with its std replaced, in the columns ``columns``
-    (:class:`~undertow.occupancy.ColumnStats`) holds, by the propagated uncertainty of the
-    column's hits (module doc):
+    """``surface`` with its std replaced by the propagated uncertainty of the column's hits
+    (module doc; ``columns``: :class:`~undertow.occupancy.ColumnStats`, a column no hit landed
+    in taking the nearest one's):
 
         s^2 = V / W + (X / W) (dd/dx)^2 + (Y / W) (dd/dy)^2,
 
@@ -297,12 +298,16 @@ def propagated_std(surface: Surface, columns) -> Surface:
     without data, 0 with neither neighbour)."""
     ny, nx = surface.shape
     res = surface.resolution
+    held = columns.sums[:, 0] > 0
+    if not held.any() or not surface.coverage.any():
+        return surface
+    j, i = np.nonzero(surface.coverage)
     i0 = int(round(surface.x0 / res - 0.5))
     j0 = int(round(surface.y0 / res - 0.5))
-    ci, cj = columns.cells[:, 0] - i0, columns.cells[:, 1] - j0
-    inside = (ci >= 0) & (ci < nx) & (cj >= 0) & (cj < ny) & (columns.sums[:, 0] > 0)
+    cells = columns.cells[held]
+    nearest = cKDTree(cells).query(np.stack([i + i0, j + j0], axis=1))[1]
     means = np.full((ny, nx, 3), np.nan)
-    means[cj[inside], ci[inside]] = columns.sums[inside, 1:] / columns.sums[inside, :1]
+    means[j, i] = columns.sums[held][nearest, 1:] / columns.sums[held][nearest, :1]
     gx, gy = _slope(surface.depth, 1, res), _slope(surface.depth, 0, res)
     var = means[..., 0] + means[..., 1] * gx * gx + means[..., 2] * gy * gy
     std = np.where(surface.coverage & np.isfinite(var), np.sqrt(np.maximum(var, 0.0)),

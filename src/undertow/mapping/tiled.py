@@ -211,9 +211,8 @@ def map_tile(tile: TileId, samples: Samples, config: MappingConfig, tiling: Tili
         mapper.integrate(samples)
     cells, alpha, beta = mapper.grid.cells()
     own = np.all(tiling.tiles_of_cells(cells) == np.asarray(tile), axis=1)
-    columns = getattr(mapper, "columns", None)
+    columns = mapper.column_stats()
     if columns is not None:
-        columns = columns.stats()
         mine = np.all(tiling.tiles_of_cells(columns.cells) == np.asarray(tile), axis=1)
         columns = ColumnStats(columns.cells[mine], columns.sums[mine])
     return TileResult(tile, cells[own], alpha[own], beta[own], len(samples),
