@@ -178,7 +178,8 @@ def test_json_has_every_metric_and_matches_the_library(files):
     taus = ("5cm", "10cm", "20cm")
     keys = {"c2c_mean_m", "c2c_median_m", "c2c_rmse_m", "coverage_mean_m", "occupied_cells",
             "surface_rmse_m", "surface_bias_m", "coverage", "within_1sigma", "within_2sigma",
-            "mean_abs_z", "calibrated_columns", "threshold", "threshold_from", "truth_z",
+            "mean_abs_z", "calibrated_columns", "std_kind", "threshold", "threshold_from",
+            "truth_z",
             *(f"{m}_{t}" for m in ("precision", "recall", "fscore") for t in taus)}  # fmt: skip
     assert keys <= set(data)
     assert all(not isinstance(v, dict | list) for v in data.values())  # flat
@@ -245,6 +246,7 @@ def test_the_geotiff_s_depth_std_band_is_calibrated_as_the_map(files, tmp_path):
     for key in ("within_1sigma", "within_2sigma"):
         assert abs(tif[key] - npz[key]) <= 1 / n
     assert tif["surface_rmse_m"] == pytest.approx(npz["surface_rmse_m"], abs=1e-6)
+    assert npz["std_kind"] == tif["std_kind"] == "first-occupied"  # the file's UNDERTOW_STD
     utm = export_map(files["map"], tmp_path / "utm.tif", origin=ORIGIN).path
     line = one_error_line(runner.invoke(app, ["evaluate", "map", str(utm), str(files["ply"])]))
     assert "--origin LAT,LON or --utm E,N,ZONE" in line

@@ -84,6 +84,7 @@ def test_the_sums_go_through_map_npz_and_a_prior_and_old_maps_keep_the_spread(tm
     spread = evidence_surface(old)
     assert np.array_equal(spread.std, map_surface(occupancy, uncertainty="spread").std,
                           equal_nan=True)  # fmt: skip
+    assert (spread.std_kind, map_surface(occupancy).std_kind) == ("spread", "propagated")
     with pytest.raises(DataError, match="needs the map's column sums"):
         evidence_surface(old, uncertainty="propagated")
     with pytest.raises(DataError, match="surface uncertainty 'both'"):

@@ -288,6 +288,8 @@ def _pct(value) -> str:
 
 def map_score_lines(v: dict) -> list[str]:
     """The human-readable table of `undertow evaluate map` from its flat result."""
+    from ..mapping.surface import STD_KINDS
+
     taus = ("5cm", "10cm", "20cm")
 
     def per_tau(name: str) -> str:
@@ -298,6 +300,7 @@ def map_score_lines(v: dict) -> list[str]:
         f"{_pct(v['within_1sigma'])} within 1 sigma, {_pct(v['within_2sigma'])} within 2 sigma "
         f"(a true std: 68.3 %, 95.4 %), mean |z| {_num(v['mean_abs_z'], 2)}, "
         f"{v['calibrated_columns']} columns"
+        + (f"; std: {STD_KINDS[v['std_kind']]}" if v.get("std_kind") in STD_KINDS else "")
         if v["calibrated_columns"] is not None
         else "n/a (the map holds no depth std)"
     )

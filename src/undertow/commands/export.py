@@ -23,7 +23,7 @@ from ..io.export.las import write_map_las
 from ..io.export.octree import write_octomap
 from ..io.export.raster import resample_surface
 from ..io.ply import write_map_ply
-from ..mapping.surface import map_surface
+from ..mapping.surface import STD_KINDS, map_surface
 from ..occupancy import MAP_FILE, OccupancyMap
 from .common import npz_file
 
@@ -48,10 +48,12 @@ class ExportResult:
     threshold: float | None
     threshold_from: str
     warnings: list[str] = field(default_factory=list)
+    std_kind: str = ""  # the GeoTIFF's std band (mapping.surface.STD_KINDS)
 
     def summary(self) -> str:
         what = {"geotiff": "cells with data", "octomap": "leaves"}.get(self.format, "points")
-        return f"wrote {self.path} ({self.format}: {self.count} {what}; {self.frame})"
+        std = f"; std band: {STD_KINDS[self.std_kind]}" if self.std_kind in STD_KINDS else ""
+        return f"wrote {self.path} ({self.format}: {self.count} {what}; {self.frame}{std})"
 
 
 def export_format(out: str | Path, fmt: str | None = None) -> str:
@@ -132,10 +134,13 @@ def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
     occupancy = OccupancyMap.load(source)
     used, used_from = map_threshold(occupancy, threshold)
     axes = _axes(fmt, frame, georef)
+    std_kind = ""
     if fmt == "geotiff":
-        raster = resample_surface(map_surface(occupancy, used), resolution, georef)
-        write_raster(out, raster, georef)
+        surface = map_surface(occupancy, used)
+        raster = resample_surface(surface, resolution, georef)
+        write_raster(out, raster, georef, surface.std_kind)
         count = int(np.count_nonzero(raster.coverage > 0))
+        std_kind = surface.std_kind
     elif fmt == "octomap":
         write_octomap(out, occupancy, used, frame)
         count = len(occupancy)
@@ -147,7 +152,7 @@ def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
     else:
         write_map_ply(out, occupancy, used)
         count = len(occupancy.occupied(used))
-    return ExportResult(out, fmt, count, axes, used, used_from)
+    return ExportResult(out, fmt, count, axes, used, used_from, std_kind=std_kind)
 
 
 def _axes(fmt: str, frame: str, georef) -> str:

@@ -276,13 +276,16 @@ class MapEvaluationResult:
     notes: list[str] = field(default_factory=list)
     truth_z: str | None = None
     calibrated: bool = True
+    std_kind: str = ""
 
     def to_dict(self) -> dict:
         """Every metric, flat (C2C, cells, surface, F-scores, calibration: null for a map
-        without a depth std), then the threshold and how the truth was read."""
+        without a depth std, and what the std is, ``std_kind``), then the threshold and how
+        the truth was read."""
         surface = {} if self.surface is None else self.surface.to_dict()
+        surface["std_kind"] = self.std_kind or None
         if not self.calibrated:
-            surface.update({k: None for k in CALIBRATION_KEYS})
+            surface.update({k: None for k in (*CALIBRATION_KEYS, "std_kind")})
         return {**self.evaluation.to_dict(), **surface, "threshold": self.threshold,
                 "threshold_from": self.threshold_from, "truth_z": self.truth_z}  # fmt: skip
 
@@ -314,7 +317,8 @@ def _map_to_evaluate(map_path: Path, threshold: float | None, notes: list[str]) 
     if suffix in GEOTIFF_SUFFIXES:
         grid = read_map_geotiff(map_path)
         depth, std, cover = (grid.bands[k] for k in ("depth", "std", "coverage"))
-        surface = Surface(grid.x0, grid.y0, grid.resolution, depth, std, cover > 0)
+        surface = Surface(grid.x0, grid.y0, grid.resolution, depth, std, cover > 0,
+                          str(grid.tags.get("UNDERTOW_STD", "")))  # fmt: skip
         notes.append(f"{map_path}: C2C and cells are the GeoTIFF's cells with data")
         return _EvaluatedMap(surface.points(), surface, grid.crs, grid.resolution, None,
                              "the GeoTIFF (thresholded when it was exported)", True)  # fmt: skip
@@ -385,8 +389,8 @@ def evaluate_map_file(map_path: str | Path, ground_truth_path: str | Path,
     area = hull_area(loaded.surface, truth.reference)
     surface = evaluate_surface(loaded.surface, truth.reference, area=area)
     return MapEvaluationResult(evaluation, loaded.threshold, loaded.threshold_from, caught,
-                               surface, notes + truth.notes, truth.z,
-                               loaded.calibrated)  # fmt: skip
+                               surface, notes + truth.notes, truth.z, loaded.calibrated,
+                               loaded.surface.std_kind)  # fmt: skip
 
 
 def _extent(surface: Surface):

@@ -80,7 +80,8 @@ class Surface:
     """A depth grid: cell (row j, column i) has its centre at (x0 + i res, y0 + j res).
 
     ``depth`` (ny, nx) m, z down, NaN where there is no data; ``std`` (ny, nx) m, the depth's
-    standard deviation (NaN where no data); ``coverage`` (ny, nx) bool, where there is data."""
+    standard deviation (NaN where no data); ``coverage`` (ny, nx) bool, where there is data;
+    ``std_kind``: what the std is (:data:`STD_KINDS`; "" when not said)."""
 
     x0: float
     y0: float
@@ -88,6 +89,7 @@ class Surface:
     depth: np.ndarray
     std: np.ndarray
     coverage: np.ndarray
+    std_kind: str = ""
 
     def __post_init__(self) -> None:
         depth = np.asarray(self.depth, dtype=float)
@@ -167,6 +169,13 @@ def _columns(cells: np.ndarray):
 
 #: How a surface is read from the cells: the first-occupied expectation, or the hit evidence
 SURFACE_ESTIMATORS = ("first-occupied", "evidence")
+#: What a surface's std is, by :attr:`Surface.std_kind`
+STD_KINDS = {
+    "propagated": "the hits' propagated uncertainty (vertical, and horizontal x slope)",
+    "spread": "the spread of the hits' evidence in the column",
+    "first-occupied": "the spread of the first occupied depth",
+    "points": "the spread of the points in the cell",
+}
 
 
 def default_estimator(occupancy: OccupancyMap) -> str:
@@ -218,10 +227,10 @@ def _first_occupied(occupancy: OccupancyMap, threshold: float) -> Surface:
     spread = np.add.reduceat(weight * (z - np.repeat(mean_z, lengths)) ** 2, starts)
     var = spread / np.where(total > 0, total, 1.0) + res * res / 12.0
     covered = np.maximum.reduceat(p, starts) > threshold
-    return _grid(cells[starts, :2], covered, mean_z, var, res)
+    return _grid(cells[starts, :2], covered, mean_z, var, res, "first-occupied")
 
 
-def _grid(ij, covered, depth_by_column, var_by_column, res: float) -> Surface:
+def _grid(ij, covered, depth_by_column, var_by_column, res: float, kind: str) -> Surface:
     """The Surface over the bounding box of the columns ``ij`` (K, 2), with data where
     ``covered``."""
     lo = ij.min(axis=0)
@@ -232,7 +241,7 @@ def _grid(ij, covered, depth_by_column, var_by_column, res: float) -> Surface:
     depth[row[covered], col[covered]] = depth_by_column[covered]
     std[row[covered], col[covered]] = np.sqrt(var_by_column[covered])
     x0, y0 = ((lo + 0.5) * res).tolist()
-    return Surface(x0, y0, res, depth, std, np.isfinite(depth))
+    return Surface(x0, y0, res, depth, std, np.isfinite(depth), kind)
 
 
 def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, *,
@@ -263,7 +272,7 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     f -= np.floor(f)
     var = np.maximum(spread - f * (1.0 - f) * res * res, 0.0)
     covered = (np.maximum.reduceat(p, starts) > threshold) & (total > 0)
-    surface = _grid(cells[starts, :2], covered, d, var, res)
+    surface = _grid(cells[starts, :2], covered, d, var, res, "spread")
     if uncertainty == "spread":
         return surface
     return propagated_std(surface, occupancy.columns)
@@ -312,7 +321,7 @@ def propagated_std(surface: Surface, columns) -> Surface:
     var = means[..., 0] + means[..., 1] * gx * gx + means[..., 2] * gy * gy
     std = np.where(surface.coverage & np.isfinite(var), np.sqrt(np.maximum(var, 0.0)),
                    surface.std)  # fmt: skip
-    return Surface(surface.x0, surface.y0, res, surface.depth, std, surface.coverage)
+    return Surface(surface.x0, surface.y0, res, surface.depth, std, surface.coverage, "propagated")
 
 
 def _slope(depth: np.ndarray, axis: int, res: float) -> np.ndarray:
@@ -361,4 +370,5 @@ def surface_from_points(points, resolution: float, origin: tuple[float, float] |
     has = count > 0
     depth[~has], std[~has] = np.nan, np.nan
     return Surface(x0 + lo[0] * resolution, y0 + lo[1] * resolution, resolution,
-                   depth.reshape(ny, nx), std.reshape(ny, nx), has.reshape(ny, nx))  # fmt: skip
+                   depth.reshape(ny, nx), std.reshape(ny, nx), has.reshape(ny, nx),
+                   "points")  # fmt: skip

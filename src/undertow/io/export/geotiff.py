@@ -8,7 +8,8 @@ value of bands 1 and 2). Geotransform (R, 0, W, 0, -R, N): rows north to south.
 With a georeference the file carries its projected CRS (UTM by default). Without one it has no
 CRS at all, rather than an engineering (LOCAL_CS) one, which GIS readers handle unevenly (QGIS
 treats it as unknown or asks); east is then undertow's y, north its x, in metres from the map's
-origin, and the file's metadata (``UNDERTOW_FRAME``) says so.
+origin, and the file's metadata (``UNDERTOW_FRAME``) says so. ``UNDERTOW_STD`` says what the
+std band is (for a ``tpu`` map: the hits' propagated uncertainty).
 """
 
 from __future__ import annotations
@@ -37,12 +38,14 @@ def write_geotiff(path, surface, resolution: float | None = None, georef=None) -
     if path.suffix.lower() not in SUFFIXES:
         raise ConfigError(f"{path}: a GeoTIFF file ends in .tif or .tiff")
     raster = resample_surface(surface, resolution, georef)
-    write_raster(path, raster, georef)
+    write_raster(path, raster, georef, getattr(surface, "std_kind", ""))
     return path
 
 
-def write_raster(path, raster: Raster, georef=None) -> Path:
-    """Write a :class:`~.raster.Raster` as a deflate-compressed, tiled GeoTIFF. Atomic."""
+def write_raster(path, raster: Raster, georef=None, std_kind: str = "") -> Path:
+    """Write a :class:`~.raster.Raster` as a deflate-compressed, tiled GeoTIFF. Atomic.
+    ``std_kind``: what the std band is (the surface's :attr:`~undertow.mapping.surface.
+    Surface.std_kind`), in the tag ``UNDERTOW_STD`` when given."""
     rasterio = require("rasterio", "GeoTIFF output")
     from rasterio.transform import Affine
 
@@ -64,4 +67,6 @@ def write_raster(path, raster: Raster, georef=None) -> Path:
             dst.set_band_description(band, name)
             dst.set_band_unit(band, UNITS[name])
         dst.update_tags(UNDERTOW_FRAME=frame, UNDERTOW_DEPTH=DEPTH)
+        if std_kind:
+            dst.update_tags(UNDERTOW_STD=std_kind)
     return path
