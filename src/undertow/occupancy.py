@@ -188,7 +188,7 @@ class OccupancyMap:
                 )  # fmt: skip
         except FileNotFoundError as exc:
             raise ReaderError(f"{path}: no such map file") from exc
-        except (KeyError, ValueError, OSError) as exc:
+        except (KeyError, ValueError, OSError, DataError) as exc:
             raise ReaderError(f"{path}: not an undertow map ({exc})") from exc
 
 

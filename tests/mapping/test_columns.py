@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from undertow.errors import DataError
+from undertow.errors import DataError, ReaderError
 from undertow.mapping import make_mapper
 from undertow.mapping.samples import expand
 from undertow.mapping.surface import Surface, evidence_surface, map_surface, propagated_std
@@ -89,6 +89,19 @@ def test_the_sums_go_through_map_npz_and_a_prior_and_old_maps_keep_the_spread(tm
         evidence_surface(old, uncertainty="propagated")
     with pytest.raises(DataError, match="surface uncertainty 'both'"):
         map_surface(occupancy, uncertainty="both")
+
+
+def test_a_map_file_with_broken_column_sums_is_one_line_naming_it(tmp_path):
+    mapper = make_mapper("tpu", resolution=RES)
+    mapper.integrate(_flat_floor(np.array([0.01, 0.01, 1e-4])))
+    occupancy = mapper.occupancy()
+    path = occupancy.save(tmp_path / "map.npz")
+    with np.load(path) as d:
+        arrays = {k: d[k] for k in d.files}
+    arrays["column_sums"] = arrays["column_sums"][:-1]  # one row short
+    np.savez(tmp_path / "broken.npz", **arrays)
+    with pytest.raises(ReaderError, match=r"broken.npz: not an undertow map \(ColumnStats"):
+        OccupancyMap.load(tmp_path / "broken.npz")
 
 
 def test_column_sums_merge_column_by_column():
