@@ -34,8 +34,9 @@ class ColumnStats:
     """Per (x, y) column (index i = floor(x / res), j = floor(y / res)): the hit evidence it
     received and that evidence's uncertainties, sum_i w_i, sum_i w_i sigma_v,i^2,
     sum_i w_i s_x,i^2, sum_i w_i s_y,i^2 (:data:`COLUMN_SUMS`; w_i the kernel-weighted mass of
-    hit i in the column, sigma_v,i its vertical standard deviation, s_x,i and s_y,i its
-    horizontal ones). Written by the ``tpu`` mapper (:mod:`undertow.mapping.columns`); read by
+    hit i in the column, sigma_v,i its vertical standard deviation, s_x,i and s_y,i the
+    standard deviations of its kernel across the floor). Written by the ``tpu`` mapper
+    (:mod:`undertow.mapping.columns`); read by
     :func:`~undertow.mapping.surface.evidence_surface`."""
 
     cells: np.ndarray

@@ -32,8 +32,7 @@ from ..occupancy import COLUMN_SUMS, ColumnStats
 from .chunks import CHUNK_SHIFT, find_or_insert
 from .grid import ChunkedGrid
 from .kernels import sincos
-from .samples import Samples
-from .tpu import KERNEL_STD, tpu_hit_weights
+from .tpu import KERNEL_STD
 from .tpuscatter import TpuHits
 
 #: the share of the map's resident budget the column sums may hold in memory
@@ -52,23 +51,22 @@ class ColumnGrid:
         budget = None if resident_bytes is None else resident_bytes * RESIDENT_SHARE
         self.grid = ChunkedGrid(self.resolution, resident_bytes=budget)
 
-    def add_rays(self, hits: TpuHits, extent) -> None:
-        """Add hits given as :class:`~undertow.mapping.tpuscatter.TpuHits`; ``extent``: a box
-        holding them (:func:`~undertow.mapping.tpuscatter.tpu_extent`'s)."""
+    def add_hits(self, hits: TpuHits, extent) -> None:
+        """Add hits given as :class:`~undertow.mapping.tpuscatter.TpuHits` (the ray path);
+        ``extent``: a box holding them (:func:`~undertow.mapping.tpuscatter.tpu_extent`'s)."""
         self._add(hits.x, hits.y, hits.l, hits.weight, hits.var_v, extent)
 
-    def add_samples(self, samples: Samples, **settings) -> None:
-        """Add the hits of written ``samples`` (``settings`` as
-        :func:`~undertow.mapping.tpu.tpu_training`'s)."""
-        x, y, lx, ly, weight, var_v = tpu_hit_weights(samples, **settings)
+    def add_written(self, x, y, lx, ly, weight, var_v) -> None:
+        """Add the hits of written samples, as :func:`~undertow.mapping.tpu.tpu_hit_weights`
+        gives them."""
         if len(x):
-            extent = (np.array([x.min(), y.min(), 0.0]), np.array([x.max(), y.max(), 0.0]), True)
+            extent = (np.array([x.min(), y.min()]), np.array([x.max(), y.max()]))
             self._add(x, y, np.stack([lx, ly], axis=1), weight, var_v, extent)
 
     def _add(self, x, y, l, weight, var_v, extent) -> None:
-        """Add hits at (x, y) with kernel lengths l (n, 2), weights w and sigma_v^2; hits with
-        a value not finite, or w or l not positive, are left out (a hit without weight adds
-        nothing to the map either)."""
+        """Add hits at (x, y) with kernel lengths l (n, 2), weights w and sigma_v^2, inside the
+        x-y box ``extent`` (lo, hi); hits with a value not finite, or w or l not positive, are
+        left out (a hit without weight adds nothing to the map either)."""
         n = len(x)
         if n == 0:
             return

@@ -41,7 +41,7 @@ from .grid import ChunkedGrid, points_extent
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
 from .rayscatter import ray_extent
 from .samples import RaySamples, Samples
-from .tpu import tpu_training
+from .tpu import tpu_hit_weights, tpu_training
 from .tpuscatter import tpu_extent, tpu_hits
 
 DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
@@ -294,7 +294,7 @@ class TpuBkiMapper(Mapper):
                 self._check_need(need, n, limit_gb)
                 try:
                     self.grid.scatter_tpu(rays, hits, cap, (lo, hi, finite), n)
-                    self.columns.add_rays(hits, (lo, hi, finite))
+                    self.columns.add_hits(hits, (lo, hi, finite))
                 except MemoryError:
                     raise out_of_memory(self.resolution) from None
                 return
@@ -304,7 +304,8 @@ class TpuBkiMapper(Mapper):
         """:meth:`integrate`'s scatter through the written training samples of
         :func:`~undertow.mapping.tpu.tpu_training` and the generic product-kernel scatter
         (the reference of the scatter from the rays)."""
-        points, label, weight, lengths = tpu_training(samples, **self._settings())
+        hits = tpu_hit_weights(samples, **self._settings())
+        points, label, weight, lengths = tpu_training(samples, hits, **self._settings())
         # the product kernel's l_j = s_j (l_max_j - l_min_j) + l_min_j with bounds (0, 1):
         # s_j = l_j / cap gives each sample its own lengths (cap fixed by the settings, so
         # a sample's lengths do not depend on the batch: tiles map as the whole)
@@ -313,11 +314,11 @@ class TpuBkiMapper(Mapper):
         bounds = (np.zeros(3), np.ones(3))
         self._grid_scatter(MODE_PRODUCT, training, bounds, np.zeros(3), cap)
         try:
-            self.columns.add_samples(samples, **self._settings())
+            self.columns.add_written(*hits)
         except MemoryError:
             raise out_of_memory(self.resolution) from None
 
-    def seed(self, prior) -> None:
+    def seed(self, prior: OccupancyMap | str | Path) -> OccupancyMap:
         """:meth:`Mapper.seed`, and the prior's column sums (a ``tpu`` map's)."""
         prior = super().seed(prior)
         self.columns.add_stats(prior.columns)

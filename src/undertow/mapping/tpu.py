@@ -212,16 +212,15 @@ def tpu_hit_weights(samples: Samples, *, resolution: float, base_length: float,
     return points[:, 0], points[:, 1], lx, ly, weight, sv * sv
 
 
-def tpu_training(samples: Samples, *, resolution: float, base_length: float, max_length: float,
-                 range_std, range_std_fraction: float, sonar_beam_width_deg: float = 0.0,
-                 wave=None):  # fmt: skip
+def tpu_training(samples: Samples, hits=None, **settings):
     """The samples the ``tpu`` mapper scatters with the product kernel, and their per-axis
     length scales: (points (M, 3), label (M,), weight (M,), lengths (M, 3)). Free samples
-    first, in order, then every hit's three vertical cells (module doc)."""
-    settings = {"resolution": resolution, "base_length": base_length, "max_length": max_length,
-                "range_std": range_std, "range_std_fraction": range_std_fraction,
-                "sonar_beam_width_deg": sonar_beam_width_deg, "wave": wave}  # fmt: skip
-    _, _, lx, ly, weight, var_v = tpu_hit_weights(samples, **settings)
+    first, in order, then every hit's three vertical cells (module doc). ``settings``: those
+    of :func:`tpu_hit_weights`; ``hits``: its result when already computed."""
+    if hits is None:
+        hits = tpu_hit_weights(samples, **settings)
+    _, _, lx, ly, weight, var_v = hits
+    resolution, base_length = settings["resolution"], settings["base_length"]
     sv = np.sqrt(var_v)
     hit = samples.label > 0.5
     free = ~hit

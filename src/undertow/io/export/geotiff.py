@@ -38,7 +38,7 @@ def write_geotiff(path, surface, resolution: float | None = None, georef=None) -
     if path.suffix.lower() not in SUFFIXES:
         raise ConfigError(f"{path}: a GeoTIFF file ends in .tif or .tiff")
     raster = resample_surface(surface, resolution, georef)
-    write_raster(path, raster, georef, getattr(surface, "std_kind", ""))
+    write_raster(path, raster, georef, surface.std_kind)
     return path
 
 
