@@ -27,6 +27,8 @@ MAP_FILE = "a map.npz written by `undertow map` (or its folder)"
 
 #: what each column of :attr:`ColumnStats.sums` holds, per (x, y) column of the map
 COLUMN_SUMS = ("weight", "weight_var_v", "weight_var_x", "weight_var_y")
+#: the values of :attr:`ColumnStats.carve` per column: two free intervals' bottoms and tops
+CARVE_FIELDS = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,12 +37,16 @@ class ColumnStats:
     received and that evidence's uncertainties, sum_i w_i, sum_i w_i sigma_v,i^2,
     sum_i w_i s_x,i^2, sum_i w_i s_y,i^2 (:data:`COLUMN_SUMS`; w_i the kernel-weighted mass of
     hit i in the column, sigma_v,i its vertical standard deviation, s_x,i and s_y,i the
-    standard deviations of its kernel across the floor). Written by the ``tpu`` mapper
+    standard deviations of its kernel across the floor). ``carve`` (K, 4) or None: the two
+    deepest depth intervals a sonar's cone found free in the column, F_1, T_1, F_2, T_2 (m, z
+    down; F_1 >= F_2 the intervals' bottoms, T their tops; NaN where fewer;
+    :mod:`undertow.mapping.carve`). Written by the ``tpu`` mapper
     (:mod:`undertow.mapping.columns`); read by
     :func:`~undertow.mapping.surface.evidence_surface`."""
 
     cells: np.ndarray
     sums: np.ndarray
+    carve: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         cells = np.asarray(self.cells, dtype=np.int64).reshape(-1, 2)
@@ -49,6 +55,11 @@ class ColumnStats:
             raise DataError(f"ColumnStats: {len(cells)} columns but {len(sums)} rows of sums")
         object.__setattr__(self, "cells", cells)
         object.__setattr__(self, "sums", sums)
+        if self.carve is not None:
+            carve = np.asarray(self.carve, dtype=float).reshape(-1, CARVE_FIELDS)
+            if len(carve) != len(cells):
+                raise DataError(f"ColumnStats: {len(cells)} columns but {len(carve)} carve rows")
+            object.__setattr__(self, "carve", carve)
 
     def __len__(self) -> int:
         return int(self.cells.shape[0])
@@ -62,9 +73,35 @@ class ColumnStats:
         cells = np.concatenate([p.cells for p in parts])
         sums = np.concatenate([p.sums for p in parts])
         unique, inverse = np.unique(cells, axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
         out = np.zeros((len(unique), sums.shape[1]))
-        np.add.at(out, inverse.reshape(-1), sums)
-        return cls(unique, out)
+        np.add.at(out, inverse, sums)
+        if all(p.carve is None for p in parts):
+            return cls(unique, out)
+        carve = np.concatenate([np.full((len(p), CARVE_FIELDS), np.nan) if p.carve is None
+                                else p.carve for p in parts])  # fmt: skip
+        return cls(unique, out, deepest_two(carve, inverse, len(unique)))
+
+
+def deepest_two(carve: np.ndarray, group: np.ndarray, groups: int) -> np.ndarray:
+    """Per group of rows of ``carve`` ((n, 4): F_1, T_1, F_2, T_2, NaN where none; ``group``
+    (n,) the row's group in [0, groups)), the two intervals with the deepest bottoms F among
+    all the rows' intervals: (groups, 4), as :attr:`ColumnStats.carve`."""
+    pairs = np.concatenate([carve[:, :2], carve[:, 2:]])
+    gid = np.concatenate([group, group])
+    ok = np.isfinite(pairs[:, 0])
+    pairs, gid = pairs[ok], gid[ok]
+    order = np.lexsort((-pairs[:, 0], gid))
+    pairs, gid = pairs[order], gid[order]
+    index = np.arange(len(gid))
+    first = np.ones(len(gid), bool)
+    first[1:] = gid[1:] != gid[:-1]
+    rank = index - np.maximum.accumulate(np.where(first, index, 0))
+    out = np.full((groups, CARVE_FIELDS), np.nan)
+    for k in (0, 1):
+        sel = rank == k
+        out[gid[sel], 2 * k : 2 * k + 2] = pairs[sel]
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,8 +221,7 @@ class OccupancyMap:
                     cells=d["cells"], alpha=d["alpha"], beta=d["beta"],
                     resolution=float(d["resolution"]), alpha0=float(d["alpha0"]),
                     beta0=float(d["beta0"]), metadata=json.loads(str(d["metadata"])),
-                    columns=(ColumnStats(d["column_cells"], d["column_sums"])
-                             if "column_cells" in d else None),
+                    columns=stored_columns(d),
                 )  # fmt: skip
         except FileNotFoundError as exc:
             raise ReaderError(f"{path}: no such map file") from exc
@@ -197,7 +233,17 @@ def column_arrays(columns: ColumnStats | None) -> dict:
     """The arrays ``map.npz`` stores a map's :class:`ColumnStats` in (none without them)."""
     if columns is None:
         return {}
-    return {"column_cells": columns.cells, "column_sums": columns.sums}
+    carve = {} if columns.carve is None else {"column_carve": columns.carve}
+    return {"column_cells": columns.cells, "column_sums": columns.sums, **carve}
+
+
+def stored_columns(arrays) -> ColumnStats | None:
+    """The :class:`ColumnStats` of a map's or a tile's stored arrays (an open ``.npz``), None
+    when it has none."""
+    if "column_cells" not in arrays:
+        return None
+    carve = arrays["column_carve"] if "column_carve" in arrays else None
+    return ColumnStats(arrays["column_cells"], arrays["column_sums"], carve)
 
 
 _KINDS = {

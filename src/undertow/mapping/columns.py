@@ -18,7 +18,9 @@ uncertainty (:func:`~undertow.mapping.surface.evidence_surface`). The sums are k
 second :class:`~undertow.mapping.grid.ChunkedGrid` of the map's resolution whose cells
 (i, j, c) hold sum c of column (i, j) as alpha mass (float32, as the map's masses), written by
 :func:`add_column_sums` (one kernel evaluation per column for the four sums); it spills as
-the map's grid does, with an eighth of its resident budget.
+the map's grid does, with an eighth of its resident budget. Cells (i, j, 4 .. 7) hold the two
+deepest intervals a sonar's cone carved free in the column (:mod:`undertow.mapping.carve`,
+written by :func:`~undertow.mapping.carve.add_carve`).
 """
 
 from __future__ import annotations
@@ -28,7 +30,8 @@ import math
 import numpy as np
 from numba import njit
 
-from ..occupancy import COLUMN_SUMS, ColumnStats
+from ..occupancy import CARVE_FIELDS, COLUMN_SUMS, ColumnStats
+from .carve import FIRST_CELL, add_carve, carve_inputs, decode, encode
 from .chunks import CHUNK_SHIFT, find_or_insert
 from .grid import ChunkedGrid
 from .kernels import sincos
@@ -71,9 +74,30 @@ class ColumnGrid:
         if n == 0:
             return
         res = self.resolution
-        box = (np.array([extent[0][0], extent[0][1], 0.0]),
-               np.array([extent[1][0], extent[1][1], len(COLUMN_SUMS) * res]), True)  # fmt: skip
-        self.grid.write(add_column_sums, n, (x, y, l, weight, var_v, res), box, self.reach(l))
+        self.grid.write(add_column_sums, n, (x, y, l, weight, var_v, res), self._box(extent),
+                        self.reach(l))  # fmt: skip
+
+    def _box(self, extent):
+        """The grid box of the column cells over the x-y box ``extent`` (lo, hi)."""
+        top = (FIRST_CELL + CARVE_FIELDS) * self.resolution
+        return (np.array([extent[0][0], extent[0][1], 0.0]),
+                np.array([extent[1][0], extent[1][1], top]), True)  # fmt: skip
+
+    def add_carve(self, origin, direction, r, var_v, half_angle: float, cap: float) -> None:
+        """Carve the cones of sonar pings (origins (n, 3), unit axes (n, 3), ranges, the hits'
+        sigma_v^2; half-angle h in rad; ``cap`` the largest reach, m):
+        :mod:`undertow.mapping.carve`."""
+        if half_angle <= 0 or not len(r):
+            return
+        origin, direction, r, margin = carve_inputs(origin, direction, r, var_v, half_angle)
+        if not len(r):
+            return
+        end = origin + r[:, None] * direction
+        reach = np.minimum(2.0 * r * math.sin(half_angle / 2.0), cap)
+        extent = (end[:, :2].min(axis=0), end[:, :2].max(axis=0))
+        args = (origin, direction, r, margin, math.cos(half_angle), math.sin(half_angle / 2.0),
+                float(cap), self.resolution)  # fmt: skip
+        self.grid.write(add_carve, len(r), args, self._box(extent), float(reach.max()))
 
     @staticmethod
     def reach(l) -> float:
@@ -82,35 +106,43 @@ class ColumnGrid:
         return float(finite.max()) if finite.size else 0.0
 
     def add_stats(self, stats: ColumnStats | None) -> None:
-        """Add sums already made (a prior map's)."""
+        """Add sums already made (a prior map's), to a grid that holds no carved intervals yet
+        (those are kept, not added)."""
         if stats is None or not len(stats):
             return
-        k = len(COLUMN_SUMS)
+        values = stats.sums
+        if stats.carve is not None:
+            values = np.hstack([stats.sums, encode(stats.carve)])
+        k = values.shape[1]
         cells = np.column_stack([np.repeat(stats.cells, k, axis=0),
                                  np.tile(np.arange(k), len(stats))])  # fmt: skip
-        mass = stats.sums.reshape(-1)
+        mass = values.reshape(-1)
         self.grid.add_mass(cells, mass, np.zeros_like(mass))
 
     def stats(self) -> ColumnStats:
-        """The sums per column (:class:`~undertow.occupancy.ColumnStats`), columns sorted by
-        (i, j). Read part by part (a column's four cells are in one chunk, so in one part):
-        48 bytes a column at the end, not the grid's readout of every cell whole."""
+        """The sums per column (:class:`~undertow.occupancy.ColumnStats`, with the carved
+        intervals), columns sorted by (i, j), those without hits left out. Read part by part (a
+        column's cells are in one chunk, so in one part): 80 bytes a column at the end, not the
+        grid's readout of every cell whole."""
         k = len(COLUMN_SUMS)
-        columns, sums = [], []
+        n = FIRST_CELL + CARVE_FIELDS
+        columns, values = [], []
         for cells, alpha, _ in self.grid.iter_cells():
-            ok = (cells[:, 2] >= 0) & (cells[:, 2] < k)
+            ok = (cells[:, 2] >= 0) & (cells[:, 2] < n)
             cells, alpha = cells[ok], alpha[ok]
             part, inverse = np.unique(cells[:, :2], axis=0, return_inverse=True)
-            total = np.zeros((len(part), k))
+            total = np.zeros((len(part), n))
             np.add.at(total, (inverse.reshape(-1), cells[:, 2]), alpha)
             keep = total[:, 0] > 0
             columns.append(part[keep])
-            sums.append(total[keep])
+            values.append(total[keep])
         if not columns:
-            return ColumnStats(np.zeros((0, 2), np.int64), np.zeros((0, k)))
-        columns, sums = np.concatenate(columns), np.concatenate(sums)
+            return ColumnStats(np.zeros((0, 2), np.int64), np.zeros((0, k)),
+                               np.zeros((0, CARVE_FIELDS)))  # fmt: skip
+        columns, values = np.concatenate(columns), np.concatenate(values)
         order = np.lexsort((columns[:, 1], columns[:, 0]))
-        return ColumnStats(columns[order], sums[order])
+        values = values[order]
+        return ColumnStats(columns[order], values[:, :k], decode(values[:, FIRST_CELL:n]))
 
 
 @njit(cache=True, inline="always")

@@ -82,6 +82,10 @@ class MappingConfig(BaseModel):
         25.0, ge=0, lt=180, allow_inf_nan=False,
         description="tpu: the sonar's full beam width, deg (Ping2 spec: 25)",
     )  # fmt: skip
+    sonar_carve: bool = Field(
+        True, description="tpu: each sonar first return clears its cone nearer than its range, "
+        "so a return from relief beside the axis does not widen it (mapping.carve)",
+    )  # fmt: skip
     wave_range_noise: bool = Field(
         True, description="tpu: add the waves' orbital displacement (the trajectory's wave) "
         "to the range noise",

@@ -40,7 +40,7 @@ from .config import MappingConfig, Method
 from .grid import ChunkedGrid, points_extent
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
 from .rayscatter import ray_extent
-from .samples import RaySamples, Samples
+from .samples import SENSOR_SONAR, RaySamples, Samples
 from .tpu import tpu_hit_weights, tpu_training
 from .tpuscatter import tpu_extent, tpu_hits
 
@@ -257,9 +257,11 @@ class TpuBkiMapper(Mapper):
     method = "tpu"
 
     def __init__(self, *, base_length, max_length, range_std, range_std_fraction,
-                 sonar_beam_width_deg, wave=None, **base) -> None:  # fmt: skip
+                 sonar_beam_width_deg, wave=None, sonar_carve=True, **base) -> None:  # fmt: skip
         super().__init__(**base)
         self.sonar_beam_width_deg = float(sonar_beam_width_deg)
+        #: whether the sonar's first returns carve their cones free (:mod:`~undertow.mapping.carve`)
+        self.sonar_carve = bool(sonar_carve)
         #: (amplitude m, frequency Hz) of the waves whose orbital motion adds to the range
         #: noise (the settings' ``wave``, resolved by :func:`~undertow.mapping.tpu.with_wave`)
         self.wave = wave
@@ -295,6 +297,9 @@ class TpuBkiMapper(Mapper):
                 try:
                     self.grid.scatter_tpu(rays, hits, cap, (lo, hi, finite), n)
                     self.columns.add_hits(hits, (lo, hi, finite))
+                    sonar = rays.sensor == SENSOR_SONAR
+                    self._carve(rays.origin[sonar], rays.direction[sonar], rays.r[sonar],
+                                hits.var_v[sonar])  # fmt: skip
                 except MemoryError:
                     raise out_of_memory(self.resolution) from None
                 return
@@ -315,8 +320,22 @@ class TpuBkiMapper(Mapper):
         self._grid_scatter(MODE_PRODUCT, training, bounds, np.zeros(3), cap)
         try:
             self.columns.add_written(*hits)
+            hit = samples.label > 0.5
+            sonar = (samples.sensor[hit] == SENSOR_SONAR) & (samples.ray[hit] >= 0)
+            if sonar.any() and len(samples.origins):
+                origin = samples.origins[samples.ray[hit][sonar]]
+                offset = samples.points[hit][sonar] - origin
+                r = np.linalg.norm(offset, axis=1)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    self._carve(origin, offset / r[:, None], r, hits[5][sonar])
         except MemoryError:
             raise out_of_memory(self.resolution) from None
+
+    def _carve(self, origin, direction, r, var_v) -> None:
+        """Carve the sonar pings' cones (:mod:`~undertow.mapping.carve`) unless turned off."""
+        if self.sonar_carve:
+            half = np.deg2rad(self.sonar_beam_width_deg) / 2.0
+            self.columns.add_carve(origin, direction, r, var_v, half, self.max_length)
 
     def seed(self, prior: OccupancyMap | str | Path) -> OccupancyMap:
         """:meth:`Mapper.seed`, and the prior's column sums (a ``tpu`` map's)."""
@@ -334,6 +353,7 @@ class TpuBkiMapper(Mapper):
                 "max_length": self.max_length, "range_std": list(self.range_std),
                 "range_std_fraction": self.range_std_fraction,
                 "sonar_beam_width_deg": self.sonar_beam_width_deg,
+                "sonar_carve": self.sonar_carve,
                 "wave": None if self.wave is None else
                 {"amplitude_m": self.wave[0], "frequency_hz": self.wave[1]}}  # fmt: skip
 
@@ -361,6 +381,7 @@ def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
                               range_std=(config.range_std_dvl, config.range_std_sonar,
                                          config.range_std_multibeam),
                               sonar_beam_width_deg=config.sonar_beam_width_deg,
+                              sonar_carve=config.sonar_carve,
                               wave=config.wave if config.wave_range_noise else None,
                               range_std_fraction=config.range_std_fraction, **base)  # fmt: skip
     else:

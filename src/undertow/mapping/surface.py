@@ -73,6 +73,7 @@ from scipy.spatial import cKDTree
 
 from ..errors import DataError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
+from .carve import carved
 
 
 @dataclass(frozen=True, eq=False)
@@ -263,6 +264,8 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     p = np.clip(occupancy.mean[order], 0.0, 1.0)
     w = np.maximum(occupancy.alpha[order] - occupancy.alpha0, 0.0)
     z = (cells[:, 2] + 0.5) * res
+    cut = carved_cells(cells, z, occupancy.columns)
+    p[cut], w[cut] = 0.0, 0.0
     lengths = np.diff(np.append(starts, len(p)))
     total = np.add.reduceat(w, starts)
     safe = np.where(total > 0, total, 1.0)
@@ -276,6 +279,23 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     if uncertainty == "spread":
         return surface
     return propagated_std(surface, occupancy.columns)
+
+
+def carved_cells(cells: np.ndarray, z: np.ndarray, columns) -> np.ndarray:
+    """Which of ``cells`` (n, 3; centre depths ``z``) a sonar's cone carved free (the map's
+    :attr:`~undertow.occupancy.ColumnStats.carve`, :func:`~undertow.mapping.carve.carved`);
+    none when the map keeps no intervals."""
+    out = np.zeros(len(cells), bool)
+    if columns is None or columns.carve is None or not len(columns) or not len(cells):
+        return out
+    key = columns.cells[:, 0] * (1 << 32) + columns.cells[:, 1]
+    order = np.argsort(key, kind="stable")
+    find = cells[:, 0] * (1 << 32) + cells[:, 1]
+    at = np.clip(np.searchsorted(key[order], find), 0, len(key) - 1)
+    row = order[at]
+    held = key[row] == find
+    out[held] = carved(z[held], columns.carve[row[held]])
+    return out
 
 
 #: The depth std of the evidence surface: the hits' propagated uncertainty, or their spread

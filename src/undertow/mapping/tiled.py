@@ -48,7 +48,7 @@ import numpy as np
 
 from .._util.dask import check_scheduler, describe_exception
 from ..errors import ConfigError, DataError, ReaderError
-from ..occupancy import ColumnStats, OccupancyMap, column_arrays
+from ..occupancy import ColumnStats, OccupancyMap, column_arrays, stored_columns
 from .config import MappingConfig
 from .mappers import mapper_from_config
 from .samples import Samples
@@ -68,6 +68,7 @@ TPU_FIELDS = (
     "range_std_multibeam",
     "range_std_fraction",
     "sonar_beam_width_deg",
+    "sonar_carve",
     "wave_range_noise",
     "wave",
 )
@@ -214,7 +215,8 @@ def map_tile(tile: TileId, samples: Samples, config: MappingConfig, tiling: Tili
     columns = mapper.column_stats()
     if columns is not None:
         mine = np.all(tiling.tiles_of_cells(columns.cells) == np.asarray(tile), axis=1)
-        columns = ColumnStats(columns.cells[mine], columns.sums[mine])
+        carve = None if columns.carve is None else columns.carve[mine]
+        columns = ColumnStats(columns.cells[mine], columns.sums[mine], carve)
     return TileResult(tile, cells[own], alpha[own], beta[own], len(samples),
                       time.perf_counter() - start, mapper.grid.nbytes, columns)  # fmt: skip
 
@@ -509,8 +511,7 @@ def iter_tiles(tile_dir: str | Path) -> Iterable[TileResult]:
         try:
             with np.load(path, allow_pickle=False) as d:
                 tile = tuple(int(v) for v in d["tile"])
-                columns = (ColumnStats(d["column_cells"], d["column_sums"])
-                           if "column_cells" in d else None)  # fmt: skip
+                columns = stored_columns(d)
                 yield TileResult(tile, d["cells"], d["alpha_mass"], d["beta_mass"],
                                  columns=columns)  # fmt: skip
         except (KeyError, ValueError, OSError) as exc:
