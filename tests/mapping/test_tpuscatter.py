@@ -70,14 +70,16 @@ def test_the_rays_give_the_written_samples_map_bit_for_bit(wave, max_length):
 
 def test_the_column_sums_from_the_rays_are_the_written_samples_sums():
     """The per-column sums (mapping/columns.py) by the ray scatter and by the generic scatter
-    of written samples: the same columns and sums (to rounding: the hits' sigma_v^2 and
-    weights are formed in two places)."""
+    of written samples: the same columns, sums and carved intervals (to rounding: the hits'
+    sigma_v^2 and weights, and the written rays' directions, are formed in two places)."""
     batches = [_fan(seed) for seed in range(3)]
     written = _map(batches, True).occupancy().columns
     rays = _map(batches, False).occupancy().columns
     assert len(rays) > 1000
     np.testing.assert_array_equal(written.cells, rays.cells)
     np.testing.assert_allclose(written.sums, rays.sums, rtol=1e-9, atol=1e-300)
+    assert np.isfinite(rays.carve[:, 2]).sum() > 100  # the sonar's rays carved their cones
+    np.testing.assert_allclose(written.carve, rays.carve, rtol=1e-9, atol=1e-6)
 
 
 @pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread")
