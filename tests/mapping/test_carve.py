@@ -89,10 +89,13 @@ def test_each_column_keeps_its_two_deepest_intervals_whatever_the_order():
     assert np.isfinite(one.carve[:, 0]).any() and np.isnan(one.carve[:, 2]).all()
 
 
-def test_a_cell_is_carved_only_inside_both_intervals():
-    intervals = np.array([[3.0, 1.0, 2.5, 1.5]] * 5 + [[3.0, 1.0, np.nan, np.nan]])
-    z = np.array([1.2, 1.5, 2.0, 2.5, 2.9, 2.0])
-    np.testing.assert_array_equal(carved(z, intervals), [False, True, True, False, False, False])
+def test_a_cell_is_carved_only_when_every_hit_it_can_hold_is_inside_both_intervals():
+    """A cell of centre z holds mass of hits within 1.5 cells of z (the three-cell lattice):
+    carved when [z - 0.15, z + 0.15] lies in both intervals (0.1 m cells)."""
+    intervals = np.array([[3.0, 1.0, 2.5, 1.5]] * 6 + [[3.0, 1.0, np.nan, np.nan]])
+    z = np.array([1.6, 1.65, 2.0, 2.35, 2.4, 2.9, 2.0])
+    expected = [False, True, True, True, False, False, False]
+    np.testing.assert_array_equal(carved(z, intervals, RES), expected)
 
 
 def test_merged_columns_keep_the_two_deepest_of_all_parts():
@@ -156,9 +159,10 @@ def _surface_error(occupancy):
 
 def test_the_cone_carves_the_widened_step_back_to_the_floor(step_survey):
     """First returns from the block's top while the axis is over the floor beside it widen the
-    block in the map by up to the footprint (r tan 12.5 deg, ~0.55 m); carving brings the
-    columns beside it back to the floor and leaves the block's top and the far floor as
-    they were (to a centimetre)."""
+    block in the map by up to the footprint (r tan 12.5 deg, ~0.55 m). Carving brings the
+    columns 0.2-0.5 m beside it back to the floor (to 5 cm) and leaves the block's top and
+    the far floor as they were (to a centimetre). Closer to the step no ping can carve: a cone
+    that reaches that floor reaches the block's top too, so its return is the top."""
     maps = {}
     for carve in (False, True):
         mapper = make_mapper("tpu", resolution=RES, sonar_carve=carve)
@@ -166,16 +170,16 @@ def test_the_cone_carves_the_widened_step_back_to_the_floor(step_survey):
         maps[carve] = mapper.occupancy()
     x, plain = _surface_error(maps[False])
     x2, cut = _surface_error(maps[True])
-    beside = ((x > 1.55) & (x < 1.9)) | ((x > 2.9) & (x < 3.25))
-    assert np.mean(np.abs(plain[beside]) > 0.1) > 0.5  # the step widened without carving
-    beside2 = ((x2 > 1.55) & (x2 < 1.9)) | ((x2 > 2.9) & (x2 < 3.25))
-    assert np.all(np.abs(cut[beside2]) < 0.1)
-    top = (x2 > 2.2) & (x2 < 2.6)
+    np.testing.assert_array_equal(x, x2)
+    beside = ((x > 1.5) & (x < 1.8)) | ((x > 3.0) & (x < 3.3))
+    assert beside.sum() == 6
+    assert np.all(plain[beside] < -0.1)  # the step widened without carving
+    assert np.all(np.abs(cut[beside]) < 0.05)
+    top = (x > 2.2) & (x < 2.6)
     assert np.all(np.abs(cut[top]) < 0.05)  # the block's top is kept
     far = (x < 1.0) | (x > 3.8)
-    far2 = (x2 < 1.0) | (x2 > 3.8)
-    np.testing.assert_allclose(cut[far2], plain[far], atol=0.01)  # (the step's wide kernels
-    assert np.all(np.abs(cut[far2]) < 0.01)  # reach these columns: moved by millimetres)
+    np.testing.assert_allclose(cut[far], plain[far], atol=0.01)  # (the step's wide kernels
+    assert np.all(np.abs(cut[far]) < 0.01)  # reach these columns: moved by millimetres)
     assert maps[True].metadata["sonar_carve"] and not maps[False].metadata["sonar_carve"]
 
 

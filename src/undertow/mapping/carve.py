@@ -32,9 +32,11 @@ carves only within that distance of its axis' end on x and on y.
 Per column the map keeps the two deepest such intervals (F_1 >= F_2, with their tops T_1, T_2),
 cells (i, j, 4 .. 7) of the :class:`~undertow.mapping.columns.ColumnGrid` (stored as depth +
 :data:`OFFSET`, so that 0 is "none" and the grid's spill and take-back, which add a chunk to an
-empty one, keep them). A cell of the column at depth z is carved when both intervals hold it,
-max(T_1, T_2) <= z < F_2: two pings must agree, so one spurious long range (a second bottom echo)
-clears nothing. Taking the two deepest is conservative: the cells it carves are free by two
+empty one, keep them). A hit's mass lies on the three cells around it (:mod:`undertow.mapping.
+tpu`), so a cell of centre depth z holds mass of hits within 3 r / 2 of z (r the resolution); it
+is carved when all of them lie inside both intervals, max(T_1, T_2) <= z - 3 r / 2 and
+z + 3 r / 2 <= F_2 (a floor hit's upper cell is not carved by the floor's own free space): two
+pings must agree, so one spurious long range (a second bottom echo) clears nothing. Taking the two deepest is conservative: the cells it carves are free by two
 pings' cones; some a vote of other pings would also carve stay. The surface leaves carved cells
 out (:func:`~undertow.mapping.surface.evidence_surface`).
 """
@@ -138,13 +140,16 @@ def keep_deepest(cell, top, bottom):
         cell[k + 2], cell[k + 3] = bottom, top
 
 
-def carved(depth: np.ndarray, intervals: np.ndarray) -> np.ndarray:
-    """Whether a cell at ``depth`` (n,) is carved by its column's ``intervals`` (n, 4: F_1, T_1,
-    F_2, T_2 in metres, NaN where none): max(T_1, T_2) <= z < F_2 (module doc)."""
+def carved(depth: np.ndarray, intervals: np.ndarray, resolution: float) -> np.ndarray:
+    """Whether a cell of the map's grid (``resolution`` r) at centre depth ``depth`` (n,) is
+    carved by its column's ``intervals`` (n, 4: F_1, T_1, F_2, T_2 in metres, NaN where none):
+    every hit that can have put mass on it lies inside both, max(T_1, T_2) <= z - 3 r / 2 and
+    z + 3 r / 2 <= F_2 (module doc)."""
     intervals = np.asarray(intervals, float)
     top = np.maximum(intervals[:, 1], intervals[:, 3])
+    reach = 1.5 * float(resolution)
     with np.errstate(invalid="ignore"):
-        return (depth >= top) & (depth < intervals[:, 2])
+        return (depth - reach >= top) & (depth + reach <= intervals[:, 2])
 
 
 def decode(stored: np.ndarray) -> np.ndarray:

@@ -264,7 +264,7 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     p = np.clip(occupancy.mean[order], 0.0, 1.0)
     w = np.maximum(occupancy.alpha[order] - occupancy.alpha0, 0.0)
     z = (cells[:, 2] + 0.5) * res
-    cut = carved_cells(cells, z, occupancy.columns)
+    cut = carved_cells(cells, z, occupancy.columns, res)
     p[cut], w[cut] = 0.0, 0.0
     lengths = np.diff(np.append(starts, len(p)))
     total = np.add.reduceat(w, starts)
@@ -281,7 +281,7 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     return propagated_std(surface, occupancy.columns)
 
 
-def carved_cells(cells: np.ndarray, z: np.ndarray, columns) -> np.ndarray:
+def carved_cells(cells: np.ndarray, z: np.ndarray, columns, resolution: float) -> np.ndarray:
     """Which of ``cells`` (n, 3; centre depths ``z``) a sonar's cone carved free (the map's
     :attr:`~undertow.occupancy.ColumnStats.carve`, :func:`~undertow.mapping.carve.carved`);
     none when the map keeps no intervals."""
@@ -294,7 +294,7 @@ def carved_cells(cells: np.ndarray, z: np.ndarray, columns) -> np.ndarray:
     at = np.clip(np.searchsorted(key[order], find), 0, len(key) - 1)
     row = order[at]
     held = key[row] == find
-    out[held] = carved(z[held], columns.carve[row[held]])
+    out[held] = carved(z[held], columns.carve[row[held]], resolution)
     return out
 
 
