@@ -32,13 +32,15 @@ carves only within that distance of its axis' end on x and on y.
 Per column the map keeps the two deepest such intervals (F_1 >= F_2, with their tops T_1, T_2),
 cells (i, j, 4 .. 7) of the :class:`~undertow.mapping.columns.ColumnGrid` (stored as depth +
 :data:`OFFSET`, so that 0 is "none" and the grid's spill and take-back, which add a chunk to an
-empty one, keep them). A hit's mass lies on the three cells around it (:mod:`undertow.mapping.
-tpu`), so a cell of centre depth z holds mass of hits within 3 r / 2 of z (r the resolution); it
-is carved when all of them lie inside both intervals, max(T_1, T_2) <= z - 3 r / 2 and
-z + 3 r / 2 <= F_2 (a floor hit's upper cell is not carved by the floor's own free space): two
-pings must agree, so one spurious long range (a second bottom echo) clears nothing. Taking the two deepest is conservative: the cells it carves are free by two
-pings' cones; some a vote of other pings would also carve stay. The surface leaves carved cells
-out (:func:`~undertow.mapping.surface.evidence_surface`).
+empty one, keep them). A hit's mass lies on the three cells around it
+(:mod:`undertow.mapping.tpu`), so a cell of centre depth z holds mass of hits within 3 r / 2 of
+z (r the resolution); it is carved when all of them lie inside both intervals,
+max(T_1, T_2) <= z - 3 r / 2 and z + 3 r / 2 <= F_2 (a floor hit's upper cell is not carved by
+the floor's own free space). Two pings must agree, so one spurious long range (a second bottom
+echo) clears nothing. Taking the two deepest is conservative: the cells it carves are free by
+two pings' cones; some that a vote of all the pings would carve stay. The surface leaves carved
+cells out (:func:`~undertow.mapping.surface.evidence_surface`). The floor right beside a step
+stays as it was: a cone that reaches it reaches the step's top too, so its return is the top.
 """
 
 from __future__ import annotations
