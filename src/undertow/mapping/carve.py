@@ -102,6 +102,7 @@ def add_carve(start, origin, direction, r, margin, cos_half, sin_quarter, cap, r
     hits'), the two deepest intervals (T, F)
     in cells (i, j, FIRST_CELL ..) (module doc). A ping starts only when the chunk arrays have
     room for every chunk it may place; returns the first ping without that room, or n."""
+    last_x, last_y, chunk = np.int64(1) << 40, np.int64(0), -1  # the last chunk found
     for s in range(start, r.shape[0]):
         ox, oy, oz = origin[s, 0], origin[s, 1], origin[s, 2]
         vx, vy, vz = direction[s, 0], direction[s, 1], direction[s, 2]
@@ -124,8 +125,10 @@ def add_carve(start, origin, direction, r, margin, cos_half, sin_quarter, cap, r
                                               cos_half, x, y)  # fmt: skip
                 if not bottom > top:
                     continue
-                chunk = find_or_insert(i >> CHUNK_SHIFT, j >> CHUNK_SHIFT, 0, table_keys,
-                                       table_vals, chunk_keys, n_chunks)  # fmt: skip
+                if i >> CHUNK_SHIFT != last_x or j >> CHUNK_SHIFT != last_y:
+                    last_x, last_y = i >> CHUNK_SHIFT, j >> CHUNK_SHIFT
+                    chunk = find_or_insert(last_x, last_y, 0, table_keys, table_vals,
+                                           chunk_keys, n_chunks)  # fmt: skip
                 keep_deepest(alpha[chunk, i & 7, j & 7], top + OFFSET, bottom + OFFSET)
     return r.shape[0]
 

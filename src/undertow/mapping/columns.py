@@ -130,11 +130,12 @@ class ColumnGrid:
         for cells, alpha, _ in self.grid.iter_cells():
             ok = (cells[:, 2] >= 0) & (cells[:, 2] < n)
             cells, alpha = cells[ok], alpha[ok]
-            part, inverse = np.unique(cells[:, :2], axis=0, return_inverse=True)
+            key = (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)  # one int per column
+            part, first, inverse = np.unique(key, return_index=True, return_inverse=True)
             total = np.zeros((len(part), n))
-            np.add.at(total, (inverse.reshape(-1), cells[:, 2]), alpha)
+            total[inverse.reshape(-1), cells[:, 2]] = alpha  # each (i, j, c) once in a part
             keep = total[:, 0] > 0
-            columns.append(part[keep])
+            columns.append(cells[first[keep], :2])
             values.append(total[keep])
         if not columns:
             return ColumnStats(np.zeros((0, 2), np.int64), np.zeros((0, k)),
