@@ -102,6 +102,12 @@ def test_a_map_file_with_broken_column_sums_is_one_line_naming_it(tmp_path):
     np.savez(tmp_path / "broken.npz", **arrays)
     with pytest.raises(ReaderError, match=r"broken.npz: not an undertow map \(ColumnStats"):
         OccupancyMap.load(tmp_path / "broken.npz")
+    with np.load(path) as d:
+        arrays = {k: d[k] for k in d.files}
+    arrays["column_carve"] = arrays["column_carve"][:, :3]  # the sonar's intervals cut short
+    np.savez(tmp_path / "carve.npz", **arrays)
+    with pytest.raises(ReaderError, match=r"carve.npz: not an undertow map \(ColumnStats"):
+        OccupancyMap.load(tmp_path / "carve.npz")
 
 
 def test_column_sums_merge_column_by_column():
