@@ -83,6 +83,13 @@ class ColumnStats:
         return cls(unique, out, deepest_two(carve, inverse, len(unique)))
 
 
+def column_keys(ij: np.ndarray) -> np.ndarray:
+    """One int64 per (i, j) column index pair ((n, 2+); i and j within int32), equal only for
+    equal pairs (not ordered as (i, j))."""
+    ij = np.asarray(ij, dtype=np.int64)
+    return (ij[:, 0] << 32) + (ij[:, 1] & 0xFFFFFFFF)
+
+
 def deepest_two(carve: np.ndarray, group: np.ndarray, groups: int) -> np.ndarray:
     """Per group of rows of ``carve`` ((n, 4): F_1, T_1, F_2, T_2, NaN where none; ``group``
     (n,) the row's group in [0, groups)), the two intervals with the deepest bottoms F among

@@ -52,6 +52,7 @@ from numba import njit
 
 from ..occupancy import COLUMN_SUMS
 from .chunks import CHUNK_SHIFT, find_or_insert
+from .tpu import shortfall
 
 #: the margin kept above the sphere of the range, in the hit's range-and-depth standard deviations
 KAPPA = 3.0
@@ -68,7 +69,7 @@ def carve_inputs(origin, direction, r, var_v, half_angle: float):
     within h of the vertical."""
     origin, direction = np.asarray(origin, float), np.asarray(direction, float)
     r, var_v = np.asarray(r, float), np.asarray(var_v, float)
-    s_d = r * (1.0 / math.cos(half_angle) - 1.0)
+    s_d = shortfall(r, math.tan(half_angle))
     margin = KAPPA * np.sqrt(np.maximum(var_v - s_d * s_d, 0.0))
     ok = (np.isfinite(origin).all(axis=1) & np.isfinite(direction).all(axis=1)
           & np.isfinite(r) & (r > 0) & np.isfinite(margin)
@@ -99,8 +100,8 @@ def add_carve(start, origin, direction, r, margin, cos_half, sin_quarter, cap, r
     """From ping ``start``: keep, per column whose centre ((i + 1/2) res, ...) the ping's cone
     reaches (within the chord 2 r sin(h / 2) of its axis' end on x and on y, and within ``cap``:
     the tpu kernel's largest support, which bounds the cost and the tiles' halo as it does the
-    hits'), the two deepest intervals (T, F)
-    in cells (i, j, FIRST_CELL ..) (module doc). A ping starts only when the chunk arrays have
+    hits'), the two deepest intervals (T, F) in cells (i, j, FIRST_CELL ..) (module doc). A
+    ping starts only when the chunk arrays have
     room for every chunk it may place; returns the first ping without that room, or n."""
     last_x, last_y, chunk = np.int64(1) << 40, np.int64(0), -1  # the last chunk found
     for s in range(start, r.shape[0]):

@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..occupancy import CARVE_FIELDS, COLUMN_SUMS, ColumnStats
+from ..occupancy import CARVE_FIELDS, COLUMN_SUMS, ColumnStats, column_keys
 from .carve import FIRST_CELL, add_carve, carve_inputs, decode, encode
 from .chunks import CHUNK_SHIFT, find_or_insert
 from .grid import ChunkedGrid
@@ -130,8 +130,8 @@ class ColumnGrid:
         for cells, alpha, _ in self.grid.iter_cells():
             ok = (cells[:, 2] >= 0) & (cells[:, 2] < n)
             cells, alpha = cells[ok], alpha[ok]
-            key = (cells[:, 0] << 32) + (cells[:, 1] & 0xFFFFFFFF)  # one int per column
-            part, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+            part, first, inverse = np.unique(column_keys(cells), return_index=True,
+                                             return_inverse=True)  # fmt: skip
             total = np.zeros((len(part), n))
             total[inverse.reshape(-1), cells[:, 2]] = alpha  # each (i, j, c) once in a part
             keep = total[:, 0] > 0

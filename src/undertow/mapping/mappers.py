@@ -322,7 +322,7 @@ class TpuBkiMapper(Mapper):
             self.columns.add_written(*hits)
             hit = samples.label > 0.5
             sonar = (samples.sensor[hit] == SENSOR_SONAR) & (samples.ray[hit] >= 0)
-            if sonar.any() and len(samples.origins):
+            if self.sonar_carve and sonar.any() and len(samples.origins):
                 origin = samples.origins[samples.ray[hit][sonar]]
                 offset = samples.points[hit][sonar] - origin
                 r = np.linalg.norm(offset, axis=1)

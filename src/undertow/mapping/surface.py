@@ -72,7 +72,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import DataError
-from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap
+from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap, column_keys
 from .carve import carved
 
 
@@ -288,9 +288,9 @@ def carved_cells(cells: np.ndarray, z: np.ndarray, columns, resolution: float) -
     out = np.zeros(len(cells), bool)
     if columns is None or columns.carve is None or not len(columns) or not len(cells):
         return out
-    key = columns.cells[:, 0] * (1 << 32) + columns.cells[:, 1]
+    key = column_keys(columns.cells)
     order = np.argsort(key, kind="stable")
-    find = cells[:, 0] * (1 << 32) + cells[:, 1]
+    find = column_keys(cells)
     at = np.clip(np.searchsorted(key[order], find), 0, len(key) - 1)
     row = order[at]
     held = key[row] == find

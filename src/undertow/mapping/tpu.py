@@ -174,9 +174,15 @@ def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
     tan_half = np.tan(half)
     sonar = sensor == SENSOR_SONAR
     s_b2 = np.where(sonar, (rng * tan_half / 2.0) ** 2, 0.0)
-    s_d2 = np.where(sonar, (rng * (np.sqrt(1.0 + tan_half * tan_half) - 1.0)) ** 2, 0.0)
+    s_d2 = np.where(sonar, shortfall(rng, tan_half) ** 2, 0.0)
     return (np.sqrt(var[:, 0] + s_b2), np.sqrt(var[:, 1] + s_b2),
             np.sqrt(var[:, 2] + s_r**2 + s_d2), s_r)  # fmt: skip
+
+
+def shortfall(r, tan_half):
+    """A wide beam's shortfall s_d = r (sec(b / 2) - 1) at range r, tan_half = tan(b / 2)
+    (module doc)."""
+    return r * (np.sqrt(1.0 + tan_half * tan_half) - 1.0)
 
 
 def lattice_weights(z, sigma_v, resolution: float):
