@@ -287,8 +287,11 @@ def test_a_restart_of_undertow_is_a_reset_the_autopilot_takes(dive, tmp_path, mo
     assert run.counts["ODOMETRY:reset"] == 1 and run.counts["ODOMETRY:started"] == 1
     assert "ODOMETRY:rejected" not in run.counts
     reports = run.of("EKF_STATUS_REPORT")
-    lost = [(round(t - first.span()[0], 2), msg.flags) for t, msg in reports
-            if first.span()[0] + 1.0 <= t < second.span()[1] and not msg.flags & ABS]
+    lost = [
+        (round(t - first.span()[0], 2), msg.flags)
+        for t, msg in reports
+        if first.span()[0] + 1.0 <= t < second.span()[1] and not msg.flags & ABS
+    ]
     assert not lost, (lost, first.span(), second.span())
     # right after the reset the autopilot is on the new session's estimate
     after = [(msg.time_boot_ms * 1e-3, msg) for _, msg in run.of("LOCAL_POSITION_NED")
