@@ -149,8 +149,9 @@ def step_survey():
 
 
 def _surface_error(occupancy):
-    """The surface's depth error per column on the line y = 0.05 (x, error)."""
-    s = map_surface(occupancy)
+    """The surface's depth error per column on the line y = 0.05 (x, error), every column
+    (no IHO order: the step's columns are what the carve is judged on)."""
+    s = map_surface(occupancy, iho_order="none")
     x, y = s.centres()
     row = np.argmin(np.abs(y[:, 0] - 0.05))
     ok = s.coverage[row]

@@ -45,6 +45,14 @@ def export_command(
         float | None,
         typer.Option(help="Occupied if mean > threshold, in (0, 1); default: the map's own."),
     ] = None,
+    iho_order: Annotated[
+        str | None,
+        typer.Option(
+            help="geotiff only: keep the columns whose depth meets this IHO S-44 order "
+            "(exclusive | special | 1a | 1b | 2 | none; default 1a) when the std band is a "
+            "propagated uncertainty (a tpu map): 1.96 std <= sqrt(a^2 + (b depth)^2).",
+        ),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary on stderr.")] = False,
 ) -> None:
     """Write a map as a GeoTIFF bathymetric grid (depth, std, coverage), an OctoMap octree
@@ -58,8 +66,10 @@ def export_command(
     from ..commands.export import export_map
 
     result = export_map(map_path, out, format_, resolution=resolution, origin=origin, utm=utm,
-                        threshold=threshold)  # fmt: skip
+                        threshold=threshold, iho_order=iho_order)  # fmt: skip
     for line in result.warnings:
         err.print(f"[yellow]warning:[/] {line}", highlight=False, soft_wrap=True)
     if not quiet:
+        for line in result.notes:
+            err.print(line, highlight=False, soft_wrap=True)
         err.print(result.summary(), highlight=False, soft_wrap=True)

@@ -252,6 +252,14 @@ def evaluate_map_command(
             "of the --origin/--utm CRS (default: projected when the coordinates pass 100 km)."
         ),
     ] = None,
+    iho_order: Annotated[
+        str | None,
+        typer.Option(
+            help="A map.npz whose depth std is a propagated uncertainty (a tpu map): judge the "
+            "columns whose depth meets this IHO S-44 order (exclusive | special | 1a | 1b | 2 | "
+            "none; default 1a): 1.96 std <= sqrt(a^2 + (b depth)^2).",
+        ),
+    ] = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print every metric as JSON.")] = False,
 ) -> None:
     """Judge a map against a ground truth: cloud-to-cloud distance (CloudCompare's C2C) and
@@ -264,7 +272,8 @@ def evaluate_map_command(
     from ..commands.mapping import evaluate_map_file
 
     result = evaluate_map_file(map_path, ground_truth, threshold, origin=origin, utm=utm,
-                               truth_z=truth_z, truth_frame=truth_frame)  # fmt: skip
+                               truth_z=truth_z, truth_frame=truth_frame,
+                               iho_order=iho_order)  # fmt: skip
     print_warnings(result.warnings)
     for line in result.notes:
         err.print(f"note: {line}", highlight=False, soft_wrap=True)
@@ -318,4 +327,9 @@ def map_score_lines(v: dict) -> list[str]:
         f"{'F-score':<22} {per_tau('fscore')}",
         f"{'calibration':<22} {calibration}",
         f"{'threshold':<22} {threshold} ({v['threshold_from']})",
+        *(
+            [f"{'IHO S-44 order':<22} {v['iho_order']} ({v['withheld_columns']} columns withheld)"]
+            if v.get("iho_order")
+            else []
+        ),
     ]

@@ -23,6 +23,7 @@ from ..io.export.las import write_map_las
 from ..io.export.octree import write_octomap
 from ..io.export.raster import resample_surface
 from ..io.ply import write_map_ply
+from ..mapping.iho import check_order, withheld_note
 from ..mapping.surface import STD_KINDS, map_surface
 from ..occupancy import MAP_FILE, OccupancyMap
 from .common import npz_file
@@ -49,11 +50,14 @@ class ExportResult:
     threshold_from: str
     warnings: list[str] = field(default_factory=list)
     std_kind: str = ""  # the GeoTIFF's std band (mapping.surface.STD_KINDS)
+    iho_order: str = ""  # the IHO S-44 order the GeoTIFF's columns were held to ("" none)
+    notes: list[str] = field(default_factory=list)  # the choices made, one line each
 
     def summary(self) -> str:
         what = {"geotiff": "cells with data", "octomap": "leaves"}.get(self.format, "points")
         std = f"; std band: {STD_KINDS[self.std_kind]}" if self.std_kind in STD_KINDS else ""
-        return f"wrote {self.path} ({self.format}: {self.count} {what}; {self.frame}{std})"
+        order = f"; IHO S-44 order {self.iho_order}" if self.iho_order else ""
+        return f"wrote {self.path} ({self.format}: {self.count} {what}; {self.frame}{std}{order})"
 
 
 def export_format(out: str | Path, fmt: str | None = None) -> str:
@@ -94,7 +98,11 @@ def _number(value) -> bool:
         return False
 
 
-def _check_options(fmt: str, out: Path, resolution, threshold, frame) -> None:
+def _check_options(fmt: str, out: Path, resolution, threshold, frame, iho_order) -> None:
+    if iho_order is not None:
+        check_order(iho_order)
+        if fmt != "geotiff":
+            raise ConfigError(f"--iho-order applies to geotiff; {fmt} keeps the map's cells")
     if resolution is not None:
         if fmt != "geotiff":
             raise ConfigError(f"--resolution applies to geotiff; {fmt} keeps the map's cells")
@@ -112,7 +120,8 @@ def _check_options(fmt: str, out: Path, resolution, threshold, frame) -> None:
 
 def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
                resolution: float | None = None, origin=None, utm=None,
-               threshold: float | None = None, frame: str = "enu") -> ExportResult:  # fmt: skip
+               threshold: float | None = None, frame: str = "enu",
+               iho_order: str | None = None) -> ExportResult:  # fmt: skip
     """Write the map ``map_path`` (a ``map.npz`` or its folder) to ``out`` as ``fmt`` (one of
     :data:`FORMATS`; default from the suffix of ``out``).
 
@@ -120,10 +129,12 @@ def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
     (lat, lon), WGS 84) or ``utm`` ("E,N,ZONE" or (e, n, zone); ZONE "32N" or an EPSG code):
     where undertow's origin lies, for geotiff and las/laz; ``threshold``: occupied if
     mean > threshold (default: the map's own); ``frame``: "enu" or "ned" axes of octomap and
-    local las/laz. Every option is checked before the map is read."""
+    local las/laz; ``iho_order``: the IHO S-44 order a geotiff's columns are held to when its
+    std is a propagated uncertainty (:func:`~undertow.mapping.surface.map_surface`; None: its
+    default, "none": every column). Every option is checked before the map is read."""
     out = Path(out)
     fmt = export_format(out, fmt)
-    _check_options(fmt, out, resolution, threshold, frame)
+    _check_options(fmt, out, resolution, threshold, frame, iho_order)
     georef = _georeference(fmt, origin, utm)
     if georef is not None and frame != "enu":
         raise ConfigError("a georeferenced export is east-north-up; frame must be enu")
@@ -134,13 +145,14 @@ def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
     occupancy = OccupancyMap.load(source)
     used, used_from = map_threshold(occupancy, threshold)
     axes = _axes(fmt, frame, georef)
-    std_kind = ""
+    std_kind, order, notes = "", "", []
     if fmt == "geotiff":
-        surface = map_surface(occupancy, used)
+        surface = map_surface(occupancy, used, iho_order=iho_order)
         raster = resample_surface(surface, resolution, georef)
-        write_raster(out, raster, georef, surface.std_kind)
+        write_raster(out, raster, georef, surface.std_kind, surface.iho_order)
         count = int(np.count_nonzero(raster.coverage > 0))
-        std_kind = surface.std_kind
+        std_kind, order = surface.std_kind, surface.iho_order
+        notes = [n for n in (withheld_note(order, surface.withheld),) if n]
     elif fmt == "octomap":
         write_octomap(out, occupancy, used, frame)
         count = len(occupancy)
@@ -152,7 +164,8 @@ def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
     else:
         write_map_ply(out, occupancy, used)
         count = len(occupancy.occupied(used))
-    return ExportResult(out, fmt, count, axes, used, used_from, std_kind=std_kind)
+    return ExportResult(out, fmt, count, axes, used, used_from, std_kind=std_kind,
+                        iho_order=order, notes=notes)  # fmt: skip
 
 
 def _axes(fmt: str, frame: str, georef) -> str:

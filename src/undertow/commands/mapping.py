@@ -43,6 +43,7 @@ from ..io.trajectory_input import (
     tum_trajectory,
 )
 from ..mapping.config import MappingConfig
+from ..mapping.iho import check_order, withheld_note
 from ..mapping.run import (
     PIECE_METHODS,
     MappingResult,
@@ -277,6 +278,8 @@ class MapEvaluationResult:
     truth_z: str | None = None
     calibrated: bool = True
     std_kind: str = ""
+    iho_order: str = ""
+    withheld: int = 0
 
     def to_dict(self) -> dict:
         """Every metric, flat (C2C, cells, surface, F-scores, calibration: null for a map
@@ -284,6 +287,7 @@ class MapEvaluationResult:
         the truth was read."""
         surface = {} if self.surface is None else self.surface.to_dict()
         surface["std_kind"] = self.std_kind or None
+        surface.update(iho_order=self.iho_order or None, withheld_columns=self.withheld)
         if not self.calibrated:
             surface.update({k: None for k in (*CALIBRATION_KEYS, "std_kind")})
         return {**self.evaluation.to_dict(), **surface, "threshold": self.threshold,
@@ -304,11 +308,17 @@ class _EvaluatedMap:
     calibrated: bool
 
 
-def _map_to_evaluate(map_path: Path, threshold: float | None, notes: list[str]) -> _EvaluatedMap:
+def _map_to_evaluate(map_path: Path, threshold: float | None, notes: list[str],
+                     iho_order: str | None = None) -> _EvaluatedMap:  # fmt: skip
     """The map.npz, map.ply or GeoTIFF ``map_path`` as :class:`_EvaluatedMap`; the surface of
     a map.npz is ``map_surface(occupancy, threshold)``, of a map.ply its cell centres gridded
-    (no std), of a GeoTIFF its depth and std bands."""
+    (no std), of a GeoTIFF its depth and std bands (held to an IHO order when exported)."""
     suffix = map_path.suffix.lower()
+    if suffix in (".ply", *GEOTIFF_SUFFIXES) and iho_order is not None:
+        raise ConfigError(
+            f"--iho-order applies to a map.npz; {map_path} holds the columns kept when it was "
+            "written (give the map.npz, or leave --iho-order out)"
+        )
     if suffix in (".ply", *GEOTIFF_SUFFIXES) and threshold is not None:
         raise ConfigError(
             f"threshold applies to a map.npz; {map_path} holds the cells already "
@@ -318,7 +328,8 @@ def _map_to_evaluate(map_path: Path, threshold: float | None, notes: list[str]) 
         grid = read_map_geotiff(map_path)
         depth, std, cover = (grid.bands[k] for k in ("depth", "std", "coverage"))
         surface = Surface(grid.x0, grid.y0, grid.resolution, depth, std, cover > 0,
-                          str(grid.tags.get("UNDERTOW_STD", "")))  # fmt: skip
+                          str(grid.tags.get("UNDERTOW_STD", "")),
+                          str(grid.tags.get("UNDERTOW_IHO_ORDER", "")))  # fmt: skip
         notes.append(f"{map_path}: C2C and cells are the GeoTIFF's cells with data")
         return _EvaluatedMap(surface.points(), surface, grid.crs, grid.resolution, None,
                              "the GeoTIFF (thresholded when it was exported)", True)  # fmt: skip
@@ -329,7 +340,8 @@ def _map_to_evaluate(map_path: Path, threshold: float | None, notes: list[str]) 
                              "the map.ply (thresholded when it was written)", False)  # fmt: skip
     occupancy = OccupancyMap.load(map_path)
     threshold, threshold_from = map_threshold(occupancy, threshold)
-    surface = map_surface(occupancy, threshold)
+    surface = map_surface(occupancy, threshold, iho_order=iho_order)
+    notes.extend(n for n in (withheld_note(surface.iho_order, surface.withheld),) if n)
     return _EvaluatedMap(occupancy.points(threshold), surface, None, occupancy.resolution,
                          threshold, threshold_from, True)  # fmt: skip
 
@@ -361,7 +373,8 @@ def _map_georeference(origin, utm):
 def evaluate_map_file(map_path: str | Path, ground_truth_path: str | Path,
                       threshold: float | None = None, *, origin=None, utm=None,
                       truth_z: str | None = None,
-                      truth_frame: str | None = None) -> MapEvaluationResult:  # fmt: skip
+                      truth_frame: str | None = None,
+                      iho_order: str | None = None) -> MapEvaluationResult:  # fmt: skip
     """A map (``map.npz``, its folder, a ``map.ply`` or an exported GeoTIFF) against a ground
     truth (a PLY cloud, an XYZ file or a GeoTIFF bathymetry, :mod:`undertow.evaluation.truth`):
     cloud-to-cloud distance and cells (:func:`~undertow.evaluation.cloud.evaluate_map`) and the
@@ -370,16 +383,20 @@ def evaluate_map_file(map_path: str | Path, ground_truth_path: str | Path,
     (:func:`~undertow.evaluation.surface.hull_area`). Occupied cells of a map.npz: mean >
     ``threshold`` in (0, 1), by default the one the map was made with. ``origin``/``utm``: the
     map's origin, for a truth (or map) with a CRS; ``truth_z`` (depth | elevation) and
-    ``truth_frame`` (local | projected, XYZ) override what is detected."""
+    ``truth_frame`` (local | projected, XYZ) override what is detected. ``iho_order``: the
+    IHO S-44 order a map.npz's surface is held to (:func:`~undertow.mapping.surface.
+    map_surface`; None: its default, "none": every column)."""
     if threshold is not None and not 0.0 < threshold < 1.0:
         raise ConfigError(f"threshold must be in (0, 1), got {threshold}")
+    if iho_order is not None:
+        check_order(iho_order)
     check_truth_options(truth_kind(ground_truth_path), truth_z, truth_frame)
     georef = _map_georeference(origin, utm)
     map_path = Path(map_path)
     map_path = map_path / "map.npz" if map_path.is_dir() else map_path
     notes: list[str] = []
     caught: list[str] = []
-    loaded = _map_to_evaluate(map_path, threshold, notes)
+    loaded = _map_to_evaluate(map_path, threshold, notes, iho_order)
     if len(loaded.points) == 0:
         caught.append(f"{map_path}: the map has no points")
     with collect_warnings(caught):
@@ -390,7 +407,8 @@ def evaluate_map_file(map_path: str | Path, ground_truth_path: str | Path,
     surface = evaluate_surface(loaded.surface, truth.reference, area=area)
     return MapEvaluationResult(evaluation, loaded.threshold, loaded.threshold_from, caught,
                                surface, notes + truth.notes, truth.z, loaded.calibrated,
-                               loaded.surface.std_kind)  # fmt: skip
+                               loaded.surface.std_kind, loaded.surface.iho_order,
+                               loaded.surface.withheld)  # fmt: skip
 
 
 def _extent(surface: Surface):

@@ -74,6 +74,7 @@ from scipy.spatial import cKDTree
 from ..errors import DataError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap, column_keys
 from .carve import carved
+from .iho import DEFAULT_IHO_ORDER, NO_ORDER, check_order, meets_order
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,7 +83,9 @@ class Surface:
 
     ``depth`` (ny, nx) m, z down, NaN where there is no data; ``std`` (ny, nx) m, the depth's
     standard deviation (NaN where no data); ``coverage`` (ny, nx) bool, where there is data;
-    ``std_kind``: what the std is (:data:`STD_KINDS`; "" when not said)."""
+    ``std_kind``: what the std is (:data:`STD_KINDS`; "" when not said); ``iho_order``: the
+    IHO S-44 order the columns were held to ("" none, :mod:`undertow.mapping.iho`) and
+    ``withheld`` how many columns with data failed it and were left out."""
 
     x0: float
     y0: float
@@ -91,6 +94,8 @@ class Surface:
     std: np.ndarray
     coverage: np.ndarray
     std_kind: str = ""
+    iho_order: str = ""
+    withheld: int = 0
 
     def __post_init__(self) -> None:
         depth = np.asarray(self.depth, dtype=float)
@@ -187,7 +192,8 @@ def default_estimator(occupancy: OccupancyMap) -> str:
 
 def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, *,
                 occupied_only: bool = False, estimator: str | None = None,
-                uncertainty: str | None = None) -> Surface:  # fmt: skip
+                uncertainty: str | None = None,
+                iho_order: str | None = None) -> Surface:  # fmt: skip
     """The seafloor surface ``occupancy`` implies (equations in the module doc): per column a
     depth d and its standard deviation s; no data where no cell's mean exceeds ``threshold``.
     ``estimator``: ``first-occupied`` (the expected first occupied depth), ``evidence``
@@ -195,7 +201,11 @@ def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, 
     map's (cell i has centre (i + 1/2) res), over the bounding box of the map's columns.
     ``occupied_only``: only the occupied cells (mean > threshold, the paper's map points) enter
     the expectation; cells below the threshold then neither stop a column nor pull its depth
-    up. ``uncertainty``: the evidence surface's std (:func:`evidence_surface`)."""
+    up. ``uncertainty``: the evidence surface's std (:func:`evidence_surface`).
+    ``iho_order``: a surface whose std is the hits' propagated uncertainty keeps only the
+    columns that meet this IHO S-44 order (:func:`held_to_order`; None:
+    :data:`~undertow.mapping.iho.DEFAULT_IHO_ORDER`, ``"none"``: every column)."""
+    order = check_order(DEFAULT_IHO_ORDER if iho_order is None else iho_order)
     estimator = default_estimator(occupancy) if estimator is None else estimator
     if estimator not in SURFACE_ESTIMATORS:
         raise DataError(f"surface estimator {estimator!r}: expected one of {SURFACE_ESTIMATORS}")
@@ -205,8 +215,23 @@ def map_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESHOLD, 
         empty = np.zeros((0, 0))
         return Surface(0.0, 0.0, float(occupancy.resolution), empty, empty, empty.astype(bool))
     if estimator == "evidence":
-        return evidence_surface(occupancy, threshold, uncertainty=uncertainty)
+        surface = evidence_surface(occupancy, threshold, uncertainty=uncertainty)
+        return held_to_order(surface, order) if surface.std_kind == "propagated" else surface
     return _first_occupied(occupancy, threshold)
+
+
+def held_to_order(surface: Surface, order: str) -> Surface:
+    """``surface`` with only the columns whose depth d and std s meet the IHO S-44 ``order``,
+    z_95 s <= sqrt(a^2 + (b d)^2) (:func:`~undertow.mapping.iho.meets_order`); the others
+    lose their data and are counted in ``withheld``. ``"none"`` returns it unchanged."""
+    if check_order(order) == NO_ORDER:
+        return surface
+    keep = surface.coverage & meets_order(surface.depth, surface.std, order)
+    withheld = int(np.count_nonzero(surface.coverage & ~keep))
+    depth = np.where(keep, surface.depth, np.nan)
+    std = np.where(keep, surface.std, np.nan)
+    return Surface(surface.x0, surface.y0, surface.resolution, depth, std, keep,
+                   surface.std_kind, order, surface.withheld + withheld)  # fmt: skip
 
 
 def _first_occupied(occupancy: OccupancyMap, threshold: float) -> Surface:

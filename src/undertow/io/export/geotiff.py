@@ -38,14 +38,17 @@ def write_geotiff(path, surface, resolution: float | None = None, georef=None) -
     if path.suffix.lower() not in SUFFIXES:
         raise ConfigError(f"{path}: a GeoTIFF file ends in .tif or .tiff")
     raster = resample_surface(surface, resolution, georef)
-    write_raster(path, raster, georef, surface.std_kind)
+    write_raster(path, raster, georef, surface.std_kind, surface.iho_order)
     return path
 
 
-def write_raster(path, raster: Raster, georef=None, std_kind: str = "") -> Path:
+def write_raster(path, raster: Raster, georef=None, std_kind: str = "",
+                 iho_order: str = "") -> Path:  # fmt: skip
     """Write a :class:`~.raster.Raster` as a deflate-compressed, tiled GeoTIFF. Atomic.
     ``std_kind``: what the std band is (the surface's :attr:`~undertow.mapping.surface.
-    Surface.std_kind`), in the tag ``UNDERTOW_STD`` when given."""
+    Surface.std_kind`), in the tag ``UNDERTOW_STD`` when given; ``iho_order``: the IHO S-44
+    order its columns were held to (:attr:`~undertow.mapping.surface.Surface.iho_order`), in
+    the tag ``UNDERTOW_IHO_ORDER`` when given."""
     rasterio = require("rasterio", "GeoTIFF output")
     from rasterio.transform import Affine
 
@@ -69,4 +72,6 @@ def write_raster(path, raster: Raster, georef=None, std_kind: str = "") -> Path:
         dst.update_tags(UNDERTOW_FRAME=frame, UNDERTOW_DEPTH=DEPTH)
         if std_kind:
             dst.update_tags(UNDERTOW_STD=std_kind)
+        if iho_order:
+            dst.update_tags(UNDERTOW_IHO_ORDER=iho_order)
     return path
