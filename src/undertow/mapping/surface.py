@@ -60,6 +60,11 @@ occupancy exceeds the threshold, as for the first-occupied surface. It does not 
 the hits: a cell's mean is a ratio of the hit and free evidence it received, and weighting
 a hit's three cells by it would move the hit's depth.
 
+**Held to an IHO order** (:func:`held_to_order`, what :func:`map_surface` does to a surface
+whose std is the propagated uncertainty): a column keeps its data only where its depth meets
+an IHO S-44 order, 1.96 s <= sqrt(a^2 + (b d)^2) (:mod:`undertow.mapping.iho`); the others
+are counted in :attr:`Surface.withheld`.
+
 :func:`surface_from_points` grids a point set (a ground-truth scan, an XYZ file) into the same
 :class:`Surface` form: per cell, the shallowest point (the first surface seen from above).
 """
