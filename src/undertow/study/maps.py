@@ -86,10 +86,12 @@ def surveyed_area(log) -> np.ndarray:
 
 def map_metrics(occupancy, truth, cloud, area) -> dict:
     """C2C, cells and coverage (the paper's, against ``cloud``) and the surface metrics (against
-    ``truth``, over ``area``) of one map, plain numbers."""
+    ``truth``, over ``area``) of one map, plain numbers; ``withheld_columns``: the columns its
+    surface left out as failing the IHO order (a tpu map's; 0 for the others)."""
     out = evaluate_map(occupancy.points(THRESHOLD), cloud, resolution=occupancy.resolution)
-    surface = evaluate_surface(map_surface(occupancy, THRESHOLD), truth, area=area)
-    return to_plain({**out.to_dict(), **surface.to_dict()})
+    held = map_surface(occupancy, THRESHOLD)
+    surface = evaluate_surface(held, truth, area=area)
+    return to_plain({**out.to_dict(), **surface.to_dict(), "withheld_columns": held.withheld})
 
 
 def floor_relief(truth, area: np.ndarray, resolution: float) -> dict:
