@@ -196,6 +196,17 @@ def _trajectory_frame(text: str | None) -> str | None:
     return text
 
 
+#: `evaluate map --iho-order`
+EvaluatedOrder = Annotated[
+    str | None,
+    typer.Option(
+        help="A map.npz whose depth std is a propagated uncertainty (a tpu map): judge the "
+        "columns whose depth meets this IHO S-44 order (exclusive | special | 1a | 1b | 2 | "
+        "none; default 1a): 1.96 std <= sqrt(a^2 + (b depth)^2).",
+    ),
+]
+
+
 @evaluate_app.command("map")
 @user_errors
 def evaluate_map_command(
@@ -252,14 +263,7 @@ def evaluate_map_command(
             "of the --origin/--utm CRS (default: projected when the coordinates pass 100 km)."
         ),
     ] = None,
-    iho_order: Annotated[
-        str | None,
-        typer.Option(
-            help="A map.npz whose depth std is a propagated uncertainty (a tpu map): judge the "
-            "columns whose depth meets this IHO S-44 order (exclusive | special | 1a | 1b | 2 | "
-            "none; default 1a): 1.96 std <= sqrt(a^2 + (b depth)^2).",
-        ),
-    ] = None,
+    iho_order: EvaluatedOrder = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print every metric as JSON.")] = False,
 ) -> None:
     """Judge a map against a ground truth: cloud-to-cloud distance (CloudCompare's C2C) and
