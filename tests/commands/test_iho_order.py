@@ -11,33 +11,20 @@ import json
 import numpy as np
 import pytest
 from conftest import one_error_line
+from survey_patches import FLOOR, two_patches
 from typer.testing import CliRunner
 
 from undertow.cli import app
 from undertow.io.ply import write_ply
-from undertow.mapping import make_mapper
-from undertow.mapping.samples import SENSOR_DVL, expand
 
 rasterio = pytest.importorskip("rasterio")
 runner = CliRunner()
-FLOOR = 2.0
 
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     root = tmp_path_factory.mktemp("iho")
-    xs, ys = np.meshgrid(np.arange(0.0, 1.0, 0.05), np.arange(0.0, 0.6, 0.05))
-    x, y = xs.ravel(), ys.ravel()
-    origin = np.concatenate([np.stack([x, y, np.full(x.size, 0.5)], axis=1),
-                             np.stack([x + 3.0, y, np.full(x.size, 0.5)], axis=1)])  # fmt: skip
-    n = len(origin)
-    var = np.full((n, 3), 1e-6)
-    var[: x.size, 2], var[x.size :, 2] = 0.05**2, 0.30**2
-    samples = expand(origin, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, FLOOR - 0.5), var,
-                     np.full(n, 0.6), np.full(n, SENSOR_DVL), 0.1, {})  # fmt: skip
-    mapper = make_mapper("tpu", resolution=0.1, wave_range_noise=False)
-    mapper.integrate(samples)
-    out = {"map": mapper.occupancy().save(root / "map" / "map.npz")}
+    out = {"map": two_patches().save(root / "map" / "map.npz")}
     gx, gy = np.meshgrid(np.arange(-1.0, 5.0, 0.025), np.arange(-1.0, 2.0, 0.025))
     plane = np.stack([gx.ravel(), gy.ravel(), np.full(gx.size, FLOOR)], axis=1)
     out["truth"] = write_ply(root / "truth.ply", plane)

@@ -9,17 +9,12 @@ import math
 
 import numpy as np
 import pytest
+import survey_patches
+from survey_patches import FLOOR, GOOD, POOR, RES, S_R
 
 from undertow.errors import ConfigError
-from undertow.mapping import make_mapper
 from undertow.mapping.iho import IHO_ORDERS, Z95, allowed_tvu, check_order, meets_order
-from undertow.mapping.samples import SENSOR_DVL, expand
 from undertow.mapping.surface import Surface, held_to_order, map_surface
-
-RES = 0.1
-FLOOR = 2.0  # m, z down
-S_R = 0.005  # the DVL's range noise (MappingConfig.range_std_dvl)
-GOOD, POOR = 0.05, 0.30  # the two patches' pose depth std, m
 
 
 def test_the_allowed_tvu_is_s44s_formula():
@@ -63,21 +58,7 @@ def test_held_to_order_withholds_the_failing_columns():
 
 @pytest.fixture(scope="module")
 def two_patches():
-    """A tpu map of a flat floor 2 m deep from DVL beams straight down from 0.5 m: a patch
-    whose poses' depth std is GOOD, and 3 m away one whose is POOR (horizontal std 1 mm, so
-    the kernels are the base one and the patches do not touch)."""
-    xs, ys = np.meshgrid(np.arange(0.0, 1.0, 0.05), np.arange(0.0, 0.6, 0.05))
-    x, y = xs.ravel(), ys.ravel()
-    origin = np.concatenate([np.stack([x, y, np.full(x.size, 0.5)], axis=1),
-                             np.stack([x + 3.0, y, np.full(x.size, 0.5)], axis=1)])  # fmt: skip
-    n = len(origin)
-    var = np.full((n, 3), 1e-6)
-    var[: x.size, 2], var[x.size :, 2] = GOOD**2, POOR**2
-    samples = expand(origin, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, FLOOR - 0.5), var,
-                     np.full(n, 0.6), np.full(n, SENSOR_DVL), 0.1, {})  # fmt: skip
-    mapper = make_mapper("tpu", resolution=RES, wave_range_noise=False)
-    mapper.integrate(samples)
-    return mapper.occupancy()
+    return survey_patches.two_patches()
 
 
 def test_a_tpu_map_keeps_the_patch_inside_order_1a(two_patches):

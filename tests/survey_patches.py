@@ -1,0 +1,34 @@
+"""A tpu map of a flat floor with two survey patches whose depth stds are known in closed form,
+for the tests of the IHO order (tests/mapping/test_iho.py, tests/commands/test_iho_order.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from undertow.mapping import make_mapper
+from undertow.mapping.samples import SENSOR_DVL, expand
+from undertow.occupancy import OccupancyMap
+
+RES = 0.1
+FLOOR = 2.0  # m, z down
+S_R = 0.005  # the DVL's range noise (MappingConfig.range_std_dvl)
+GOOD, POOR = 0.05, 0.30  # the two patches' pose depth std, m
+
+
+def two_patches() -> OccupancyMap:
+    """DVL beams straight down from 0.5 m onto a floor FLOOR deep: a 1 x 0.6 m patch whose
+    poses' depth std is GOOD and, 3 m further along x, one whose is POOR (horizontal std 1 mm,
+    so the kernels are the base one and the patches do not touch). Without waves each column's
+    propagated std is sqrt(s_z^2 + S_R^2) of its patch (a flat floor: no slope term)."""
+    xs, ys = np.meshgrid(np.arange(0.0, 1.0, 0.05), np.arange(0.0, 0.6, 0.05))
+    x, y = xs.ravel(), ys.ravel()
+    origin = np.concatenate([np.stack([x, y, np.full(x.size, 0.5)], axis=1),
+                             np.stack([x + 3.0, y, np.full(x.size, 0.5)], axis=1)])  # fmt: skip
+    n = len(origin)
+    var = np.full((n, 3), 1e-6)
+    var[: x.size, 2], var[x.size :, 2] = GOOD**2, POOR**2
+    samples = expand(origin, np.tile([0.0, 0.0, 1.0], (n, 1)), np.full(n, FLOOR - 0.5), var,
+                     np.full(n, 0.6), np.full(n, SENSOR_DVL), 0.1, {})  # fmt: skip
+    mapper = make_mapper("tpu", resolution=RES, wave_range_noise=False)
+    mapper.integrate(samples)
+    return mapper.occupancy()
