@@ -49,6 +49,10 @@ def test_evaluate_map_judges_the_columns_that_meet_the_order(files):
     assert "IHO S-44" not in quiet
     special, _ = _evaluate(files["map"], files["truth"], "--iho-order", "special")
     assert special["withheld_columns"] == held["withheld_columns"]
+    table = runner.invoke(app, ["evaluate", "map", str(files["map"]), str(files["truth"])])
+    assert (
+        f"IHO S-44 order         1a ({held['withheld_columns']} columns withheld)" in table.stdout
+    )
 
 
 def test_the_geotiff_keeps_the_columns_that_meet_the_order(files, tmp_path):

@@ -23,7 +23,7 @@ from ..io.export.las import write_map_las
 from ..io.export.octree import write_octomap
 from ..io.export.raster import resample_surface
 from ..io.ply import write_map_ply
-from ..mapping.iho import check_order, withheld_note
+from ..mapping.iho import check_order, withheld_notes
 from ..mapping.surface import STD_KINDS, map_surface
 from ..occupancy import MAP_FILE, OccupancyMap
 from .common import npz_file
@@ -152,7 +152,7 @@ def export_map(map_path: str | Path, out: str | Path, fmt: str | None = None, *,
         write_raster(out, raster, georef, surface.std_kind, surface.iho_order)
         count = int(np.count_nonzero(raster.coverage > 0))
         std_kind, order = surface.std_kind, surface.iho_order
-        notes = [n for n in (withheld_note(order, surface.withheld),) if n]
+        notes = withheld_notes(order, surface.withheld)
     elif fmt == "octomap":
         write_octomap(out, occupancy, used, frame)
         count = len(occupancy)

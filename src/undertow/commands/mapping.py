@@ -43,7 +43,7 @@ from ..io.trajectory_input import (
     tum_trajectory,
 )
 from ..mapping.config import MappingConfig
-from ..mapping.iho import check_order, withheld_note
+from ..mapping.iho import check_order, withheld_notes
 from ..mapping.run import (
     PIECE_METHODS,
     MappingResult,
@@ -341,7 +341,7 @@ def _map_to_evaluate(map_path: Path, threshold: float | None, notes: list[str],
     occupancy = OccupancyMap.load(map_path)
     threshold, threshold_from = map_threshold(occupancy, threshold)
     surface = map_surface(occupancy, threshold, iho_order=iho_order)
-    notes.extend(n for n in (withheld_note(surface.iho_order, surface.withheld),) if n)
+    notes.extend(withheld_notes(surface.iho_order, surface.withheld))
     return _EvaluatedMap(occupancy.points(threshold), surface, None, occupancy.resolution,
                          threshold, threshold_from, True)  # fmt: skip
 

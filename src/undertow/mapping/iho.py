@@ -39,12 +39,12 @@ DEFAULT_IHO_ORDER = "1a"
 Z95 = 1.959963984540054
 
 
-def withheld_note(order: str, withheld: int) -> str | None:
-    """The one line saying what holding a surface to ``order`` left out (None: nothing)."""
-    if not withheld or check_order(order) == NO_ORDER:
-        return None
-    return (f"IHO S-44 order {order}: {withheld} columns withheld, their 95 % depth "
-            "uncertainty above the order's TVU (--iho-order none keeps them)")  # fmt: skip
+def withheld_notes(order: str, withheld: int) -> list[str]:
+    """The line saying what holding a surface to ``order`` left out (none when nothing was)."""
+    if not withheld:
+        return []
+    return [f"IHO S-44 order {order}: {withheld} columns withheld, their 95 % depth "
+            "uncertainty above the order's TVU (--iho-order none keeps them)"]  # fmt: skip
 
 
 def check_order(order: str) -> str:

@@ -71,7 +71,7 @@ are counted in :attr:`Surface.withheld`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -233,10 +233,9 @@ def held_to_order(surface: Surface, order: str) -> Surface:
         return surface
     keep = surface.coverage & meets_order(surface.depth, surface.std, order)
     withheld = int(np.count_nonzero(surface.coverage & ~keep))
-    depth = np.where(keep, surface.depth, np.nan)
-    std = np.where(keep, surface.std, np.nan)
-    return Surface(surface.x0, surface.y0, surface.resolution, depth, std, keep,
-                   surface.std_kind, order, surface.withheld + withheld)  # fmt: skip
+    return replace(surface, depth=np.where(keep, surface.depth, np.nan),
+                   std=np.where(keep, surface.std, np.nan), coverage=keep, iho_order=order,
+                   withheld=surface.withheld + withheld)  # fmt: skip
 
 
 def _first_occupied(occupancy: OccupancyMap, threshold: float) -> Surface:
