@@ -10,6 +10,7 @@ from undertow.study.pipeline import StudySettings, run_seed
 from undertow.study.runner import run_study
 
 # the study runs whole seeds (and a process cluster); one xdist worker builds its fixture once
+# (session scope: a module fixture is rebuilt when the worker runs another module in between)
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("study")]
 
 SMALL = StudySettings(
@@ -20,7 +21,7 @@ SMALL = StudySettings(
 )
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def study(tmp_path_factory):
     out = tmp_path_factory.mktemp("study")
     return run_study(out, seeds=[0, 1], scheduler="threads", settings=SMALL)
@@ -107,9 +108,11 @@ def test_the_mapping_scenario_table_has_every_metric_with_intervals(study):
     tables = json.loads((study.out_dir / "tables.json").read_text())
     seeds = [json.loads((study.out_dir / f"seeds/seed_{s}.json").read_text()) for s in (0, 1)]
     runs = tables["map_scenarios"]["rock-survey"]["mapping"]
-    for key in ("csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed"):
+    for key in ("csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed",
+                "tpu/proposed", "tpu/proposed+scale"):  # fmt: skip
         for metric in ("c2c_mean_m", "occupied_cells", "surface_rmse_m", "surface_bias_m",
-                       "coverage", "fscore_5cm", "fscore_10cm", "fscore_20cm"):  # fmt: skip
+                       "coverage", "fscore_5cm", "fscore_10cm", "fscore_20cm",
+                       "within_1sigma", "within_2sigma"):  # fmt: skip
             leaf = runs[key][metric]
             values = [s["map_scenarios"]["rock-survey"]["mapping"][key][metric] for s in seeds]
             assert leaf["n"] == 2 and leaf["mean"] == pytest.approx(sum(values) / 2)
@@ -119,6 +122,10 @@ def test_the_mapping_scenario_table_has_every_metric_with_intervals(study):
         assert entry["rock-survey"]["n"] == 2
     assert "## Table IV on a rough floor: rock-survey" in study.markdown
     assert "| surface RMSE (m) |" in study.markdown
+    assert "| tpu (default) | proposed+scale |" in study.markdown
+    # the filter with the calibrated DVL scale factor: its errors in the scenario's facts line
+    loc = tables["map_scenarios"]["rock-survey"]["localization"]["proposed+scale"]
+    assert loc["rmse"]["x_m"]["n"] == 2 and "; proposed+scale x " in study.markdown
 
 
 def test_the_table_iv_headline_claim_is_counted_from_the_seeds_and_explained(study):
