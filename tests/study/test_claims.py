@@ -22,7 +22,7 @@ from undertow.study.claims import (
     TABLE1_CLAIMS,
     evaluate_seed,
 )
-from undertow.study.maps import SCENARIO_MAP_RUNS
+from undertow.study.maps import SCENARIO_FILTERS, SCENARIO_MAP_RUNS
 from undertow.study.pipeline import (
     FIELD_VARIANTS,
     MAP_RUNS,
@@ -71,7 +71,7 @@ def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS, maps=MAP_SCENA
     def map_scenario():
         return {"duration_s": draw(600), "wave": {"amplitude_m": draw(0.1), "frequency_hz": draw()},
                 "floor": {"depth_std_m": draw(0.1), "rms_slope": draw(0.1)},
-                "localization": {v: trajectory() for v in ("baseline", "proposed")},
+                "localization": {v: trajectory() for v in SCENARIO_FILTERS},
                 "mapping": {f"{m}/{v}": evaluation() for m, v in SCENARIO_MAP_RUNS},
                 "normal": {"within_1sigma": 0.6827, "within_2sigma": 0.9545}}  # fmt: skip
 
@@ -264,6 +264,16 @@ def test_mapping_scenario_claims_are_explained_from_the_measured_values():
             why = entry["why"][name]
             for q in (*claim.left, *claim.right):
                 assert q.format(sum(q.read(r, name, claim.id) for r in results) / 2) in why
+            if claim.id.startswith("tpu_depth_std_calibrated"):
+                # beside the run judged: the same mapper on the filter with the DVL scale factor
+                # calibrated, and both filters' x errors against their own stds
+                scen = [r["map_scenarios"][name] for r in results]
+                for k in ("within_1sigma", "within_2sigma"):
+                    share = sum(s["mapping"]["tpu/proposed+scale"][k] for s in scen) / 2
+                    assert f"{share:.1%} within {k[7]}" in why, (k, why)
+                for v in ("proposed", "proposed+scale"):
+                    x = sum(s["localization"][v]["rmse"]["x_m"] for s in scen) / 2
+                    assert f"x RMSE {x:.4f} m" in why, (v, why)
             if claim.id.startswith("proposed_filter"):
                 scen = [r["map_scenarios"][name] for r in results]
                 y = sum(s["localization"]["baseline"]["rmse"]["y_m"] for s in scen) / 2

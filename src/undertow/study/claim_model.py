@@ -29,7 +29,8 @@ Axis = Literal[
     "x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_m_s", "vy_m_s", "vz_m_s"
 ]  # fmt: skip
 MapRun = Literal[
-    "csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed", "tpu/proposed"
+    "csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed", "tpu/proposed",
+    "tpu/proposed+scale",
 ]  # fmt: skip
 #: The F-score's threshold the claims read (the middle of the benchmark's thresholds).
 TAU = TAUS[len(TAUS) // 2]

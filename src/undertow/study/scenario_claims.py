@@ -27,6 +27,7 @@ from .claim_model import (
     table1,
     unit_of,
 )
+from .maps import SCALED
 
 
 def _auto_close(m: Measured) -> str:
@@ -290,6 +291,10 @@ CALIBRATION_TARGETS = {"within_1sigma": (0.6827, 0.07), "within_2sigma": (0.9545
 _OTHER_MAPS = ("csm/proposed", "bki/proposed", "adaptive/proposed", "csm/baseline")
 
 
+#: The default mapper on the filter with the DVL scale factor calibrated
+SCALED_RUN = f"tpu/{SCALED}"
+
+
 def _tpu_why_not(m: Measured) -> str:
     return _mapper_why_not(m)
 
@@ -297,6 +302,7 @@ def _tpu_why_not(m: Measured) -> str:
 def _calibration_facts(m: Measured) -> str:
     run = "tpu/proposed"
     v = {k: m[map_metric(run, k, scenario=True)] for k in CALIBRATION_TARGETS}
+    scaled = {k: m[map_metric(SCALED_RUN, k, scenario=True)] for k in CALIBRATION_TARGETS}
     one, two = (CALIBRATION_TARGETS[k][0] for k in ("within_1sigma", "within_2sigma"))
     shape = ""
     if v["within_1sigma"] > one and v["within_2sigma"] < two:
@@ -312,16 +318,19 @@ def _calibration_facts(m: Measured) -> str:
         f"{run}: {v['within_1sigma']:.1%} of the true floor within 1 sigma, "
         f"{v['within_2sigma']:.1%} within 2 sigma (a normal error: {one:.1%}, {two:.1%})"
         f"{shape}; the map's std carries the pose covariance the filter gave it: "
-        f"{_pose_calibration(m)}; {_map_facts(m, [run])}"
+        f"{_pose_calibration(m, 'proposed')}; {_map_facts(m, [run])}; on the filter with the "
+        f"DVL scale factor calibrated ({SCALED_RUN}: {_pose_calibration(m, SCALED)}), "
+        f"{scaled['within_1sigma']:.1%} within 1 sigma and {scaled['within_2sigma']:.1%} "
+        "within 2"
     )  # fmt: skip
 
 
-def _pose_calibration(m: Measured) -> str:
-    """The proposed filter's RMSE against its own mean std in x and y."""
+def _pose_calibration(m: Measured, variant: str) -> str:
+    """A scenario filter's RMSE against its own mean std in x and y."""
     parts = []
     for axis in ("x_m", "y_m"):
-        error = m[_scenario_rmse("proposed", axis)]
-        std = m[scenario_quantity("std", "localization", "proposed", "mean_std", axis)]
+        error = m[_scenario_rmse(variant, axis)]
+        std = m[scenario_quantity("std", "localization", variant, "mean_std", axis)]
         parts.append(f"{AXIS_NAMES[axis]} RMSE {error:.4f} m against a mean std of {std:.4f} m")
     return ", ".join(parts)
 

@@ -17,8 +17,9 @@ from .claims import (
     Claim,
     sea_applies,
 )
+from .maps import SCENARIO_FILTERS, SCENARIO_MAP_RUNS
 from .peer_tables import build_peers, peers_section
-from .pipeline import MAP_RUNS, ROCK_MARGIN_M
+from .pipeline import ROCK_MARGIN_M
 from .stats import aggregate, cell, claim_fraction
 
 AXIS_LABELS = {
@@ -188,9 +189,9 @@ def table4_markdown(t: dict, condition: str) -> str:
 
 def mapping_markdown(runs: dict) -> str:
     """Table IV rows from the aggregated metrics of the maps (``runs[method/variant]``): the
-    paper's four, then the default mapper where it ran (no paper value: "-")."""
+    paper's four, then the default mapper's runs where they ran (no paper value: "-")."""
     rows = []
-    for method, variant in (*MAP_RUNS, ("tpu", "proposed")):
+    for method, variant in SCENARIO_MAP_RUNS:
         key = f"{method}/{variant}"
         if key not in runs:
             continue
@@ -224,9 +225,10 @@ def map_scenario_markdown(t: dict, name: str) -> str:
         f"{_mean(r['floor']['rms_slope'], 3)} in the surveyed area (means over the seeds). "
         "Filter RMSE: "
         + "; ".join(
-            f"{v} y {cell(loc[v]['rmse']['y_m'], 4)} m, yaw {cell(loc[v]['rmse']['yaw_rad'], 4)}"
-            " rad"
-            for v in ("baseline", "proposed")
+            f"{v} x {cell(loc[v]['rmse']['x_m'], 4)} m, y {cell(loc[v]['rmse']['y_m'], 4)} m, "
+            f"yaw {cell(loc[v]['rmse']['yaw_rad'], 4)} rad"
+            for v in SCENARIO_FILTERS
+            if v in loc
         )
         + "."
     )
