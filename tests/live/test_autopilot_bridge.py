@@ -37,7 +37,9 @@ from undertow.settings import LiveSettings, Settings
 from undertow.sim.robot import Faults
 from undertow.trajectory import Trajectory
 
-pytestmark = [pytest.mark.network, pytest.mark.slow]
+# one worker runs this module's tests, so its module fixtures are built once (make test:
+# --dist loadgroup)
+pytestmark = [pytest.mark.network, pytest.mark.slow, pytest.mark.xdist_group("autopilot_bridge")]
 
 RATE = 2.0  # the log is served twice as fast as real time
 SPAN_S = 16.0

@@ -31,7 +31,9 @@ from undertow.settings import LiveSettings, Settings
 from undertow.sim.robot import Faults
 from undertow.trajectory import Trajectory
 
-pytestmark = [pytest.mark.network, pytest.mark.slow]
+# one worker runs this module's tests, so its module fixtures are built once (make test:
+# --dist loadgroup)
+pytestmark = [pytest.mark.network, pytest.mark.slow, pytest.mark.xdist_group("live")]
 
 RATE = 8.0  # the log is served 8 times faster than real time
 SPAN_S = 24.0  # seconds of the simulated log served

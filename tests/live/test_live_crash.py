@@ -30,7 +30,9 @@ from undertow.commands.serve import serve
 from undertow.io import read_log
 from undertow.trajectory import Trajectory
 
-pytestmark = [pytest.mark.network, pytest.mark.slow]
+# one worker runs this module's tests, so its module fixtures are built once (make test:
+# --dist loadgroup)
+pytestmark = [pytest.mark.network, pytest.mark.slow, pytest.mark.xdist_group("live_crash")]
 
 RATE = 2.0  # served at twice real time
 SPAN_S = 40.0  # seconds of the simulated log served (the kill comes before its end)
