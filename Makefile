@@ -16,7 +16,8 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/undertow demo --out results
 
-# both cores (pytest-xdist); tests of one xdist_group (the study) stay on one worker
+# both cores (pytest-xdist); the tests of one xdist_group (the study, SITL, a live module with
+# module fixtures) stay on one worker (pytest < 9.2, see pyproject.toml)
 test: $(STAMP)
 	$(BIN)/pytest -n 2 --dist loadgroup
 

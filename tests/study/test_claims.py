@@ -272,8 +272,12 @@ def test_mapping_scenario_claims_are_explained_from_the_measured_values():
                     share = sum(s["mapping"]["tpu/proposed+scale"][k] for s in scen) / 2
                     assert f"{share:.1%} within {k[7]}" in why, (k, why)
                 for v in ("proposed", "proposed+scale"):
-                    x = sum(s["localization"][v]["rmse"]["x_m"] for s in scen) / 2
-                    assert f"x RMSE {x:.4f} m" in why, (v, why)
+                    for axis in ("x_m", "z_m"):
+                        loc = [s["localization"][v] for s in scen]
+                        error = sum(s["rmse"][axis] for s in loc) / 2
+                        std = sum(s["mean_std"][axis] for s in loc) / 2
+                        assert (f"{axis[0]} RMSE {error:.4f} m against a mean std of "
+                                f"{std:.4f} m") in why, (v, axis, why)  # fmt: skip
             if claim.id.startswith("proposed_filter"):
                 scen = [r["map_scenarios"][name] for r in results]
                 y = sum(s["localization"]["baseline"]["rmse"]["y_m"] for s in scen) / 2

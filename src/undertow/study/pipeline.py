@@ -57,7 +57,7 @@ VARIANTS = ("baseline", "be", "an", "proposed")
 #: the log (no probe) and the innovation-adaptive peer baseline.
 FIELD_VARIANTS = ("proposed+auto", "adaptive-r")
 #: The states whose filter standard deviation is averaged along the trajectory (index in x).
-MEAN_STD_STATES = {"x_m": 0, "y_m": 1, "yaw_rad": 5, "vx_m_s": 6}
+MEAN_STD_STATES = {"x_m": 0, "y_m": 1, "z_m": 2, "yaw_rad": 5, "vx_m_s": 6}
 #: The rock survey's maps are evaluated over the rock's footprint plus this margin.
 ROCK_MARGIN_M = 0.5
 #: The mapping scenarios the study evaluates Table IV on (those that exist; beyond the paper).

@@ -326,9 +326,10 @@ def _calibration_facts(m: Measured) -> str:
 
 
 def _pose_calibration(m: Measured, variant: str) -> str:
-    """A scenario filter's RMSE against its own mean std in x and y."""
+    """A scenario filter's RMSE against its own mean std in x, y and z (the depth the map's
+    vertical uncertainty carries)."""
     parts = []
-    for axis in ("x_m", "y_m"):
+    for axis in ("x_m", "y_m", "z_m"):
         error = m[_scenario_rmse(variant, axis)]
         std = m[scenario_quantity("std", "localization", variant, "mean_std", axis)]
         parts.append(f"{AXIS_NAMES[axis]} RMSE {error:.4f} m against a mean std of {std:.4f} m")
