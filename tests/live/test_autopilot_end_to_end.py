@@ -190,7 +190,10 @@ def _check_position_modes(run: Run, mode: str):
 
 @pytest.mark.parametrize("mode", ["odometry", "vision-position"])
 def test_a_position_mode_is_taken_and_followed(dive, tmp_path, mode):
-    run = _drive(_cut(dive, 20.0), tmp_path, autopilot_mode=mode, autopilot_origin=ORIGIN)
+    # at 2x, not RATE: the bound on messages dropped as too close is a bound on arrival jitter
+    # times the rate (module docstring), and a loaded machine's jitter at 4x passed it (9 of 161)
+    run = _drive(_cut(dive, 20.0), tmp_path, autopilot_mode=mode, autopilot_origin=ORIGIN,
+                 rate=2.0)  # fmt: skip
     _check_position_modes(run, mode)
     # the origin: none on the vehicle, undertow's set once it runs (it refuses one before)
     origin = run.of("GPS_GLOBAL_ORIGIN")[0][1]
