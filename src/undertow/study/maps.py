@@ -41,6 +41,16 @@ SCALED = "proposed+scale"
 SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"), ("tpu", SCALED))
 #: The filters of a mapping scenario (the paper's two, then :data:`SCALED`).
 SCENARIO_FILTERS = ("baseline", "proposed", SCALED)
+
+
+def filter_options(variant: str) -> tuple[str, dict]:
+    """The localize filter of a study ``variant`` (its name before any "+") and its DVL
+    scale option: a ``+scale`` variant divides out the calibration's factor, the others keep
+    1 (the paper's filters do not correct it)."""
+    scale = {} if variant.endswith("+scale") else {"dvl_scale_factor": 1.0}
+    return variant.split("+")[0], scale
+
+
 #: The map threshold the paper evaluates at.
 THRESHOLD = 0.5
 #: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
@@ -147,9 +157,9 @@ def map_scenario(name: str, seed: int, calibration, profile, bki_length_scale: f
     wave = "calm" if measured.calm else (measured.amplitude_m, measured.frequency_hz)
     trajectories, localization = {}, {}
     for variant in SCENARIO_FILTERS:
-        scale = {} if variant == SCALED else {"dvl_scale_factor": 1.0}
-        traj = localize(sim.log, variant.split("+")[0], profile=profile, wave=wave,
-                        calibration=calibration, extrapolate=True, **scale)  # fmt: skip
+        base, scale = filter_options(variant)
+        traj = localize(sim.log, base, profile=profile, wave=wave, calibration=calibration,
+                        extrapolate=True, **scale)  # fmt: skip
         art.trajectories[(name, variant)] = trajectories[variant] = traj
         localization[variant] = trajectory_metrics(traj, sim.log.ground_truth)
     area = surveyed_area(sim.log)

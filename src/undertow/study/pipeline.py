@@ -48,7 +48,7 @@ from ..sim import list_scenarios, load_scenario, simulate
 from ..wavetrack import WaveTrack
 from . import paper
 from .claims import evaluate_seed
-from .maps import MAP_RUNS, evaluate_runs, map_scenario
+from .maps import MAP_RUNS, evaluate_runs, filter_options, map_scenario
 from .peers import PeerSettings, peer_waves, run_peers
 
 WAVE_CONDITIONS = ("wave-a0.10-f1.00", "wave-a0.10-f0.75", "wave-a0.05-f0.75")
@@ -124,8 +124,7 @@ def run_seed_with_artifacts(seed: int, settings: StudySettings | None = None):
         wave = (row["amplitude_m"], row["frequency_hz"])
         loc = {}
         for variant in (*VARIANTS, "proposed+scale", *FIELD_VARIANTS):
-            base = variant.split("+")[0]
-            params = {} if variant.endswith("+scale") else {"dvl_scale_factor": 1.0}
+            base, params = filter_options(variant)
             run_wave = "auto" if variant.endswith("+auto") else wave
             traj = localize(
                 log, base, profile=char.profile, wave=run_wave, calibration=calibration, **params
