@@ -470,6 +470,36 @@ def _free_udp_port() -> int:
     return port
 
 
+@pytest.fixture
+def kernel_stamps():
+    """The kernel's receive timestamps switched on before a test relies on them, and kept on
+    by an open socket that asks for them: Linux enables them for the whole stack the first time
+    a socket asks, in deferred work (net/core/dev.c, ``netstamp_work``), and stamps a datagram
+    received before that with the time it is read (net/socket.c, ``__sock_recv_timestamp``:
+    "Race occurred between timestamp enabling and packet receiving")."""
+    from undertow.live.links import stamped
+
+    receiver = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    receiver.bind(("127.0.0.1", 0))
+    stamped.enable(receiver)
+    reader = stamped.Reader(receiver, time.time)
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    deadline = time.monotonic() + 10.0
+    try:
+        while True:  # a probe stamped well before its read: the stamps are on
+            sender.sendto(b"probe", receiver.getsockname())
+            time.sleep(0.05)
+            read_at = time.time()
+            got = reader.read()
+            if got is not None and got[1] < read_at - 0.025:
+                break
+            assert time.monotonic() < deadline, "the kernel never stamped a datagram on receipt"
+        yield
+    finally:
+        sender.close()
+        receiver.close()
+
+
 def _wait(condition, link, timeout: float = 10.0) -> None:
     deadline = time.monotonic() + timeout
     while not condition():
@@ -478,7 +508,7 @@ def _wait(condition, link, timeout: float = 10.0) -> None:
 
 
 @pytest.mark.parametrize("mode", ["thread", "deferred", "polled"])
-def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, mode):
+def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, mode, kernel_stamps):
     """The link's records are the .tlog reader's, decoded in the link's thread or (deferred)
     by pump() in the caller's, which is woken by the datagrams holding DVL messages, or
     (polled) read and decoded by pump() alone, stamped with the kernel's receive times."""
@@ -554,7 +584,7 @@ def test_mavlink_udp_same_mapping_as_tlog(tmp_path, simulation, mode):
     assert np.all(np.diff(arrivals) >= 0)
 
 
-def test_polled_mavlink_counts_the_kernels_drops_and_stamps_on_its_clock():
+def test_polled_mavlink_counts_the_kernels_drops_and_stamps_on_its_clock(kernel_stamps):
     """A polled link's socket (with a small receive buffer) not read while 3000 datagrams
     arrive: the kernel drops what its receive buffer cannot hold (counted as overflow: every
     datagram sent is a record or a drop), and each record is stamped with its receive time

@@ -5,6 +5,9 @@ Linux socket(7): ``SO_TIMESTAMPNS`` attaches each datagram's receive time (``CLO
 so ``time.time`` seconds) as a ``struct timespec``; ``SO_RXQ_OVFL`` attaches the count of the
 datagrams the socket dropped so far (the receive buffer full), to the next datagram it keeps.
 Elsewhere the options may be missing: the time is then the read's, and no drops are counted.
+The first datagrams after timestamps are first asked for on a machine may carry the read's time
+too: Linux enables them in deferred work and stamps what arrived before on reading it
+(net/socket.c, ``__sock_recv_timestamp``).
 """
 
 from __future__ import annotations
