@@ -62,7 +62,12 @@ class DvlModel(_Model):
     min_range: float = Field(0.05, ge=0, description="A50 spec: altitude 0.05-50 m")
     max_range: float = Field(50.0, gt=0, description="A50 spec: altitude 0.05-50 m")
     sound_speed_setting: float = Field(
-        1500.0, gt=0, description="c_set configured in the DVL (A50 default 1500 m/s)"
+        1500.0,
+        gt=0,
+        description=(
+            "c_set configured in the DVL; 1500 m/s, a sea-water value, left set in the fresh"
+            " water (the A50's own get_config example answers 1475 m/s, as the virtual A50)"
+        ),
     )
     wave_noise_coefficient: Vec3 = Field(
         (1.0, 0.0, 0.0),
