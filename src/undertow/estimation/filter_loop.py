@@ -125,7 +125,6 @@ def pack_measurements(t, kind, z, R) -> np.ndarray:
     return meas
 
 
-@njit(cache=True)
 def run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None, innovations=None):
     """Walk the merged measurements ``meas`` (:data:`MEASUREMENT`, time-sorted) from (t0, x0,
     P0) with the model ``process`` (:class:`~undertow.estimation.model.ProcessModel`) and
@@ -158,7 +157,10 @@ def run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None, in
 
     The records are unpacked (:func:`_filter_from`) into explicit arguments of :func:`_filter`:
     numba keeps arguments in registers through the loop, while it reloads arrays taken out of
-    a tuple in the loop (about 10 % more time per step in benchmarks/bench_ukf.py).
+    a tuple in the loop (about 10 % more time per step in benchmarks/bench_ukf.py). This entry
+    is plain Python, so the loop is compiled once, in :func:`_filter_from`, for it and for
+    :func:`resume_filter` (a jitted entry compiles the whole loop again for each combination of
+    optional arguments), and runs without the GIL.
     """
     t, kind, z, R = _columns(meas)
     if out_times is None:
