@@ -48,6 +48,8 @@ from .ukf import all_finite, cholesky_repair, sigma_points, update, update_linea
 MEASUREMENT = np.dtype(
     [("t", np.float64), ("kind", np.int64), ("z", np.float64, (3,)), ("R", np.float64, (3, 3))]
 )
+#: the ``out_times`` of a loop that records at each distinct row time
+NO_TIMES = np.empty(0)
 
 # counters returned by run_filter: "used" and "gated" one per kind (index USED + kind,
 # GATED + kind), then the others, each indexed by its constant below
@@ -115,7 +117,9 @@ def resume_filter(meas, state: FilterState, process, sensors, flush: bool, innov
     t, kind, z, R = _columns(meas)
     n_out = _distinct_times(t) + 1 if t.size else 1
     record = np.empty((0, 3)) if innovations is None or t.size == 0 else innovations
-    return _filter_from(t, kind, z, R, state, process, sensors, None, n_out, flush, record)
+    return _filter_from(
+        t, kind, z, R, state, process, sensors, NO_TIMES, False, n_out, flush, record
+    )
 
 
 def pack_measurements(t, kind, z, R) -> np.ndarray:
@@ -163,10 +167,13 @@ def run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None, in
     optional arguments), and runs without the GIL.
     """
     t, kind, z, R = _columns(meas)
-    if out_times is None:
-        n_out = _distinct_times(t)
-    else:
+    at_times = out_times is not None
+    if at_times:
+        out_times = np.ascontiguousarray(out_times, dtype=np.float64)
         n_out = out_times.size
+    else:
+        out_times = NO_TIMES
+        n_out = _distinct_times(t)
     if r_adapted is None:
         Ra = np.zeros((4, 3, 3))
     else:
@@ -176,21 +183,25 @@ def run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None, in
         record = np.empty((0, 3))
     else:
         record = innovations
-    out = _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, True, record)
+    out = _filter_from(
+        t, kind, z, R, state, process, sensors, out_times, at_times, n_out, True, record
+    )
     return out[0], out[1], out[2], state.counts, state.nis
 
 
 @njit(cache=True, nogil=True)  # the link threads run while the filter loops
-def _filter_from(t, kind, z, R, state, process, sensors, out_times, n_out, flush, record):
-    """:func:`_filter` from ``state`` (:class:`FilterState`, advanced in place); ``record``:
-    the whitened innovations per row (:func:`run_filter`), or (0, 3) for none."""
+def _filter_from(t, kind, z, R, state, process, sensors, out_times, at_times, n_out, flush, record):
+    """:func:`_filter` from ``state`` (:class:`FilterState`, advanced in place); the states
+    recorded at ``out_times`` when ``at_times``, else at each distinct row time (one compiled
+    loop for both: a None would compile it twice); ``record``: the whitened innovations per
+    row (:func:`run_filter`), or (0, 3) for none."""
     wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias, hold_dr, hold_gyro = process
     first, last = held_range(freeze_bias, hold_dr, hold_gyro)
     x, P, L, clock, Ra, adapted, counts, nis = state
     return _filter(t, kind, z, R, x, P, L, clock, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
                    last > first, first, last, jacobians(sensors), sensors.gate, sensors,
-                   out_times, n_out, sensors.adapt_r, sensors.adapt_alpha, Ra, adapted, counts,
-                   nis, flush, record)  # fmt: skip
+                   out_times, at_times, n_out, sensors.adapt_r, sensors.adapt_alpha, Ra, adapted,
+                   counts, nis, flush, record)  # fmt: skip
 
 
 @njit(cache=True)
@@ -219,8 +230,8 @@ def _distinct_times(t):
 
 @njit(cache=True)
 def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze,
-            first, last, H, gate, sensors, out_times, n_out, adapt, alpha, Ra, adapted, counts,
-            nis, flush, record):  # fmt: skip
+            first, last, H, gate, sensors, out_times, at_times, n_out, adapt, alpha, Ra, adapted,
+            counts, nis, flush, record):  # fmt: skip
     """The loop of :func:`run_filter` over its unpacked records, from the state (x, P, L_in,
     clock, Ra, adapted, counts, nis) of a :class:`FilterState`, advanced in place;
     H = jacobians(sensors); states first..last-1 held when ``freeze``; ``adapt``: the DVL and
@@ -247,7 +258,7 @@ def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt
     N = t.size
     for k in range(N + 1):
         tk = t[k] if k < N else np.inf
-        if out_times is not None:
+        if at_times:
             k_out = _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
                                   mu, dt_max, ws, xb, Pb, out_t, out_x, out_P, counts)  # fmt: skip
         if k == N:
@@ -289,7 +300,7 @@ def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt
                 record[k, 0], record[k, 1], record[k, 2] = w3[0], w3[1], w3[2]
             if use_ra and used:
                 adapt_r(Ra[kd], alpha, zk, x, P, H[kd], kd == DR)
-        if out_times is None:
+        if not at_times:
             emit_due = True
             t_last = tk
     if flush and emit_due:
