@@ -16,6 +16,7 @@ from rich.console import Console
 
 from .._util.plain import json_safe
 from ..errors import Terminated, UndertowError
+from . import _compile_notice
 from ._crash import (
     EXIT_BUG,
     EXIT_INTERRUPTED,
@@ -57,8 +58,21 @@ def print_warnings(lines) -> None:
 
 @app.callback()
 def _setup() -> None:
-    """Library warnings (bad rows dropped, units fixed) become one line each on stderr."""
+    """Library warnings (bad rows dropped, units fixed) become one line each on stderr; a
+    compilation of undertow's numba kernels is told once, on stderr when it is a terminal."""
     warnings.showwarning = _one_line_warning
+    _compile_notices()
+
+
+@functools.cache  # one listener per process (the app may be called many times in one)
+def _compile_notices() -> _compile_notice.CompileNotice:
+    return _compile_notice.install(_tell_a_user)
+
+
+def _tell_a_user(line: str) -> None:
+    """A note on stderr for someone watching it (a terminal); nothing in a pipe or a log."""
+    if err.is_terminal:
+        err.print(f"note: {line}", highlight=False, soft_wrap=True)
 
 
 def user_errors(fn):
