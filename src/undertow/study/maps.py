@@ -41,6 +41,12 @@ SCALED = "proposed+scale"
 SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"), ("tpu", SCALED))
 #: The filters of a mapping scenario (the paper's two, then :data:`SCALED`).
 SCENARIO_FILTERS = ("baseline", "proposed", SCALED)
+#: The map threshold the paper evaluates at.
+THRESHOLD = 0.5
+#: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
+AREA_POSE_RATE_HZ = 50.0
+#: Attributes of a simulation result that may hold the true floor as a heightfield z(x, y).
+HEIGHTFIELD_ATTRIBUTES = ("heightfield", "floor_depth", "seabed")
 
 
 def filter_options(variant: str) -> tuple[str, dict]:
@@ -49,14 +55,6 @@ def filter_options(variant: str) -> tuple[str, dict]:
     1 (the paper's filters do not correct it)."""
     scale = {} if variant.endswith("+scale") else {"dvl_scale_factor": 1.0}
     return variant.split("+")[0], scale
-
-
-#: The map threshold the paper evaluates at.
-THRESHOLD = 0.5
-#: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
-AREA_POSE_RATE_HZ = 50.0
-#: Attributes of a simulation result that may hold the true floor as a heightfield z(x, y).
-HEIGHTFIELD_ATTRIBUTES = ("heightfield", "floor_depth", "seabed")
 
 
 def floor_truth(sim):
