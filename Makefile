@@ -16,12 +16,15 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/undertow demo --out results
 
-# both cores (pytest-xdist); the tests of one xdist_group (the study, SITL, a live module with
-# module fixtures) stay on one worker (pytest < 9.2, see pyproject.toml)
+# three pytest-xdist workers on the two cores: the real-time tests (SITL, the autopilot, the
+# live links) wait on the clock much of their time, and a numba kernel two workers need at once
+# is compiled by one of them (tests/conftest.py); the tests of one xdist_group (the study, SITL,
+# a live module with module fixtures) stay on one worker (pytest < 9.2, see pyproject.toml)
 test: $(STAMP)
-	$(BIN)/pytest -n 2 --dist loadgroup
+	$(BIN)/pytest -n 3 --dist loadgroup
 
-# the inner loop: everything but the tests marked slow (under a minute on 2 cores)
+# the inner loop: everything but the tests marked slow (two workers: these wait on no clock;
+# about 2 minutes on this machine)
 test-fast: $(STAMP)
 	$(BIN)/pytest -n 2 --dist loadgroup -m "not slow"
 

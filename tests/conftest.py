@@ -17,6 +17,7 @@ out by ``make test-fast`` (``pytest -m "not slow"``); ``make test`` runs everyth
 
 import contextlib
 import dataclasses
+import fcntl
 import os
 from pathlib import Path
 
@@ -37,6 +38,43 @@ def _find_real_data() -> Path:
 
 
 REAL_DATA = _find_real_data()
+
+
+def compile_each_kernel_once(folder: Path) -> None:
+    """Processes that share ``folder`` compile a numba kernel they need at the same moment once:
+    the first compiles it, the others wait and load it from numba's cache
+    (``Dispatcher.compile`` looks there first). On a clean clone the xdist workers otherwise
+    compile the filter's loop and the InEKF's side by side, about 45 s of CPU each time. One
+    lock file per cached function, taken inside numba's compiler lock (one compiling thread
+    per process) and in call order (caller before callee; kernels do not recurse), so no two
+    processes wait on each other."""
+    from numba.core.compiler_lock import global_compiler_lock
+    from numba.core.dispatcher import Dispatcher
+
+    folder.mkdir(parents=True, exist_ok=True)
+    original, held = Dispatcher.compile, set()
+
+    def compile_once(self, sig):
+        name = f"{self.py_func.__module__}.{self.py_func.__qualname__}"
+        if type(self._cache).__name__ == "NullCache" or name in held:
+            return original(self, sig)
+        with global_compiler_lock, open(folder / name, "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            held.add(name)
+            try:
+                return original(self, sig)
+            finally:
+                held.discard(name)
+                fcntl.flock(lock, fcntl.LOCK_UN)
+
+    Dispatcher.compile = compile_once
+
+
+def pytest_configure(config):
+    """In a pytest-xdist worker, :func:`compile_each_kernel_once` among the run's workers (their
+    temporary folders' common parent, which pytest prunes)."""
+    if hasattr(config, "workerinput") and config.option.basetemp:
+        compile_each_kernel_once(Path(config.option.basetemp).parent / "numba-compile-locks")
 
 
 def pytest_runtest_setup(item):
