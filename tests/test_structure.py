@@ -357,7 +357,9 @@ def test_relative_imports_resolve_to_the_module_they_name(source, module, expect
 
 
 #: project-level tests at the root of tests/ (not of one stage)
-ROOT_TESTS = {"test_structure.py", "test_examples.py", "test_readme_example.py"}
+ROOT_TESTS = {
+    "test_structure.py", "test_examples.py", "test_readme_example.py", "test_compile_once.py"
+}  # fmt: skip
 
 
 def test_the_tests_mirror_the_source():
