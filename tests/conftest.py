@@ -44,19 +44,23 @@ def compile_each_kernel_once(folder: Path) -> None:
     """Processes that share ``folder`` compile a numba kernel they need at the same moment once:
     the first compiles it, the others wait and load it from numba's cache
     (``Dispatcher.compile`` looks there first). On a clean clone the xdist workers otherwise
-    compile the filter's loop and the InEKF's side by side, about 45 s of CPU each time. One
-    lock file per cached function, taken inside numba's compiler lock (one compiling thread
+    compile the filter's loop and the InEKF's side by side, about 40 s of CPU the second time.
+    One lock file per cached function, taken inside numba's compiler lock (one compiling thread
     per process) and in call order (caller before callee; kernels do not recurse), so no two
-    processes wait on each other."""
+    processes wait on each other. Installed once per process (a second call does nothing: two
+    locks on one file from one process would wait on each other)."""
+    from numba.core.caching import NullCache
     from numba.core.compiler_lock import global_compiler_lock
     from numba.core.dispatcher import Dispatcher
 
+    if getattr(Dispatcher.compile, "compiles_once", False):
+        return
     folder.mkdir(parents=True, exist_ok=True)
     original, held = Dispatcher.compile, set()
 
     def compile_once(self, sig):
         name = f"{self.py_func.__module__}.{self.py_func.__qualname__}"
-        if type(self._cache).__name__ == "NullCache" or name in held:
+        if isinstance(self._cache, NullCache) or name in held:
             return original(self, sig)
         with global_compiler_lock, open(folder / name, "w") as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
@@ -67,6 +71,7 @@ def compile_each_kernel_once(folder: Path) -> None:
                 held.discard(name)
                 fcntl.flock(lock, fcntl.LOCK_UN)
 
+    compile_once.compiles_once = True
     Dispatcher.compile = compile_once
 
 
