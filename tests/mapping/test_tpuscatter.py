@@ -13,6 +13,7 @@ from conftest import multibeam_fan, numba_threads, same_map
 
 from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
+from undertow.mapping.columns import ColumnGrid
 from undertow.mapping.grid import points_extent
 from undertow.mapping.samples import RaySamples, Samples, expand
 from undertow.mapping.tpu import tpu_training, wavenumbers
@@ -117,6 +118,22 @@ def test_the_hits_and_the_extent_are_the_written_training_samples():
     want = points_extent(points)
     assert n == len(points) and finite and np.array_equal(lo, want[0])
     assert np.array_equal(hi, want[1])
+
+
+def test_the_hits_reach_is_the_largest_finite_length_the_column_sums_would_take():
+    """TpuHits.reach (compiled beside the lattice) is ColumnGrid.reach of the hits' lengths,
+    a ray whose variance is not finite left out (expand refuses one; tpu_hits takes any
+    rays); and the settings' constants, remembered, change with the settings."""
+    o, v, r, var, sig, sensor = _fan(5)
+    var[::7] *= 40.0  # lengths above l_0 and up to the cap
+    rays = expand(o, v, r, var, sig, sensor, 0.1, {}).rays
+    broken = rays.var.copy()
+    broken[-1, 0] = np.nan  # the last: a NaN there would stay in a running max
+    hits = tpu_hits(rays._replace(var=broken), **SETTINGS)
+    assert not np.isfinite(hits.l).all() and hits.reach > SETTINGS["base_length"]
+    assert hits.reach == ColumnGrid.reach(hits.l) == np.nanmax(hits.l)
+    shorter = tpu_hits(rays, **{**SETTINGS, "max_length": 0.2})
+    assert shorter.reach == ColumnGrid.reach(shorter.l) <= 0.2 < hits.reach
 
 
 def test_the_compiledwavenumbers_arewavenumbers_bit_for_bit():

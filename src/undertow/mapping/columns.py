@@ -57,25 +57,27 @@ class ColumnGrid:
     def add_hits(self, hits: TpuHits, extent) -> None:
         """Add hits given as :class:`~undertow.mapping.tpuscatter.TpuHits` (the ray path);
         ``extent``: a box holding them (:func:`~undertow.mapping.tpuscatter.tpu_extent`'s)."""
-        self._add(hits.x, hits.y, hits.l, hits.weight, hits.var_v, extent)
+        self._add(hits.x, hits.y, hits.l, hits.weight, hits.var_v, extent, hits.reach)
 
     def add_written(self, x, y, lx, ly, weight, var_v) -> None:
         """Add the hits of written samples, as :func:`~undertow.mapping.tpu.tpu_hit_weights`
         gives them."""
         if len(x):
             extent = (np.array([x.min(), y.min()]), np.array([x.max(), y.max()]))
-            self._add(x, y, np.stack([lx, ly], axis=1), weight, var_v, extent)
+            l = np.stack([lx, ly], axis=1)
+            self._add(x, y, l, weight, var_v, extent, self.reach(l))
 
-    def _add(self, x, y, l, weight, var_v, extent) -> None:
+    def _add(self, x, y, l, weight, var_v, extent, reach: float) -> None:
         """Add hits at (x, y) with kernel lengths l (n, 2), weights w and sigma_v^2, inside the
-        x-y box ``extent`` (lo, hi); hits with a value not finite, or w or l not positive, are
-        left out (a hit without weight adds nothing to the map either)."""
+        x-y box ``extent`` (lo, hi); ``reach`` the largest finite l (:meth:`reach`). Hits with
+        a value not finite, or w or l not positive, are left out (a hit without weight adds
+        nothing to the map either)."""
         n = len(x)
         if n == 0:
             return
         res = self.resolution
         self.grid.write(add_column_sums, n, (x, y, l, weight, var_v, res), self._box(extent),
-                        self.reach(l))  # fmt: skip
+                        reach)  # fmt: skip
 
     def _box(self, extent):
         """The grid box of the column cells over the x-y box ``extent`` (lo, hi)."""

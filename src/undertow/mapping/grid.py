@@ -389,9 +389,14 @@ class ChunkedGrid:
         """Cells a sample's support spans per axis, at most: up to l_max (product kernel) or l
         (radial kernel) either side; scalar arithmetic, remembered per mode and length scales,
         so the common case (far below the limit) costs a streaming call little."""
+        return self._support(mode, l_min, l_max)[0]
+
+    def _support(self, mode, l_min, l_max) -> tuple:
+        """(:meth:`_cells_per_axis`, the chunks one support spans at most, its cells at most),
+        remembered per mode and length scales."""
         key = (mode, *np.asarray(l_min, float).tolist(), *np.asarray(l_max, float).tolist())
-        cells = self._support_cells.get(key)
-        if cells is None:
+        support = self._support_cells.get(key)
+        if support is None:
             lo, hi = key[1:4], key[4:7]
             if mode == MODE_CELL:
                 cells = (1.0, 1.0, 1.0)
@@ -400,17 +405,17 @@ class ChunkedGrid:
                               for a, b in zip(lo, hi, strict=True))  # fmt: skip
             else:
                 cells = (math.ceil(2 * lo[0] / self.resolution) + 1.0,) * 3
-            self._support_cells[key] = cells
-        return cells
+            chunks = math.prod(math.ceil(c / CHUNK) + 1.0 for c in cells)
+            support = self._support_cells[key] = (cells, chunks, math.prod(cells))
+        return support
 
     def bound_bytes(self, mode, n: int, l_min, l_max, limit_bytes: float, extent) -> int | None:
         """:meth:`estimate_bytes` of n > 0 samples of ``extent`` (:func:`points_extent`) when
         an upper bound settles it (every sample's support in new chunks, or the chunks of the
         samples' bounding box, within the limit; or one sample's support alone over it); None
         when only counting the chunks can tell."""
-        cells_per_axis = self._cells_per_axis(mode, l_min, l_max)
-        chunks_per_sample = math.prod(math.ceil(c / CHUNK) + 1.0 for c in cells_per_axis)
-        cells_bound = float(n) * math.prod(cells_per_axis)
+        cells_per_axis, chunks_per_sample, cells_per_sample = self._support(mode, l_min, l_max)
+        cells_bound = float(n) * cells_per_sample
         held = self.n_chunks
 
         def peak(chunks: float) -> float:
@@ -418,9 +423,12 @@ class ChunkedGrid:
 
         if peak(held + n * chunks_per_sample) <= limit_bytes:
             return int(peak(held + n * chunks_per_sample))  # cheapest upper bound
-        p_lo, p_hi, _ = extent
-        box_cells = (p_hi - p_lo) / self.resolution + np.asarray(cells_per_axis)
-        box = float(np.prod(np.ceil(box_cells / CHUNK) + 1))
+        p_lo, p_hi, finite = extent
+        box = math.inf  # the chunks of the box (scalar arithmetic: a streaming call's cost)
+        if finite:
+            sides = zip(p_lo.tolist(), p_hi.tolist(), cells_per_axis, strict=True)
+            box = math.prod(math.ceil(((b - a) / self.resolution + c) / CHUNK) + 1.0
+                            for a, b, c in sides)  # fmt: skip
         if peak(held + min(n * chunks_per_sample, box)) <= limit_bytes:
             return int(peak(held + min(n * chunks_per_sample, box)))  # cheap upper bound
         if peak(held + chunks_per_sample) > limit_bytes:

@@ -290,7 +290,7 @@ class TpuBkiMapper(Mapper):
                 return
             cap = max(self.max_length, self.resolution / 2)
             limit_gb = self.max_memory_gb or default_max_memory_gb()
-            need = self.grid.bound_bytes(MODE_PRODUCT, n, np.zeros(3), np.full(3, cap),
+            need = self.grid.bound_bytes(MODE_PRODUCT, n, (0.0, 0.0, 0.0), (cap, cap, cap),
                                          limit_gb * 1e9, (lo, hi, finite))  # fmt: skip
             if need is not None:
                 self._check_need(need, n, limit_gb)
@@ -298,8 +298,9 @@ class TpuBkiMapper(Mapper):
                     self.grid.scatter_tpu(rays, hits, cap, (lo, hi, finite), n)
                     self.columns.add_hits(hits, (lo, hi, finite))
                     sonar = rays.sensor == SENSOR_SONAR
-                    self._carve(rays.origin[sonar], rays.direction[sonar], rays.r[sonar],
-                                hits.var_v[sonar])  # fmt: skip
+                    if self.sonar_carve and sonar.any():
+                        self._carve(rays.origin[sonar], rays.direction[sonar], rays.r[sonar],
+                                    hits.var_v[sonar])  # fmt: skip
                 except MemoryError:
                     raise out_of_memory(self.resolution) from None
                 return

@@ -100,14 +100,21 @@ def _ray_scales(i, var, var_lo, var_hi, l_min, l_max, res, lengths, rot):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def free_points(ray, k0, m, n, origin, direction, f, rot, pts, scales):
+def free_coordinates(ray, k0, m, n, origin, direction, f, pts):
     """Free samples k0 .. k0 + m - 1 of ``ray`` into block columns n .. n + m - 1: the points
-    o + (k f) v and their kernel's axes and lengths (``rot``: (3, 5), the ray's rotation and
-    lengths as :func:`block_weights` reads them)."""
+    o + (k f) v."""
     for j in range(3):
         o, v = origin[ray, j], direction[ray, j]
         for t in range(m):
             pts[j, n + t] = o + ((k0 + t) * f) * v
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def free_points(ray, k0, m, n, origin, direction, f, rot, pts, scales):
+    """:func:`free_coordinates`, and the samples' kernel axes and lengths (``rot``: (3, 5), the
+    ray's rotation and lengths as :func:`block_weights` reads them)."""
+    free_coordinates(ray, k0, m, n, origin, direction, f, pts)
+    for j in range(3):
         for q in range(4):
             scales[q, j, n : n + m] = rot[j, q + 1]
 

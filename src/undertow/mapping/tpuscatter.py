@@ -30,24 +30,27 @@ What it saves: writing every sample and its length scales (the free samples alon
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
 from .chunks import CHUNK_SHIFT, find_or_insert, same_box, set_box
-from .rayscatter import BLOCK, block_cells, block_weights, free_points, ray_meets
+from .rayscatter import BLOCK, block_cells, block_weights, free_coordinates, ray_meets
 from .samples import SENSOR_SONAR
 from .tpu import KERNEL_STD, wavenumbers
 
 _TWO_PI = 2.0 * np.pi
+_NO_WAVE = (np.zeros((2, 0)), np.zeros(0))  # hit_lattice's exponentials without a wave
 
 
 class TpuHits(NamedTuple):
     """Per hit (ray) i: the point's x, y (o + r v), its lengths along x and y as the scatter
     takes them (``l``, (R, 2)), its three cells' z (R, 3) and weights (R, 3; 0: left out); the
-    free samples' lengths (3,), as the scatter takes them; and the hit's weight (R,) and
-    vertical variance sigma_v^2 (R,)."""
+    free samples' lengths (3,), as the scatter takes them; the hit's weight (R,) and
+    vertical variance sigma_v^2 (R,); and the largest finite length of ``l`` (m, 0 when none
+    is), the reach of the hits' column sums."""
 
     x: np.ndarray
     y: np.ndarray
@@ -57,6 +60,39 @@ class TpuHits(NamedTuple):
     l_free: np.ndarray
     weight: np.ndarray
     var_v: np.ndarray
+    reach: float
+
+
+class HitConstants(NamedTuple):
+    """What :func:`hit_lattice` takes from the mapper's settings (the same for every batch):
+    the range noise s_0 and its fraction per metre per sensor (DVL, sonar, multibeam), the
+    sensor taken for an unknown code, tan(b / 2) of the sonar's beam width b, l_0, the largest
+    length, the cap the scatter divides by, the resolution and the free samples' lengths."""
+
+    s0: np.ndarray
+    fraction: np.ndarray
+    unknown: int
+    tan_half: float
+    base: float
+    max_length: float
+    cap: float
+    res: float
+    l_free: np.ndarray
+
+
+@lru_cache(maxsize=64)
+def hit_constants(resolution: float, base_length: float, max_length: float, range_std: tuple,
+                  range_std_fraction: float, beam_width_deg: float) -> HitConstants:  # fmt: skip
+    """:class:`HitConstants` of the settings (computed once per distinct settings: a ping's
+    call does not pay for them)."""
+    res = float(resolution)
+    cap = max(float(max_length), res / 2)
+    s0 = np.asarray(range_std, float)
+    fraction = np.array([0.0, range_std_fraction, range_std_fraction])
+    tan_half = float(np.tan(np.deg2rad(beam_width_deg) / 2.0))
+    l_free = (np.array([base_length, base_length, res / 2]) / cap) * cap
+    return HitConstants(s0, fraction, int(np.argmax(s0)), tan_half, float(base_length),
+                        float(max_length), cap, res, l_free)  # fmt: skip
 
 
 def tpu_hits(rays, *, resolution: float, base_length: float, max_length: float, range_std,
@@ -64,23 +100,20 @@ def tpu_hits(rays, *, resolution: float, base_length: float, max_length: float, 
              wave=None) -> TpuHits:  # fmt: skip
     """:class:`TpuHits` of ``rays`` (:class:`~undertow.mapping.samples.Rays`), the arguments
     as :func:`~undertow.mapping.tpu.tpu_training`'s (the same values, bit for bit)."""
-    res = float(resolution)
-    cap = max(float(max_length), res / 2)
-    s0 = np.asarray(range_std, float)
-    fraction = np.array([0.0, range_std_fraction, range_std_fraction])
+    k = hit_constants(float(resolution), float(base_length), float(max_length),
+                      tuple(float(v) for v in range_std), float(range_std_fraction),
+                      float(sonar_beam_width_deg))  # fmt: skip
     if wave is None:
-        e, m, amplitude = np.zeros((2, 0)), np.zeros(0), 0.0
+        e, m, amplitude = _NO_WAVE[0], _NO_WAVE[1], 0.0
     else:  # the exponentials by numpy, as wave_std takes them (numba's differ in the last bit)
         amplitude, frequency = float(wave[0]), float(wave[1])
-        args = wave_arguments(rays.origin, rays.direction, rays.r, 2.0 * np.pi * frequency, res)
+        args = wave_arguments(rays.origin, rays.direction, rays.r, 2.0 * np.pi * frequency, k.res)
         e, m = np.exp(args[:2]), np.expm1(args[2])
-    tan_half = float(np.tan(np.deg2rad(sonar_beam_width_deg) / 2.0))
-    l_free = (np.array([base_length, base_length, res / 2]) / cap) * cap
-    *out, weight, var_v = hit_lattice(rays.origin, rays.direction, rays.r, rays.var, rays.sig,
-                                      rays.sensor, e, m, amplitude, s0, fraction,
-                                      int(np.argmax(s0)), tan_half, float(base_length),
-                                      float(max_length), cap, res)  # fmt: skip
-    return TpuHits(*out, l_free, weight, var_v)
+    *out, weight, var_v, reach = hit_lattice(rays.origin, rays.direction, rays.r, rays.var,
+                                             rays.sig, rays.sensor, e, m, amplitude, k.s0,
+                                             k.fraction, k.unknown, k.tan_half, k.base,
+                                             k.max_length, k.cap, k.res)  # fmt: skip
+    return TpuHits(*out, k.l_free, weight, var_v, reach)
 
 
 @njit(cache=True, error_model="numpy")
@@ -125,12 +158,14 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
     ||m - o|| tan(b / 2) / 2) and shortfall s_d (the sonar: ||m - o|| (sec(b / 2) - 1)),
     sigma_x,y = sqrt(s_x,y^2 + s_b^2), sigma_v = sqrt(s_z^2 + s_r'^2 + s_d^2),
     l_x,y = clip(sigma / c, l_0, l_cap), the weight and the lattice of
-    :mod:`undertow.mapping.tpu` (``unknown``: the sensor taken for a code outside 0 .. 2)."""
+    :mod:`undertow.mapping.tpu` (``unknown``: the sensor taken for a code outside 0 .. 2); and
+    the largest finite l as the scatter takes it (:attr:`TpuHits.reach`)."""
     n = r.shape[0]
     shortfall = np.sqrt(1.0 + tan_half * tan_half) - 1.0  # sec(b / 2) - 1
     hx, hy = np.empty(n), np.empty(n)
     hl, hz, hw = np.empty((n, 2)), np.empty((n, 3)), np.empty((n, 3))
     h_weight, h_var = np.empty(n), np.empty(n)
+    reach = 0.0
     for i in range(n):
         m0 = origin[i, 0] + r[i] * direction[i, 0]
         m1 = origin[i, 1] + r[i] * direction[i, 1]
@@ -168,7 +203,10 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
         hz[i, 0], hz[i, 1], hz[i, 2] = zc + res * -1.0, zc + res * 0.0, zc + res * 1.0
         hw[i, 0], hw[i, 1], hw[i, 2] = weight * w_minus, weight * w_zero, weight * w_plus
         h_weight[i], h_var[i] = weight, sv * sv
-    return hx, hy, hl, hz, hw, h_weight, h_var
+        for j in range(2):
+            if np.isfinite(hl[i, j]):
+                reach = max(reach, hl[i, j])
+    return hx, hy, hl, hz, hw, h_weight, h_var, reach
 
 
 @njit(cache=True, error_model="numpy")
@@ -242,6 +280,9 @@ def tpu_scatter_slab(start, axis, first, stop, origin, direction, rows, f, sig, 
     for j in range(3):
         _rotation(l_free[j], res, free_rot, j)
     _rotation(l_free[2], res, rot, 2)  # the cells' vertical length is the free samples'
+    for j in range(3):  # the free samples' axes and lengths, in every column until the hits
+        for q in range(4):
+            scales[q, j, :] = free_rot[j, q + 1]
     free_end = rows[n_rays]
     total, row = free_end + 3 * n_rays, start
     ray = np.searchsorted(rows, start, side="right") - 2 if start < free_end else n_rays
@@ -258,7 +299,7 @@ def tpu_scatter_slab(start, axis, first, stop, origin, direction, rows, f, sig, 
             if not ray_meets(ray, k0, m, origin, direction, f, l_free[axis], axis, res, first,
                              stop):  # fmt: skip
                 continue  # (a slab thread: none of these samples reaches its cells)
-            free_points(ray, k0, m, n, origin, direction, f, free_rot, pts, scales)
+            free_coordinates(ray, k0, m, n, origin, direction, f, pts)
             for t in range(m):
                 sigs[n + t], where[n + t] = sig[ray], row - m + t
             n += m
