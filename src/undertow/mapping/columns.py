@@ -65,6 +65,8 @@ class ColumnGrid:
         if len(x):
             extent = (np.array([x.min(), y.min()]), np.array([x.max(), y.max()]))
             l = np.stack([lx, ly], axis=1)
+            # contiguous, as the ray path gives them: one compiled add_column_sums, not two
+            x, y = np.ascontiguousarray(x), np.ascontiguousarray(y)
             self._add(x, y, l, weight, var_v, extent, self.reach(l))
 
     def _add(self, x, y, l, weight, var_v, extent, reach: float) -> None:
