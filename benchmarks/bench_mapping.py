@@ -441,7 +441,7 @@ def bench_multibeam(n_pings: int = 2000, altitude: float = ALTITUDE, repeats: in
 
 def bench_threads(n_pings: int, area: float, repeats: int = 5) -> dict:
     """The per-ping adaptive figure (build + integrate, whole log) with numba limited to 1 and
-    2 threads (the scatter runs on numba's threads, one slab of cells each), and OctoMap's,
+    2 threads (the scatter runs on that many threads, one slab of cells each), and OctoMap's,
     same run."""
     log, traj, rays = survey_batch(0, n_pings, n_pings, area)
     out = {}

@@ -1,9 +1,12 @@
-"""The scatter on numba's threads: each thread owns one slab of cells, so the map is the serial
-map bit for bit, whatever the slabs; the slab splitter balances the samples."""
+"""The scatter on several threads (as many as numba's thread count says): each thread owns one
+slab of cells, so the map is the serial map bit for bit, whatever the slabs; the slab splitter
+balances the samples; the parts run at once, in a forked child too."""
 
 from __future__ import annotations
 
+import multiprocessing
 import threading
+import time
 
 import numba
 import numpy as np
@@ -14,6 +17,7 @@ from undertow.mapping import threads as threads_module
 from undertow.mapping.grid import points_extent
 from undertow.mapping.kernels import slab_splits
 from undertow.mapping.samples import Samples
+from undertow.mapping.threads import run_parts
 
 BOUNDS = ((1e-4, 1e-4, 1e-4), (1.1e-3, 1.1e-3, 2e-4))
 
@@ -124,3 +128,36 @@ def test_parallel_expand_gives_the_serial_samples(monkeypatch, parts):
     assert len(serial) > 2048
     for name in ("points", "label", "sigma0", "pose_variance", "ray", "sensor"):
         assert np.array_equal(getattr(serial, name), getattr(threaded, name)), name
+
+
+def _parts_at_once(parts: int = 2) -> list[int]:
+    """Runs ``parts`` parts that each wait for all the others (a barrier with a timeout: parts
+    run in turn would break it), returns the parts seen."""
+    barrier, seen = threading.Barrier(parts, timeout=10), []
+    run_parts(lambda t: seen.append(t) or barrier.wait(), parts)
+    return sorted(seen)
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread")
+def test_the_parts_run_at_once_and_a_parts_error_comes_after_every_part_is_done():
+    assert _parts_at_once() == [0, 1]
+    done = []
+
+    def part(t):
+        if t == 1:
+            raise ValueError("part 1 failed")
+        time.sleep(0.05)
+        done.append(t)
+
+    with pytest.raises(ValueError, match="part 1 failed"):
+        run_parts(part, 3)
+    assert sorted(done) == [0, 2]
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one numba thread")
+def test_a_forked_child_runs_its_parts_on_threads_of_its_own():
+    """The parent's pool threads are not in a forked child (a Dask worker, a tile process):
+    the child makes its own pool instead of queueing parts no thread takes."""
+    assert _parts_at_once() == [0, 1]  # the parent's pool exists now
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.apply_async(_parts_at_once).get(timeout=60) == [0, 1]

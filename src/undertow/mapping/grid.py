@@ -23,19 +23,17 @@ from .kernels import (
     MODE_PRODUCT,
     count_chunks,
     insert_chunks,
-    scatter_parallel,
     scatter_slab,
     slab_splits,
 )
 from .rayscatter import (
     ray_insert_chunks,
-    ray_scatter_parallel,
     ray_scatter_slab,
     ray_slab_splits,
 )
 from .spill import TILE, ChunkSpill, tiles_of
-from .threads import parallel_slot
-from .tpuscatter import tpu_insert_chunks, tpu_scatter_parallel, tpu_scatter_slab
+from .threads import parallel_slot, run_parts
+from .tpuscatter import tpu_insert_chunks, tpu_scatter_slab
 
 
 def points_extent(points: np.ndarray):
@@ -249,7 +247,7 @@ class ChunkedGrid:
     def scatter(self, mode, points, label, sigma0, variance, var_bounds, l_min, l_max,
                 extent=None) -> None:  # fmt: skip
         """Place every chunk the samples touch (growing the arrays as needed), then run the
-        scatter kernel: on numba's threads, one slab of cells each, when there are enough
+        scatter kernel: on several threads, one slab of cells each, when there are enough
         samples (:func:`~undertow.mapping.threads.parallel_slot`); the map is the same either
         way, bit for bit.
         ``extent``: :func:`points_extent` of ``points`` when the caller has it."""
@@ -271,8 +269,9 @@ class ChunkedGrid:
         args = (mode, points, label, sigma0, variance, lo, hi, l_min, l_max, res, tk, tv, alpha,
                 beta)  # fmt: skip
         with parallel_slot(n) as parts:
-            if parts > 1:
-                scatter_parallel(*slab_splits(points, res, parts, *extent[:2]), *args)
+            if parts > 1:  # a slab of cells per part, each walking every sample in order
+                axis, splits = slab_splits(points, res, parts, *extent[:2])
+                run_parts(lambda t: scatter_slab(axis, splits[t], splits[t + 1], *args), parts)
             else:
                 scatter_slab(0, -ALL_CELLS, ALL_CELLS, *args)
         self._end_write(n0, extent)
@@ -310,10 +309,12 @@ class ChunkedGrid:
             if start < n:
                 self._grow()
         if parts > 1:
-            splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows, rays.f, res,
-                                     parts, *extent[:2])  # fmt: skip
-            ray_scatter_parallel(*splits, *geometry, rays.sig, rays.rows, rays.f, lo, hi, l_min,
-                                 l_max, res, *self._tables())  # fmt: skip
+            axis, splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows,
+                                           rays.f, res, parts, *extent[:2])  # fmt: skip
+            args = (*geometry, rays.sig, rays.rows, rays.f, lo, hi, l_min, l_max, res,
+                    *self._tables(), False)  # fmt: skip
+            run_parts(lambda t: ray_scatter_slab(0, axis, splits[t], splits[t + 1], *args),
+                      parts)  # fmt: skip
 
     def scatter_tpu(self, rays, hits, cap: float, extent, n: int) -> None:
         """:meth:`scatter` in product mode of the ``tpu`` mapper's n samples of ``rays``
@@ -349,11 +350,13 @@ class ChunkedGrid:
             if start < end:
                 self._grow()
         if parts > 1:
-            splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows, rays.f, res,
-                                     parts, *extent[:2])  # fmt: skip
-            tpu_scatter_parallel(*splits, rays.origin, rays.direction, rays.rows, rays.f,
-                                 rays.sig, hits.l_free, *lattice, res, cap,
-                                 *self._tables())  # fmt: skip
+            axis, splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows,
+                                           rays.f, res, parts, *extent[:2])  # fmt: skip
+            args = (rays.origin, rays.direction, rays.rows, rays.f, rays.sig, hits.l_free,
+                    *lattice, res, cap, *self._tables(), False)  # fmt: skip
+            first = int(rays.rows[0])
+            run_parts(lambda t: tpu_scatter_slab(first, axis, splits[t], splits[t + 1], *args),
+                      parts)  # fmt: skip
 
     def _check_extent(self, extent) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range (and

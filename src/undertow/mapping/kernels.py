@@ -18,7 +18,8 @@ i = floor(p / res), centre (i + 1/2) res); the grid is a hash of dense 8^3 chunk
 (:mod:`undertow.mapping.chunks`). A scatter is two passes: :func:`insert_chunks` places every
 chunk the supports touch (returning the first sample it could not place when the chunk arrays
 are full; the caller grows them and resumes), then :func:`scatter_slab` adds the mass with the
-table read only, so :func:`scatter_parallel` can run it on several threads, each owning a slab
+table read only, so several threads can run it at once (:meth:`~undertow.mapping.grid.
+ChunkedGrid.scatter`, :func:`~undertow.mapping.threads.run_parts`), each owning a slab
 of cells along x or y (:func:`slab_splits`) and walking all samples in order: every cell
 receives the same terms in the same order whatever the slabs, so the map is the same bit
 for bit. :func:`count_chunks` counts the chunks a scatter would touch (the grid's memory
@@ -28,7 +29,7 @@ estimate).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .chunks import (
     CHUNK,
@@ -336,25 +337,13 @@ def _scatter_product(axis, first, stop, points, label, sigma0, variance, var_lo,
                               oxy | (iz & 7), k * sig, y)  # fmt: skip
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def scatter_parallel(axis, splits, mode, points, label, sigma0, variance, var_lo, var_hi, l_min,
-                      l_max, res, table_keys, table_vals, alpha, beta):  # fmt: skip
-    """:func:`scatter_slab` for the slabs [splits[t], splits[t + 1]) on numba's threads. Each
-    thread walks the samples in order and writes only its own slab's cells, so every cell gets
-    the same terms in the same order as in one slab (bit-identical maps) and no two threads
-    write one cell."""
-    for part in prange(splits.shape[0] - 1):
-        scatter_slab(axis, splits[part], splits[part + 1], mode, points, label, sigma0,
-                      variance, var_lo, var_hi, l_min, l_max, res, table_keys, table_vals, alpha,
-                      beta)  # fmt: skip
-
-
 @njit(cache=True)
 def slab_splits(points, res, parts, p_lo, p_hi):
-    """(axis, splits) for :func:`scatter_parallel`: the horizontal axis along which the
-    samples' cells spread most, and ``parts`` + 1 cell-index boundaries along it (open at both
-    ends) at the quantiles of the samples' cells, so each slab gets about as many samples;
-    ``p_lo``, ``p_hi``: the points' extent (:func:`~undertow.mapping.grid.points_extent`)."""
+    """(axis, splits) for :func:`scatter_slab` on several threads: the horizontal axis along
+    which the samples' cells spread most, and ``parts`` + 1 cell-index boundaries along it
+    (open at both ends) at the quantiles of the samples' cells, so each slab gets about as
+    many samples; ``p_lo``, ``p_hi``: the points' extent
+    (:func:`~undertow.mapping.grid.points_extent`)."""
     n = points.shape[0]
     lo0, hi0, lo1, hi1 = p_lo[0], p_hi[0], p_lo[1], p_hi[1]
     axis = 0 if hi0 - lo0 >= hi1 - lo1 else 1

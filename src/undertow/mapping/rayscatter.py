@@ -25,9 +25,10 @@ for bit (``tests/mapping/test_rayscatter.py``). What they save:
   instead of branching (x + 0 = x for every x but -0, which no sum of masses is);
 - on one thread, a separate pass placing the chunks: the scatter places each chunk as it
   reaches it, probing the table read-only first (:func:`~undertow.mapping.chunks.find`);
-- on several threads (:func:`ray_scatter_parallel`, each owning a slab of cells), the chunks
-  are placed first (:func:`ray_insert_chunks`, a small cache remembering the chunks placed),
-  and each thread skips the runs of free samples whose supports miss its slab.
+- on several threads (:func:`~undertow.mapping.threads.run_parts`, each owning a slab of
+  cells), the chunks are placed first (:func:`ray_insert_chunks`, a small cache remembering
+  the chunks placed), and each thread skips the runs of free samples whose supports miss its
+  slab.
 
 Chunks are placed in the order the samples first touch them, as
 :func:`~undertow.mapping.kernels.insert_chunks` places them, so the chunk arrays (and the order
@@ -37,7 +38,7 @@ of :meth:`~undertow.mapping.grid.ChunkedGrid.cells`) are the same too.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .chunks import CHUNK, CHUNK_SHIFT, find, find_or_insert, lookup, pack_key
 from .kernels import ALL_CELLS
@@ -371,19 +372,6 @@ def ray_scatter_slab(start, axis, first, stop, origin, direction, r, var, sig, r
     return rows[n_rays]
 
 
-@njit(cache=True, parallel=True, nogil=True)
-def ray_scatter_parallel(axis, splits, origin, direction, r, var, sig, rows, f, var_lo, var_hi,
-                         l_min, l_max, res, table_keys, table_vals, chunk_keys, n_chunks, alpha,
-                         beta):  # fmt: skip
-    """:func:`ray_scatter_slab` for the slabs [splits[t], splits[t + 1]) on numba's threads
-    (each writes only its own slab's cells, every cell gets its terms in the serial order;
-    the chunks placed before)."""
-    for part in prange(splits.shape[0] - 1):
-        ray_scatter_slab(0, axis, splits[part], splits[part + 1], origin, direction, r, var, sig,
-                         rows, f, var_lo, var_hi, l_min, l_max, res, table_keys, table_vals,
-                         chunk_keys, n_chunks, alpha, beta, False)  # fmt: skip
-
-
 @njit(cache=True, error_model="numpy")
 def ray_extent(origin, direction, r, rows, f):
     """(min (3,), max (3,), all finite) of the rays' samples (at least one ray), as
@@ -416,7 +404,7 @@ def ray_extent(origin, direction, r, rows, f):
 
 @njit(cache=True, error_model="numpy")
 def ray_slab_splits(origin, direction, r, rows, f, res, parts, p_lo, p_hi):
-    """(axis, splits) for :func:`ray_scatter_parallel`, as
+    """(axis, splits) for :func:`ray_scatter_slab` on several threads, as
     :func:`~undertow.mapping.kernels.slab_splits` chooses them (the horizontal axis along which
     the samples spread most, cut at the quantiles of their cells), each ray's samples counted
     at its segment's midpoint (the splits only share the work out: any splits give the same

@@ -25,14 +25,14 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..errors import DataError, MissingStreamError
 from ..log import Log
 from ..rotations import rpy_to_matrix, wrap_angle
 from ..trajectory import Trajectory
 from .config import MappingConfig
-from .threads import parallel_slot
+from .threads import parallel_slot, run_parts
 
 SENSOR_DVL, SENSOR_SONAR, SENSOR_MULTIBEAM = 0, 1, 2
 DVL_MIN_RANGE, DVL_MAX_RANGE = 0.05, 50.0
@@ -307,16 +307,17 @@ def expand(origin, direction, r, var, sig, sensor, f, dropped) -> Samples:
 
 def write_samples(rays: Rays) -> tuple:
     """(points, label, sigma0, pose_variance, ray, sensor) of the rays' samples (numba kernel
-    :func:`_expand_part`: hits first, then free samples ray by ray, on numba's threads for
-    large batches)."""
+    :func:`_expand_part`: hits first, then free samples ray by ray, on several threads for
+    large batches, :func:`~undertow.mapping.threads.run_parts`)."""
     total = int(rays.rows[-1])
     arrays = (np.empty((total, 3)), np.empty(total), np.empty(total), np.empty((total, 3)),
               np.empty(total, np.int64), np.empty(total, np.int8))  # fmt: skip
     args = (rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor, rays.rows,
             rays.f)  # fmt: skip
     with parallel_slot(total) as parts:  # hits first, then free samples ray by ray
-        if parts > 1:
-            _expand_parallel(_ray_splits(rays.rows, parts), *args, *arrays)
+        if parts > 1:  # a range of rays per part, each writing only its rays' rows
+            splits = _ray_splits(rays.rows, parts)
+            run_parts(lambda t: _expand_part(splits[t], splits[t + 1], *args, *arrays), parts)
         else:
             _expand_part(0, len(rays.r), *args, *arrays)
     return arrays
@@ -367,12 +368,3 @@ def _expand_part(i0, i1, origin, direction, r, var, sig, sensor, first, f, point
             sigma0[k] = sig[i]
             ray[k] = i
             sensor_out[k] = sensor[i]
-
-
-@njit(cache=True, parallel=True, nogil=True)
-def _expand_parallel(splits, origin, direction, r, var, sig, sensor, first, f, points, label,
-                     sigma0, pose_variance, ray, sensor_out):  # fmt: skip
-    """:func:`_expand_part` for the rays [splits[t], splits[t + 1]) on numba's threads."""
-    for part in prange(splits.shape[0] - 1):
-        _expand_part(splits[part], splits[part + 1], origin, direction, r, var, sig, sensor,
-                     first, f, points, label, sigma0, pose_variance, ray, sensor_out)  # fmt: skip

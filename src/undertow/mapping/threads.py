@@ -1,20 +1,61 @@
-"""How many numba threads a mapping kernel may use: one parallel kernel at a time per process.
+"""How many threads a mapping kernel may use, and running its parts on them: one parallel kernel
+at a time per process.
 
-A scatter (:mod:`.grid`) or a sample expansion (:mod:`.samples`) of enough samples runs on
-numba's threads. Only one such kernel runs at a time per process: a second caller (a Dask
-thread, the live pipeline) runs the serial kernel instead of nesting numba's thread pool (its
-workqueue layer aborts then).
+A scatter (:mod:`.grid`) or a sample expansion (:mod:`.samples`) of enough samples runs in parts,
+each part a call of the compiled serial kernel on a slab of cells (or a range of rays), on a
+process-wide pool of threads (:func:`run_parts`; the kernels release the GIL, numba's
+``nogil``). How many parts: numba's thread count for the calling thread (``NUMBA_NUM_THREADS``,
+``numba.set_num_threads``, :func:`scatter_threads`), the setting users already have. Only one
+such kernel runs in parts at a time per process: a second caller (a Dask thread, the live
+pipeline) runs the serial kernel, so the threads never outnumber the setting. (Threads of our
+own rather than numba's ``parallel=True``: a prange variant of a kernel is compiled, and its
+kernel optimized, a second time; for the scatters that was about 35 s of a first run.)
 """
 
 from __future__ import annotations
 
+import os
 import threading
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import contextmanager
 
 import numba
 
 PARALLEL_MIN_SAMPLES = 2048  # below this a kernel stays on the calling thread
 _PARALLEL = threading.Lock()  # the process's one parallel slot (module docstring)
+_POOL: list = []  # the process's pool of threads for the parts after the first, made when needed
+_POOL_LOCK = threading.Lock()
+
+
+def _forget_pool() -> None:
+    """In a forked child: the parent's pool and locks are not the child's (its threads are not
+    copied)."""
+    global _POOL_LOCK, _PARALLEL
+    _POOL.clear()
+    _POOL_LOCK, _PARALLEL = threading.Lock(), threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pool)
+
+
+def run_parts(call, parts: int) -> None:
+    """``call(t)`` for t = 0 .. parts - 1 at once: part 0 on the calling thread, the others on
+    the process's pool; returns when every part is done, raising the first part's error."""
+    if parts <= 1:
+        call(0)
+        return
+    with _POOL_LOCK:
+        if not _POOL:
+            size = max(numba.config.NUMBA_NUM_THREADS - 1, 1)
+            _POOL.append(ThreadPoolExecutor(size, thread_name_prefix="undertow-part"))
+        pool = _POOL[0]
+    futures = [pool.submit(call, t) for t in range(1, parts)]
+    try:
+        call(0)
+    finally:
+        wait(futures)
+    for future in futures:
+        future.result()
 
 
 @contextmanager

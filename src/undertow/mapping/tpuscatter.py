@@ -34,7 +34,7 @@ from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from .chunks import CHUNK_SHIFT, find_or_insert, same_box, set_box
 from .rayscatter import BLOCK, block_cells, block_weights, free_coordinates, ray_meets
@@ -325,19 +325,6 @@ def tpu_scatter_slab(start, axis, first, stop, origin, direction, rows, f, sig, 
         if b >= 0:
             return where[b]
     return total
-
-
-@njit(cache=True, parallel=True, nogil=True)
-def tpu_scatter_parallel(axis, splits, origin, direction, rows, f, sig, l_free, hx, hy, hl, hz,
-                         hw, res, cap, table_keys, table_vals, chunk_keys, n_chunks, alpha,
-                         beta):  # fmt: skip
-    """:func:`tpu_scatter_slab` for the slabs [splits[t], splits[t + 1]) on numba's threads
-    (each writes only its own slab's cells, every cell gets its terms in the serial order;
-    the chunks placed before)."""
-    for part in prange(splits.shape[0] - 1):
-        tpu_scatter_slab(rows[0], axis, splits[part], splits[part + 1], origin, direction, rows,
-                         f, sig, l_free, hx, hy, hl, hz, hw, res, cap, table_keys, table_vals,
-                         chunk_keys, n_chunks, alpha, beta, False)  # fmt: skip
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
