@@ -60,8 +60,8 @@ def run_parts(call, parts: int) -> None:
 
 @contextmanager
 def scatter_threads(n: int):
-    """Mapping kernels on this thread use at most ``n`` numba threads inside the block (1: serial;
-    the setting is per calling thread, as ``numba.set_num_threads``)."""
+    """Mapping kernels called from this thread run in at most ``n`` parts inside the block (1:
+    serial): numba's thread count, set per calling thread as ``numba.set_num_threads`` sets it."""
     before = numba.get_num_threads()
     numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
     try:
