@@ -80,7 +80,7 @@ class ChunkedGrid:
     def __init__(self, resolution: float, capacity: int = 64, *,
                  resident_bytes: float | None = None, spill_dir=None) -> None:  # fmt: skip
         self.resolution = float(resolution)
-        self._support_cells: dict = {}  # _cells_per_axis by mode and length scales
+        self._support_cells: dict = {}  # _support by mode and length scales
         self._n = np.zeros(1, np.int64)
         self._allocate(max(int(capacity), 8))
         self._touched: list | None = None  # boxes (lo, hi) in m written since taken
@@ -309,12 +309,11 @@ class ChunkedGrid:
             if start < n:
                 self._grow()
         if parts > 1:
-            axis, splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows,
-                                           rays.f, res, parts, *extent[:2])  # fmt: skip
             args = (*geometry, rays.sig, rays.rows, rays.f, lo, hi, l_min, l_max, res,
                     *self._tables(), False)  # fmt: skip
-            run_parts(lambda t: ray_scatter_slab(0, axis, splits[t], splits[t + 1], *args),
-                      parts)  # fmt: skip
+            self._in_ray_slabs(
+                rays, extent, parts, lambda axis, a, b: ray_scatter_slab(0, axis, a, b, *args)
+            )
 
     def scatter_tpu(self, rays, hits, cap: float, extent, n: int) -> None:
         """:meth:`scatter` in product mode of the ``tpu`` mapper's n samples of ``rays``
@@ -350,13 +349,20 @@ class ChunkedGrid:
             if start < end:
                 self._grow()
         if parts > 1:
-            axis, splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows,
-                                           rays.f, res, parts, *extent[:2])  # fmt: skip
             args = (rays.origin, rays.direction, rays.rows, rays.f, rays.sig, hits.l_free,
                     *lattice, res, cap, *self._tables(), False)  # fmt: skip
             first = int(rays.rows[0])
-            run_parts(lambda t: tpu_scatter_slab(first, axis, splits[t], splits[t + 1], *args),
-                      parts)  # fmt: skip
+            self._in_ray_slabs(
+                rays, extent, parts, lambda axis, a, b: tpu_scatter_slab(first, axis, a, b, *args)
+            )
+
+    def _in_ray_slabs(self, rays, extent, parts: int, scatter) -> None:
+        """``scatter(axis, first, stop)`` for ``parts`` slabs of cells [first, stop) along
+        ``axis``, cut at the quantiles of the rays' samples (``ray_slab_splits``), at once
+        (:func:`~undertow.mapping.threads.run_parts`); the chunks already placed."""
+        axis, splits = ray_slab_splits(rays.origin, rays.direction, rays.r, rays.rows, rays.f,
+                                       self.resolution, parts, *extent[:2])  # fmt: skip
+        run_parts(lambda t: scatter(axis, splits[t], splits[t + 1]), parts)
 
     def _check_extent(self, extent) -> None:
         """Chunk coordinates are packed in 21 bits per axis: keep |p| below that range (and
@@ -386,17 +392,13 @@ class ChunkedGrid:
         lo, hi = var_bounds
         chunks = count_chunks(mode, points, variance, lo, hi, l_min, l_max, self.resolution,
                                table, held, limit_chunks)  # fmt: skip
-        return int(peak_bytes(chunks, n * math.prod(self._cells_per_axis(mode, l_min, l_max))))
-
-    def _cells_per_axis(self, mode, l_min, l_max) -> tuple:
-        """Cells a sample's support spans per axis, at most: up to l_max (product kernel) or l
-        (radial kernel) either side; scalar arithmetic, remembered per mode and length scales,
-        so the common case (far below the limit) costs a streaming call little."""
-        return self._support(mode, l_min, l_max)[0]
+        return int(peak_bytes(chunks, n * self._support(mode, l_min, l_max)[2]))
 
     def _support(self, mode, l_min, l_max) -> tuple:
-        """(:meth:`_cells_per_axis`, the chunks one support spans at most, its cells at most),
-        remembered per mode and length scales."""
+        """(cells a sample's support spans per axis, the chunks it spans, its cells), each at
+        most: up to l_max (product kernel) or l (radial kernel) either side; scalar arithmetic,
+        remembered per mode and length scales, so the common case (far below the limit) costs
+        a streaming call little."""
         key = (mode, *np.asarray(l_min, float).tolist(), *np.asarray(l_max, float).tolist())
         support = self._support_cells.get(key)
         if support is None:

@@ -298,7 +298,7 @@ class TpuBkiMapper(Mapper):
                     self.grid.scatter_tpu(rays, hits, cap, (lo, hi, finite), n)
                     self.columns.add_hits(hits, (lo, hi, finite))
                     sonar = rays.sensor == SENSOR_SONAR
-                    if self.sonar_carve and sonar.any():
+                    if sonar.any():  # (most pings have none: skip the masks)
                         self._carve(rays.origin[sonar], rays.direction[sonar], rays.r[sonar],
                                     hits.var_v[sonar])  # fmt: skip
                 except MemoryError:

@@ -23,16 +23,15 @@ import numba
 
 PARALLEL_MIN_SAMPLES = 2048  # below this a kernel stays on the calling thread
 _PARALLEL = threading.Lock()  # the process's one parallel slot (module docstring)
-_POOL: list = []  # the process's pool of threads for the parts after the first, made when needed
+_POOL: ThreadPoolExecutor | None = None  # the parts after the first run here (made when needed)
 _POOL_LOCK = threading.Lock()
 
 
 def _forget_pool() -> None:
     """In a forked child: the parent's pool and locks are not the child's (its threads are not
     copied)."""
-    global _POOL_LOCK, _PARALLEL
-    _POOL.clear()
-    _POOL_LOCK, _PARALLEL = threading.Lock(), threading.Lock()
+    global _POOL, _POOL_LOCK, _PARALLEL
+    _POOL, _POOL_LOCK, _PARALLEL = None, threading.Lock(), threading.Lock()
 
 
 os.register_at_fork(after_in_child=_forget_pool)
@@ -44,11 +43,12 @@ def run_parts(call, parts: int) -> None:
     if parts <= 1:
         call(0)
         return
+    global _POOL
     with _POOL_LOCK:
-        if not _POOL:
+        if _POOL is None:
             size = max(numba.config.NUMBA_NUM_THREADS - 1, 1)
-            _POOL.append(ThreadPoolExecutor(size, thread_name_prefix="undertow-part"))
-        pool = _POOL[0]
+            _POOL = ThreadPoolExecutor(size, thread_name_prefix="undertow-part")
+        pool = _POOL
     futures = [pool.submit(call, t) for t in range(1, parts)]
     try:
         call(0)
