@@ -13,11 +13,13 @@ from conftest import multibeam_fan, numba_threads, same_map
 
 from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
+from undertow.mapping.chunks import rehash
 from undertow.mapping.columns import ColumnGrid
 from undertow.mapping.grid import points_extent
+from undertow.mapping.kernels import MODE_PRODUCT, insert_chunks
 from undertow.mapping.samples import RaySamples, Samples, expand
 from undertow.mapping.tpu import tpu_training, wavenumbers
-from undertow.mapping.tpuscatter import tpu_extent, tpu_hits
+from undertow.mapping.tpuscatter import tpu_extent, tpu_hits, tpu_insert_chunks
 from undertow.sim.waves import wavenumber
 
 WAVE = (0.35, 0.2)  # amplitude m, frequency Hz: s_w of centimetres at these depths
@@ -141,3 +143,53 @@ def test_the_compiledwavenumbers_arewavenumbers_bit_for_bit():
     omega = 2.0 * np.pi * 0.2
     want = np.array([float(wavenumber(omega, float(h))) for h in depths])
     assert np.array_equal(wavenumbers(omega, depths), want)
+
+
+def test_the_chunks_are_placed_in_the_order_the_generic_pass_places_them():
+    """tpu_insert_chunks (the pass before the slab threads) against kernels.insert_chunks of
+    the written samples: rays in every direction, free samples every 0.1 m, and hits' cells
+    whose supports span up to four chunks across the floor (one cell vertically, as every tpu
+    sample's), far apart so that most chunks of a box are new (the order within a box counts);
+    the arrays start small, so both passes stop, grow and resume, mid-ray too. The same chunks
+    in the same order."""
+    rng = np.random.default_rng(7)
+    n, res, f, cap = 300, 0.1, 0.1, 2.0
+    origin = rng.uniform(-30.0, 30.0, (n, 3))
+    direction = rng.normal(0.0, 1.0, (n, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    rows = np.concatenate([[0], np.cumsum(rng.integers(0, 40, n))])
+    l_free = np.array([0.1, 0.1, 0.05])
+    hx, hy = rng.uniform(-30.0, 30.0, n), rng.uniform(-30.0, 30.0, n)
+    hz = rng.uniform(-30.0, 30.0, (n, 1)) + np.array([-res, 0.0, res])
+    hl = rng.uniform(0.0, 1.5, (n, 2))
+    hw = rng.uniform(0.0, 1.0, (n, 3)) * (rng.random((n, 3)) > 0.2)
+    k = np.arange(rows[-1]) - np.repeat(rows[:-1], np.diff(rows))
+    ray = np.repeat(np.arange(n), np.diff(rows))
+    free = origin[ray] + (k * f)[:, None] * direction[ray]
+    keep = hw.reshape(-1) > 0
+    cells = np.stack([np.repeat(hx, 3), np.repeat(hy, 3), hz.reshape(-1)], 1)[keep]
+    lengths = np.concatenate([np.tile(l_free, (len(free), 1)),
+                              np.column_stack([np.repeat(hl, 3, 0), np.full((n * 3, 1),
+                                              l_free[2])])[keep]])  # fmt: skip
+    points = np.concatenate([free, cells])
+
+    def placed(insert, total: int) -> np.ndarray:
+        """The chunk keys in the order ``insert(start, tables)`` places them, from arrays of
+        16 chunks doubled (and the table rehashed) whenever a pass stops."""
+        keys, n = np.zeros((16, 3), np.int64), np.zeros(1, np.int64)
+        start = 0
+        while True:
+            table = (np.full(4 * len(keys), -1, np.int64), np.zeros(4 * len(keys), np.int64))
+            rehash(keys, n[0], *table)
+            start = insert(start, (*table, keys, n))
+            if start == total:
+                return keys[: n[0]]
+            keys = np.concatenate([keys, np.zeros_like(keys)])
+
+    bounds = (np.zeros(3), np.ones(3), np.zeros(3), np.full(3, cap))
+    generic = placed(lambda s, t: insert_chunks(s, MODE_PRODUCT, points, lengths / cap, *bounds,
+                                                res, *t), len(points))  # fmt: skip
+    tpu = placed(lambda s, t: tpu_insert_chunks(s, origin, direction, rows, f, l_free, hx, hy, hl,
+                                                hz, hw, res, *t), rows[-1] + 3 * n)  # fmt: skip
+    assert len(generic) > 2000
+    assert np.array_equal(generic, tpu)

@@ -36,8 +36,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from .chunks import CHUNK_SHIFT, find_or_insert, same_box, set_box
-from .rayscatter import BLOCK, block_cells, block_weights, free_coordinates, ray_meets
+from .chunks import CHUNK_SHIFT, find, find_or_insert, pack_key
+from .rayscatter import (
+    BLOCK,
+    PLACED_CACHE,
+    block_cells,
+    block_weights,
+    free_coordinates,
+    ray_meets,
+)
 from .samples import SENSOR_SONAR
 from .tpu import KERNEL_STD, wavenumbers
 
@@ -331,41 +338,58 @@ def tpu_scatter_slab(start, axis, first, stop, origin, direction, rows, f, sig, 
 def tpu_insert_chunks(start, origin, direction, rows, f, l_free, hx, hy, hl, hz, hw, res,
                       table_keys, table_vals, chunk_keys, n_chunks):  # fmt: skip
     """:func:`~undertow.mapping.kernels.insert_chunks` of the tpu samples (rows as
-    :func:`tpu_scatter_slab`'s) from row ``start``: the last row + 1 when done, else the first
-    row whose chunks did not fit (the caller grows the arrays and resumes there)."""
+    :func:`tpu_scatter_slab`'s) from row ``start``, the same chunks in the same order: the
+    last row + 1 when done, else the first row whose chunks did not fit (the caller grows the
+    arrays and resumes there). As :func:`~undertow.mapping.rayscatter.ray_insert_chunks`:
+    ray by ray (each ray's lengths and position taken once), a sample's chunks looked at only
+    when its box differs from the previous sample's, and a small cache of the chunks placed
+    before the table is probed (:func:`~undertow.mapping.chunks.find`, then inserted on a
+    miss)."""
     n_rays = hx.shape[0]
     free_end = rows[n_rays]
-    total = free_end + 3 * n_rays
     p, ratio = np.empty(3), np.empty(3)
     lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
-    box = np.full(6, -1, np.int64)
-    ray = np.searchsorted(rows, start, side="right") - 1 if start < free_end else n_rays
-    for row in range(start, total):
-        if row < free_end:
-            while rows[ray + 1] <= row:
-                ray += 1
+    box = np.full(6, -1, np.int64)  # the previous sample's chunks (lo, hi)
+    placed = np.full(PLACED_CACHE, -1, np.int64)  # keys of chunks placed, by their low bits
+    for seg in range(n_rays + 1):  # ray by ray the free samples, then the hits' cells
+        if seg < n_rays:
+            t0, t1 = max(start - rows[seg], 0), rows[seg + 1] - rows[seg]
             for j in range(3):
-                p[j] = origin[ray, j] + ((row - rows[ray]) * f) * direction[ray, j]
                 ratio[j] = l_free[j] / res
         else:
-            i, c = (row - free_end) // 3, (row - free_end) % 3
-            if not hw[i, c] > 0.0:
-                continue
-            p[0], p[1], p[2] = hx[i], hy[i], hz[i, c]
-            ratio[0], ratio[1], ratio[2] = hl[i, 0] / res, hl[i, 1] / res, l_free[2] / res
-        for j in range(3):  # the support as kernels._support takes it
-            q = p[j] / res
-            c0 = np.int64(np.floor(q - ratio[j] - 0.5)) + 1
-            c1 = max(np.int64(np.ceil(q + ratio[j] - 0.5)) - 1, c0)
-            lo[j], hi[j] = c0 >> CHUNK_SHIFT, c1 >> CHUNK_SHIFT
-        ncx, ncy, ncz = hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1
-        if same_box(box, lo[0], lo[1], lo[2], ncx, ncy, ncz):
-            continue
-        for a in range(ncx):
-            for b in range(ncy):
-                for c in range(ncz):
-                    if find_or_insert(lo[0] + a, lo[1] + b, lo[2] + c, table_keys, table_vals,
-                                      chunk_keys, n_chunks) < 0:  # fmt: skip
-                        return row
-        set_box(box, lo[0], lo[1], lo[2], ncx, ncy, ncz)
-    return total
+            t0, t1 = max(start - free_end, 0), 3 * n_rays
+        for t in range(t0, t1):
+            if seg < n_rays:  # free sample o + (t f) v
+                for j in range(3):
+                    p[j] = (origin[seg, j] + (t * f) * direction[seg, j]) / res
+            else:  # hit i's cell c
+                i, c = t // 3, t % 3
+                if not hw[i, c] > 0.0:
+                    continue
+                p[0], p[1], p[2] = hx[i] / res, hy[i] / res, hz[i, c] / res
+                ratio[0], ratio[1], ratio[2] = hl[i, 0] / res, hl[i, 1] / res, l_free[2] / res
+            for j in range(3):  # the support as kernels._support takes it
+                first = np.int64(np.floor(p[j] - ratio[j] - 0.5)) + 1
+                last = np.int64(np.ceil(p[j] + ratio[j] - 0.5)) - 1
+                lo[j], hi[j] = first >> CHUNK_SHIFT, max(last, first) >> CHUNK_SHIFT
+            if (box[0] == lo[0] and box[1] == lo[1] and box[2] == lo[2] and box[3] == hi[0]
+                    and box[4] == hi[1] and box[5] == hi[2]):  # fmt: skip
+                continue  # the previous sample's chunks
+            for cx in range(lo[0], hi[0] + 1):
+                for cy in range(lo[1], hi[1] + 1):
+                    for cz in range(lo[2], hi[2] + 1):
+                        key = pack_key(cx, cy, cz)
+                        slot = ((cx & 7) << 6) | ((cy & 7) << 3) | (cz & 7)
+                        if placed[slot] == key:
+                            continue
+                        if (
+                            find(cx, cy, cz, table_keys, table_vals) < 0
+                            and find_or_insert(
+                                cx, cy, cz, table_keys, table_vals, chunk_keys, n_chunks
+                            )
+                            < 0
+                        ):
+                            return (rows[seg] if seg < n_rays else free_end) + t
+                        placed[slot] = key
+            box[:3], box[3:] = lo, hi
+    return free_end + 3 * n_rays
