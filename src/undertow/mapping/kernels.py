@@ -35,6 +35,7 @@ from .chunks import (
     CHUNK,
     CHUNK_SHIFT,
     chunk_box,
+    find,
     find_or_insert,
     home_slot,
     pack_key,
@@ -206,6 +207,8 @@ def insert_chunks(start, mode, points, variance, var_lo, var_hi, l_min, l_max, r
         for a in range(ncx):
             for b in range(ncy):
                 for c in range(ncz):
+                    if find(c0x + a, c0y + b, c0z + c, table_keys, table_vals) >= 0:
+                        continue  # placed (probing first: find_or_insert costs more a call)
                     ci = find_or_insert(c0x + a, c0y + b, c0z + c, table_keys, table_vals,
                                          chunk_keys, n_chunks)  # fmt: skip
                     if ci < 0:
