@@ -15,9 +15,10 @@ from undertow.mapping import grid as grid_module
 from undertow.mapping import make_mapper
 from undertow.mapping.chunks import rehash
 from undertow.mapping.columns import ColumnGrid
-from undertow.mapping.grid import points_extent
+from undertow.mapping.grid import ChunkedGrid, points_extent
 from undertow.mapping.kernels import MODE_PRODUCT, insert_chunks
 from undertow.mapping.samples import RaySamples, Samples, expand
+from undertow.mapping.threads import PARALLEL_MIN_SAMPLES
 from undertow.mapping.tpu import tpu_training, wavenumbers
 from undertow.mapping.tpuscatter import tpu_extent, tpu_hits, tpu_insert_chunks
 from undertow.sim.waves import wavenumber
@@ -147,11 +148,13 @@ def test_the_compiledwavenumbers_arewavenumbers_bit_for_bit():
 
 def test_the_chunks_are_placed_in_the_order_the_generic_pass_places_them():
     """tpu_insert_chunks (the pass before the slab threads) against kernels.insert_chunks of
-    the written samples: rays in every direction, free samples every 0.1 m, and hits' cells
-    whose supports span up to four chunks across the floor (one cell vertically, as every tpu
-    sample's), far apart so that most chunks of a box are new (the order within a box counts);
-    the arrays start small, so both passes stop, grow and resume, mid-ray too. The same chunks
-    in the same order."""
+    the written samples in one pass over all (the grid's own table, grown and resumed when
+    full, mid-ray too): rays in every direction, free samples every 0.1 m, and hits' cells whose
+    supports span up to four chunks across the floor (one cell vertically, as every tpu
+    sample's), far apart so that most chunks of a box are new (the order within a box counts).
+    Then ChunkedGrid.place, which for many rows or several parts finds each part's new chunks
+    in a table of its own and inserts them part after part (a few rows: the one pass). The same
+    chunks in the same order."""
     rng = np.random.default_rng(7)
     n, res, f, cap = 300, 0.1, 0.1, 2.0
     origin = rng.uniform(-30.0, 30.0, (n, 3))
@@ -173,23 +176,37 @@ def test_the_chunks_are_placed_in_the_order_the_generic_pass_places_them():
                                               l_free[2])])[keep]])  # fmt: skip
     points = np.concatenate([free, cells])
 
-    def placed(insert, total: int) -> np.ndarray:
-        """The chunk keys in the order ``insert(start, tables)`` places them, from arrays of
-        16 chunks doubled (and the table rehashed) whenever a pass stops."""
-        keys, n = np.zeros((16, 3), np.int64), np.zeros(1, np.int64)
-        start = 0
+    bounds = (np.zeros(3), np.ones(3), np.zeros(3), np.full(3, cap))
+
+    def generic(a, b, held, into):
+        return insert_chunks(a, b, MODE_PRODUCT, points, lengths / cap, *bounds, res, *held,
+                             *into)  # fmt: skip
+
+    def tpu(a, b, held, into):
+        return tpu_insert_chunks(a, b, origin, direction, rows, f, l_free, hx, hy, hl, hz, hw,
+                                 res, *held, *into)  # fmt: skip
+
+    def one_pass(stop: int) -> np.ndarray:
+        """The chunk keys in the order one pass places them, from arrays of 16 chunks doubled
+        (and the table rehashed) whenever the pass stops."""
+        keys, count, start = np.zeros((16, 3), np.int64), np.zeros(1, np.int64), 0
         while True:
             table = (np.full(4 * len(keys), -1, np.int64), np.zeros(4 * len(keys), np.int64))
-            rehash(keys, n[0], *table)
-            start = insert(start, (*table, keys, n))
-            if start == total:
-                return keys[: n[0]]
+            rehash(keys, count[0], *table)
+            start = generic(start, stop, table, (*table, keys, count))
+            if start == stop:
+                return keys[: count[0]]
             keys = np.concatenate([keys, np.zeros_like(keys)])
 
-    bounds = (np.zeros(3), np.ones(3), np.zeros(3), np.full(3, cap))
-    generic = placed(lambda s, t: insert_chunks(s, MODE_PRODUCT, points, lengths / cap, *bounds,
-                                                res, *t), len(points))  # fmt: skip
-    tpu = placed(lambda s, t: tpu_insert_chunks(s, origin, direction, rows, f, l_free, hx, hy, hl,
-                                                hz, hw, res, *t), rows[-1] + 3 * n)  # fmt: skip
-    assert len(generic) > 2000
-    assert np.array_equal(generic, tpu)
+    def placed(find_new, first: int, end: int, parts: int) -> np.ndarray:
+        grid = ChunkedGrid(res, capacity=16)
+        grid.place(find_new, first, end, parts)
+        return grid.chunk_mass(np.arange(grid.n_chunks))[0]
+
+    whole = one_pass(len(points))
+    assert len(whole) > 2000 and len(points) >= PARALLEL_MIN_SAMPLES
+    for parts in (1, 2, 3):  # the tpu pass; both passes in parts, a part's table its own
+        assert np.array_equal(placed(tpu, rows[0], rows[-1] + 3 * n, parts), whole)
+        assert np.array_equal(placed(generic, 0, len(points), parts), whole)
+    few = PARALLEL_MIN_SAMPLES - 1
+    assert np.array_equal(placed(generic, 0, few, 1), one_pass(few))

@@ -32,7 +32,7 @@ from .rayscatter import (
     ray_slab_splits,
 )
 from .spill import TILE, ChunkSpill, tiles_of
-from .threads import parallel_slot, run_parts
+from .threads import PARALLEL_MIN_SAMPLES, parallel_slot, run_parts
 from .tpuscatter import tpu_insert_chunks, tpu_scatter_slab
 
 
@@ -133,11 +133,8 @@ class ChunkedGrid:
     def _take_back(self, tiles) -> None:
         """Reinsert the chunks of spilled ``tiles`` (their mass and birth numbers)."""
         keys, births, alpha, beta = self.spill.take(tiles)
-        slots, start, n_before = np.empty(len(keys), np.int64), 0, self.n_chunks
-        while start < len(keys):
-            start = insert_keys(start, keys, slots, *self._tables()[:4])
-            if start < len(keys):
-                self._grow()
+        n_before = self.n_chunks
+        slots = self._insert_keys(keys)
         new = slots >= n_before
         self._alpha[slots[new]], self._beta[slots[new]] = alpha[new], beta[new]
         self._birth[slots[new]] = births[new]
@@ -220,13 +217,56 @@ class ChunkedGrid:
         self._table_keys = np.full(size, -1, np.int64)
         self._table_vals = np.zeros(size, np.int64)
 
-    def _grow(self) -> None:
+    def _grow(self, chunks: int = 0) -> None:
+        """Room for 1.5 times the chunks the arrays hold, or for ``chunks`` if more."""
         n = int(self._n[0])
         keys, alpha, beta, birth = self._keys, self._alpha, self._beta, self._birth
-        self._allocate(keys.shape[0] * 3 // 2)
+        self._allocate(max(keys.shape[0] * 3 // 2, chunks))
         self._keys[:n], self._alpha[:n], self._beta[:n] = keys[:n], alpha[:n], beta[:n]
         self._birth[:n] = birth[:n]
         rehash(self._keys, n, self._table_keys, self._table_vals)
+
+    def _insert_keys(self, keys: np.ndarray) -> np.ndarray:
+        """Insert the chunks of coordinates ``keys`` (k, 3) not held, in that order (growing
+        the arrays as needed); returns each one's index."""
+        slots, start = np.empty(len(keys), np.int64), 0
+        while start < len(keys):
+            start = insert_keys(start, keys, slots, *self._tables()[:4])
+            if start < len(keys):
+                self._grow()
+        return slots
+
+    def place(self, find_new, first: int, end: int, parts: int) -> None:
+        """Place every chunk the sample rows first..end - 1 of a scatter touch, in the order
+        one pass over them places them (the first touch). ``find_new(start, stop, held,
+        into)``: a kernel of the :func:`~undertow.mapping.kernels.insert_chunks` kind, inserting
+        into ``into`` (table keys, values, chunk keys, count) the chunks of rows start..stop - 1
+        that the table ``held`` (keys, values) does not hold, returning the first row left when
+        ``into`` is full, else ``stop``. On one part: into the grid's table. On several (at
+        once, :func:`~undertow.mapping.threads.run_parts`): each part, a range of rows, into a
+        table of its own, the grid's only read; then each part's new chunks are inserted into
+        the grid's, part after part, those placed already by an earlier part left out: the
+        order of one pass, as a chunk's first touch is in the first part that touches it."""
+        if parts <= 1 and end - first < PARALLEL_MIN_SAMPLES:  # (a ping: no tables to make)
+            while first < end:
+                tables = self._tables()
+                first = find_new(first, end, tables[:2], tables[:4])
+                if first < end:
+                    self._grow()
+            return
+        parts = max(parts, 1)
+        cuts = np.linspace(first, end, parts + 1).round().astype(np.int64).tolist()
+        held, found = self._tables()[:2], [None] * parts
+
+        def part(t: int) -> None:
+            found[t] = _new_chunks(find_new, cuts[t], cuts[t + 1], held)
+
+        run_parts(part, parts)
+        need = self.n_chunks + sum(len(keys) for keys in found)
+        if need > self._keys.shape[0]:  # one growth to (at most) the chunks needed, not a series
+            self._grow(need)
+        for keys in found:
+            self._insert_keys(keys)
 
     @property
     def n_chunks(self) -> int:
@@ -251,7 +291,7 @@ class ChunkedGrid:
         samples (:func:`~undertow.mapping.threads.parallel_slot`); the map is the same either
         way, bit for bit.
         ``extent``: :func:`points_extent` of ``points`` when the caller has it."""
-        start, n = 0, points.shape[0]
+        n = points.shape[0]
         if n == 0:
             return
         if extent is None:
@@ -260,15 +300,16 @@ class ChunkedGrid:
         n0 = self._begin_write(extent, l_max)
         lo, hi = var_bounds
         res = self.resolution
-        while start < n:
-            start = insert_chunks(start, mode, points, variance, lo, hi, l_min, l_max, res,
-                                   *self._tables()[:4])  # fmt: skip
-            if start < n:
-                self._grow()
-        tk, tv, _, _, alpha, beta = self._tables()
-        args = (mode, points, label, sigma0, variance, lo, hi, l_min, l_max, res, tk, tv, alpha,
-                beta)  # fmt: skip
+
+        def find_new(start, stop, held, into):
+            return insert_chunks(start, stop, mode, points, variance, lo, hi, l_min, l_max, res,
+                                 *held, *into)  # fmt: skip
+
         with parallel_slot(n) as parts:
+            self.place(find_new, 0, n, parts)
+            tk, tv, _, _, alpha, beta = self._tables()
+            args = (mode, points, label, sigma0, variance, lo, hi, l_min, l_max, res, tk, tv,
+                    alpha, beta)  # fmt: skip
             if parts > 1:  # a slab of cells per part, each walking every sample in order
                 axis, splits = slab_splits(points, res, parts, *extent[:2])
                 run_parts(lambda t: scatter_slab(axis, splits[t], splits[t + 1], *args), parts)
@@ -296,24 +337,28 @@ class ChunkedGrid:
     def _scatter_rays(self, rays, var_bounds, l_min, l_max, extent, parts: int) -> None:
         """:meth:`scatter_rays` on ``parts`` threads."""
         lo, hi = var_bounds
-        res, n, start = self.resolution, int(rays.rows[-1]), 0
+        res, n = self.resolution, int(rays.rows[-1])
         geometry = (rays.origin, rays.direction, rays.r, rays.var)
-        while start < n:
-            if parts > 1:
-                start = ray_insert_chunks(start, *geometry, rays.rows, rays.f, lo, hi, l_min,
-                                          l_max, res, *self._tables()[:4])  # fmt: skip
-            else:
+        if parts == 1:  # each chunk placed as the scatter reaches it
+            start = 0
+            while start < n:
                 start = ray_scatter_slab(start, 0, -ALL_CELLS, ALL_CELLS, *geometry, rays.sig,
                                          rays.rows, rays.f, lo, hi, l_min, l_max, res,
                                          *self._tables(), True)  # fmt: skip
-            if start < n:
-                self._grow()
-        if parts > 1:
-            args = (*geometry, rays.sig, rays.rows, rays.f, lo, hi, l_min, l_max, res,
-                    *self._tables(), False)  # fmt: skip
-            self._in_ray_slabs(
-                rays, extent, parts, lambda axis, a, b: ray_scatter_slab(0, axis, a, b, *args)
-            )
+                if start < n:
+                    self._grow()
+            return
+
+        def find_new(start, stop, held, into):
+            return ray_insert_chunks(start, stop, *geometry, rays.rows, rays.f, lo, hi, l_min,
+                                     l_max, res, *held, *into)  # fmt: skip
+
+        self.place(find_new, 0, n, parts)
+        args = (*geometry, rays.sig, rays.rows, rays.f, lo, hi, l_min, l_max, res,
+                *self._tables(), False)  # fmt: skip
+        self._in_ray_slabs(
+            rays, extent, parts, lambda axis, a, b: ray_scatter_slab(0, axis, a, b, *args)
+        )
 
     def scatter_tpu(self, rays, hits, cap: float, extent, n: int) -> None:
         """:meth:`scatter` in product mode of the ``tpu`` mapper's n samples of ``rays``
@@ -333,28 +378,29 @@ class ChunkedGrid:
 
     def _scatter_tpu(self, rays, hits, cap: float, extent, parts: int) -> None:
         """:meth:`scatter_tpu` on ``parts`` threads."""
-        res, start = self.resolution, int(rays.rows[0])
+        res, first = self.resolution, int(rays.rows[0])
         lattice = (hits.x, hits.y, hits.l, hits.z, hits.w)
+        geometry = (rays.origin, rays.direction, rays.rows, rays.f)
         end = int(rays.rows[-1]) + 3 * len(hits.x)
-        while start < end:
-            if parts > 1:
-                start = tpu_insert_chunks(start, rays.origin, rays.direction, rays.rows, rays.f,
-                                          hits.l_free, *lattice, res,
-                                          *self._tables()[:4])  # fmt: skip
-            else:
-                start = tpu_scatter_slab(start, 0, -ALL_CELLS, ALL_CELLS, rays.origin,
-                                         rays.direction, rays.rows, rays.f, rays.sig,
+        if parts == 1:  # each chunk placed as the scatter reaches it
+            start = first
+            while start < end:
+                start = tpu_scatter_slab(start, 0, -ALL_CELLS, ALL_CELLS, *geometry, rays.sig,
                                          hits.l_free, *lattice, res, cap, *self._tables(),
                                          True)  # fmt: skip
-            if start < end:
-                self._grow()
-        if parts > 1:
-            args = (rays.origin, rays.direction, rays.rows, rays.f, rays.sig, hits.l_free,
-                    *lattice, res, cap, *self._tables(), False)  # fmt: skip
-            first = int(rays.rows[0])
-            self._in_ray_slabs(
-                rays, extent, parts, lambda axis, a, b: tpu_scatter_slab(first, axis, a, b, *args)
-            )
+                if start < end:
+                    self._grow()
+            return
+
+        def find_new(start, stop, held, into):
+            return tpu_insert_chunks(start, stop, *geometry, hits.l_free, *lattice, res, *held,
+                                     *into)  # fmt: skip
+
+        self.place(find_new, first, end, parts)
+        args = (*geometry, rays.sig, hits.l_free, *lattice, res, cap, *self._tables(), False)
+        self._in_ray_slabs(
+            rays, extent, parts, lambda axis, a, b: tpu_scatter_slab(first, axis, a, b, *args)
+        )
 
     def _in_ray_slabs(self, rays, extent, parts: int, scatter) -> None:
         """``scatter(axis, first, stop)`` for ``parts`` slabs of cells [first, stop) along
@@ -493,6 +539,20 @@ class ChunkedGrid:
             alpha[held], beta[held] = self._alpha[part[held]], self._beta[part[held]]
             alpha[~held], beta[~held] = self.spill.read(slots_out[part[~held] - n])
             yield _massed_cells(keys, alpha, beta)
+
+
+def _new_chunks(find_new, start: int, stop: int, held) -> np.ndarray:
+    """The coordinates (k, 3) of the chunks that rows start..stop - 1 touch and the table
+    ``held`` does not hold, in the order first touched (:meth:`ChunkedGrid.place`): a table of
+    their own, doubled and rehashed when full."""
+    keys, count = np.zeros((64, 3), np.int64), np.zeros(1, np.int64)
+    while True:
+        table = (np.full(2 * len(keys), -1, np.int64), np.zeros(2 * len(keys), np.int64))
+        rehash(keys, count[0], *table)
+        start = find_new(start, stop, held, (*table, keys, count))
+        if start >= stop:
+            return keys[: count[0]]
+        keys = np.concatenate([keys, np.zeros_like(keys)])
 
 
 def _union(boxes) -> tuple[np.ndarray, np.ndarray]:

@@ -186,17 +186,19 @@ def _add_sample(s, mode, label, sigma0, l0, lo, cnt, w, a0, a1, b0, b1, chunks, 
 
 
 @njit(cache=True, nogil=True)
-def insert_chunks(start, mode, points, variance, var_lo, var_hi, l_min, l_max, res, table_keys,
-                   table_vals, chunk_keys, n_chunks):  # fmt: skip
-    """Insert every chunk the supports of samples start.. touch (the pass before
-    :func:`scatter_slab`); returns len(points) when done, else the first sample whose
-    chunks did not fit (the caller grows the arrays and resumes there)."""
-    n = points.shape[0]
+def insert_chunks(start, stop, mode, points, variance, var_lo, var_hi, l_min, l_max, res,
+                  held_keys, held_vals, table_keys, table_vals, chunk_keys, n_chunks):  # fmt: skip
+    """Insert into the table every chunk the supports of samples start..stop - 1 touch that
+    the table ``held`` (keys, values; only read) does not hold, in the order the samples first
+    touch them (the pass before :func:`scatter_slab`; ``held`` the table itself for one pass,
+    the grid's for a part of the samples on a thread, :meth:`~undertow.mapping.grid.ChunkedGrid.
+    place`); returns ``stop`` when done, else the first sample whose chunks did not fit (the
+    caller grows the arrays and resumes there)."""
     lo = np.zeros(3, np.int64)
     cnt = np.zeros(3, np.int64)
     lengths = np.empty(3)
     box = np.full(6, -1, np.int64)
-    for s in range(start, n):
+    for s in range(start, stop):
         _support(s, mode, points, variance, var_lo, var_hi, l_min, l_max, res, lengths, lo, cnt)
         c0x, c0y, c0z = lo[0] >> CHUNK_SHIFT, lo[1] >> CHUNK_SHIFT, lo[2] >> CHUNK_SHIFT
         ncx = ((lo[0] + cnt[0] - 1) >> CHUNK_SHIFT) - c0x + 1
@@ -207,14 +209,15 @@ def insert_chunks(start, mode, points, variance, var_lo, var_hi, l_min, l_max, r
         for a in range(ncx):
             for b in range(ncy):
                 for c in range(ncz):
-                    if find(c0x + a, c0y + b, c0z + c, table_keys, table_vals) >= 0:
+                    cx, cy, cz = c0x + a, c0y + b, c0z + c
+                    if (find(cx, cy, cz, held_keys, held_vals) >= 0
+                            or find(cx, cy, cz, table_keys, table_vals) >= 0):  # fmt: skip
                         continue  # placed (probing first: find_or_insert costs more a call)
-                    ci = find_or_insert(c0x + a, c0y + b, c0z + c, table_keys, table_vals,
-                                         chunk_keys, n_chunks)  # fmt: skip
-                    if ci < 0:
+                    if find_or_insert(cx, cy, cz, table_keys, table_vals, chunk_keys,
+                                      n_chunks) < 0:  # fmt: skip
                         return s
         set_box(box, c0x, c0y, c0z, ncx, ncy, ncz)
-    return n
+    return stop
 
 
 @njit(cache=True)

@@ -145,19 +145,25 @@ def _last_cell(p, lj, res):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi, l_min, l_max,
-                      res, table_keys, table_vals, chunk_keys, n_chunks):  # fmt: skip
-    """:func:`~undertow.mapping.kernels.insert_chunks` (product mode) of the rays' samples
-    (module doc) from sample row ``start``: returns rows[R] when done, else the first row whose
-    chunks did not fit (the caller grows the chunk arrays and resumes there)."""
+def ray_insert_chunks(start, stop, origin, direction, r, var, rows, f, var_lo, var_hi, l_min,
+                      l_max, res, held_keys, held_vals, table_keys, table_vals, chunk_keys,
+                      n_chunks):  # fmt: skip
+    """:func:`~undertow.mapping.kernels.insert_chunks` (product mode) of the rays' sample rows
+    start..stop - 1 (module doc), ``held`` as there: returns ``stop`` when done, else the first
+    row whose chunks did not fit (the caller grows the chunk arrays and resumes there)."""
     n_rays = r.shape[0]
     ratio = np.empty(3)  # l_j / res of the current ray
     lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
     box = np.full(6, -1, np.int64)
     placed = np.full(PLACED_CACHE, -1, np.int64)  # keys of chunks placed, by their low bits
     for seg in range(-1, n_rays):  # the hits (rows 0 .. R - 1), then ray by ray the free samples
-        t0, t1 = (start, n_rays) if seg < 0 else (max(start - rows[seg], 0),
-                                                  rows[seg + 1] - rows[seg])  # fmt: skip
+        if seg >= 0 and rows[seg] >= stop:
+            break
+        t0, t1 = (
+            (start, min(n_rays, stop))
+            if seg < 0
+            else (max(start - rows[seg], 0), min(rows[seg + 1], stop) - rows[seg])
+        )
         for t in range(t0, t1):
             ray, k = (t, -1) if seg < 0 else (seg, t)
             if seg < 0 or t == t0:
@@ -181,15 +187,14 @@ def ray_insert_chunks(start, origin, direction, r, var, rows, f, var_lo, var_hi,
                         slot = ((cx & 7) << 6) | ((cy & 7) << 3) | (cz & 7)
                         if placed[slot] == key:
                             continue
-                        ci = find(cx, cy, cz, table_keys, table_vals)
-                        if ci < 0:  # a new chunk
-                            ci = find_or_insert(cx, cy, cz, table_keys, table_vals, chunk_keys,
-                                                n_chunks)  # fmt: skip
-                        if ci < 0:
+                        if (find(cx, cy, cz, held_keys, held_vals) < 0
+                                and find(cx, cy, cz, table_keys, table_vals) < 0
+                                and find_or_insert(cx, cy, cz, table_keys, table_vals,
+                                                   chunk_keys, n_chunks) < 0):  # fmt: skip
                             return t if seg < 0 else rows[seg] + t
                         placed[slot] = key
             box[:3], box[3:] = lo, hi
-    return rows[n_rays]
+    return stop
 
 
 @njit(cache=True, inline="always", error_model="numpy")

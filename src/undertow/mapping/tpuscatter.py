@@ -335,15 +335,16 @@ def tpu_scatter_slab(start, axis, first, stop, origin, direction, rows, f, sig, 
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def tpu_insert_chunks(start, origin, direction, rows, f, l_free, hx, hy, hl, hz, hw, res,
-                      table_keys, table_vals, chunk_keys, n_chunks):  # fmt: skip
-    """:func:`~undertow.mapping.kernels.insert_chunks` of the tpu samples (rows as
-    :func:`tpu_scatter_slab`'s) from row ``start``, the same chunks in the same order: the
-    last row + 1 when done, else the first row whose chunks did not fit (the caller grows the
+def tpu_insert_chunks(start, stop, origin, direction, rows, f, l_free, hx, hy, hl, hz, hw, res,
+                      held_keys, held_vals, table_keys, table_vals, chunk_keys,
+                      n_chunks):  # fmt: skip
+    """:func:`~undertow.mapping.kernels.insert_chunks` of the tpu sample rows start..stop - 1
+    (rows as :func:`tpu_scatter_slab`'s; ``held`` as there), the same chunks in the same order:
+    ``stop`` when done, else the first row whose chunks did not fit (the caller grows the
     arrays and resumes there). As :func:`~undertow.mapping.rayscatter.ray_insert_chunks`:
     ray by ray (each ray's lengths and position taken once), a sample's chunks looked at only
     when its box differs from the previous sample's, and a small cache of the chunks placed
-    before the table is probed (:func:`~undertow.mapping.chunks.find`, then inserted on a
+    before the tables are probed (:func:`~undertow.mapping.chunks.find`, then inserted on a
     miss). (The box's loop is written out in both: as a shared compiled helper, numba counts
     references to its array arguments on every call, which made this pass 1.5x slower.)"""
     n_rays = hx.shape[0]
@@ -352,13 +353,16 @@ def tpu_insert_chunks(start, origin, direction, rows, f, l_free, hx, hy, hl, hz,
     lo, hi = np.zeros(3, np.int64), np.zeros(3, np.int64)
     box = np.full(6, -1, np.int64)  # the previous sample's chunks (lo, hi)
     placed = np.full(PLACED_CACHE, -1, np.int64)  # keys of chunks placed, by their low bits
-    for seg in range(n_rays + 1):  # ray by ray the free samples, then the hits' cells
+    first_ray = np.searchsorted(rows, start, side="right") - 1 if start < free_end else n_rays
+    for seg in range(first_ray, n_rays + 1):  # ray by ray the free samples, then the hits' cells
         if seg < n_rays:
-            t0, t1 = max(start - rows[seg], 0), rows[seg + 1] - rows[seg]
+            if rows[seg] >= stop:
+                break
+            t0, t1 = max(start - rows[seg], 0), min(rows[seg + 1], stop) - rows[seg]
             for j in range(3):
                 ratio[j] = l_free[j] / res
         else:
-            t0, t1 = max(start - free_end, 0), 3 * n_rays
+            t0, t1 = max(start - free_end, 0), min(3 * n_rays, stop - free_end)
         for t in range(t0, t1):
             if seg < n_rays:  # free sample o + (t f) v
                 for j in range(3):
@@ -383,14 +387,11 @@ def tpu_insert_chunks(start, origin, direction, rows, f, l_free, hx, hy, hl, hz,
                         slot = ((cx & 7) << 6) | ((cy & 7) << 3) | (cz & 7)
                         if placed[slot] == key:
                             continue
-                        if (
-                            find(cx, cy, cz, table_keys, table_vals) < 0
-                            and find_or_insert(
-                                cx, cy, cz, table_keys, table_vals, chunk_keys, n_chunks
-                            )
-                            < 0
-                        ):
+                        if (find(cx, cy, cz, held_keys, held_vals) < 0
+                                and find(cx, cy, cz, table_keys, table_vals) < 0
+                                and find_or_insert(cx, cy, cz, table_keys, table_vals,
+                                                   chunk_keys, n_chunks) < 0):  # fmt: skip
                             return (rows[seg] if seg < n_rays else free_end) + t
                         placed[slot] = key
             box[:3], box[3:] = lo, hi
-    return free_end + 3 * n_rays
+    return stop
