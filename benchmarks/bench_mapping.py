@@ -58,7 +58,13 @@ import numpy as np  # noqa: E402
 from undertow.log import Dvl, Log, SonarRange  # noqa: E402
 from undertow.mapping.config import MappingConfig  # noqa: E402
 from undertow.mapping.mappers import make_mapper  # noqa: E402
-from undertow.mapping.samples import SENSOR_MULTIBEAM, Samples, build_samples  # noqa: E402
+from undertow.mapping.samples import (  # noqa: E402
+    SENSOR_MULTIBEAM,
+    RaySamples,
+    Samples,
+    build_samples,
+    expand,
+)
 from undertow.mapping.tiled import Tiling  # noqa: E402
 from undertow.robot import Mounting  # noqa: E402
 from undertow.rotations import rpy_to_matrix  # noqa: E402
@@ -109,7 +115,19 @@ def survey_batch(k0: int, k1: int, n_pings: int, area: float) -> tuple[Log, Traj
 
 
 def _per_ping(samples: Samples, n_pings: int) -> list[Samples]:
-    """Split samples by ping (rays: 4 DVL per ping in order, then 1 sonar per ping)."""
+    """Split samples by ping (rays: 4 DVL per ping in order, then 1 sonar per ping): samples
+    kept as rays (``build_samples``' RaySamples) into each ping's rays expanded again, as the
+    online mapper of the live pipeline gives them to ``integrate`` (``expand``), others as
+    written samples."""
+    if isinstance(samples, RaySamples):
+        rays = samples.rays
+        ray = np.arange(len(rays.r))
+        ping = np.where(ray < 4 * n_pings, ray // 4, ray - 4 * n_pings)
+        order = np.argsort(ping, kind="stable")
+        bounds = np.searchsorted(ping[order], np.arange(n_pings + 1))
+        fields = (rays.origin, rays.direction, rays.r, rays.var, rays.sig, rays.sensor)
+        return [expand(*(a[order[i:j]] for a in fields), rays.f, {})
+                for i, j in zip(bounds[:-1], bounds[1:], strict=True)]  # fmt: skip
     ping = np.where(samples.ray < 4 * n_pings, samples.ray // 4, samples.ray - 4 * n_pings)
     order = np.argsort(ping, kind="stable")
     bounds = np.searchsorted(ping[order], np.arange(n_pings + 1))
