@@ -148,8 +148,9 @@ def test_the_compiledwavenumbers_arewavenumbers_bit_for_bit():
 
 def test_the_chunks_are_placed_in_the_order_the_generic_pass_places_them():
     """tpu_insert_chunks (the pass before the slab threads) against kernels.insert_chunks of
-    the written samples in one pass over all (the grid's own table, grown and resumed when
-    full, mid-ray too): rays in every direction, free samples every 0.1 m, and hits' cells whose
+    the written samples in one pass over all (into arrays of its own, from 16 chunks, grown
+    and resumed when full, mid-ray too; written here rather than through ChunkedGrid, whose
+    place is under test): rays in every direction, free samples every 0.1 m, and hits' cells whose
     supports span up to four chunks across the floor (one cell vertically, as every tpu
     sample's), far apart so that most chunks of a box are new (the order within a box counts).
     Then ChunkedGrid.place, which for many rows or several parts finds each part's new chunks

@@ -242,11 +242,13 @@ class ChunkedGrid:
         into)``: a kernel of the :func:`~undertow.mapping.kernels.insert_chunks` kind, inserting
         into ``into`` (table keys, values, chunk keys, count) the chunks of rows start..stop - 1
         that the table ``held`` (keys, values) does not hold, returning the first row left when
-        ``into`` is full, else ``stop``. On one part: into the grid's table. On several (at
-        once, :func:`~undertow.mapping.threads.run_parts`): each part, a range of rows, into a
-        table of its own, the grid's only read; then each part's new chunks are inserted into
-        the grid's, part after part, those placed already by an earlier part left out: the
-        order of one pass, as a chunk's first touch is in the first part that touches it."""
+        ``into`` is full, else ``stop``. Fewer than :data:`~undertow.mapping.threads.
+        PARALLEL_MIN_SAMPLES` rows on one part (a ping): straight into the grid's table.
+        Otherwise (the parts at once, :func:`~undertow.mapping.threads.run_parts`): each part, a
+        range of rows, into a table of its own, the grid's only read; then the arrays grow once
+        to the chunks found, and each part's new chunks are inserted into the grid's, part after
+        part, those placed already by an earlier part left out: the order of one pass, as a
+        chunk's first touch is in the first part that touches it."""
         if parts <= 1 and end - first < PARALLEL_MIN_SAMPLES:  # (a ping: no tables to make)
             while first < end:
                 tables = self._tables()
