@@ -61,24 +61,26 @@ def test_localize_and_map_take_the_same_piece_options(monkeypatch):
 
 @pytest.mark.slow
 def test_simulate_localize_evaluate_map_end_to_end(tmp_path):
-    """The README's workflow through the bag on disk, checked against the ground truth files."""
+    """The README's workflow through the bag on disk, checked against the ground truth files:
+    the DVL and the Ping convert with 1500 m/s in water of another sound speed, which the user
+    gives (--sound-speed) to calibrate, localize and map alike."""
     run = tmp_path / "run"
     assert (
         runner.invoke(app, ["simulate", "wave-a0.05-f0.75", "--out", str(run), "-q"]).exit_code == 0
     )
-    cal = tmp_path / "cal.yaml"
-    r = runner.invoke(
-        app, ["calibrate", str(run / "log"), str(run / "ground_truth.tum"), "--out", str(cal)]
-    )
-    assert r.exit_code == 0, r.output
-    # the simulator's sound-speed error is c_set / c_true; calibration must find it
     scenario = __import__("yaml").safe_load((run / "scenario.yaml").read_text())
+    water = str(scenario["water"]["sound_speed_m_s"])
+    cal = tmp_path / "cal.yaml"
+    # the simulator's sound-speed error is c_set / c_true; calibration must find it, and find
+    # nothing left once the water's sound speed is given
     expected = scenario["dvl"]["sound_speed_setting"] / scenario["water"]["sound_speed_m_s"]
-    assert abs(json.loads(r.stdout)["dvl_scale_factor"] - expected) < 2e-3
-    r = runner.invoke(
-        app,
-        ["localize", str(run / "log"), "--calibration", str(cal), "--out", str(run / "est"), "-q"],
-    )
+    for extra, factor in (([], expected), (["--sound-speed", water], 1.0)):
+        r = runner.invoke(app, ["calibrate", str(run / "log"), str(run / "ground_truth.tum"),
+                                "--out", str(cal), *extra])  # fmt: skip
+        assert r.exit_code == 0, r.output
+        assert abs(json.loads(r.stdout)["dvl_scale_factor"] - factor) < 2e-3
+    r = runner.invoke(app, ["localize", str(run / "log"), "--calibration", str(cal),
+                            "--sound-speed", water, "--out", str(run / "est"), "-q"])  # fmt: skip
     assert r.exit_code == 0, r.output
     r = runner.invoke(
         app, ["evaluate", "trajectory", str(run / "est"), str(run / "ground_truth.tum"), "--json"]
@@ -86,27 +88,22 @@ def test_simulate_localize_evaluate_map_end_to_end(tmp_path):
     assert r.exit_code == 0, r.output
     rmse = json.loads(r.stdout)["rmse"]
     assert rmse["x_m"] < 0.2 and rmse["y_m"] < 0.2 and rmse["z_m"] < 0.05
-    r = runner.invoke(
-        app,
-        [
-            "map",
-            str(run / "log"),
-            "--trajectory",
-            str(run / "est"),
-            "--out",
-            str(run / "map"),
-            "-q",
-        ],
-    )
-    assert r.exit_code == 0, r.output
-    r = runner.invoke(
-        app, ["evaluate", "map", str(run / "map"), str(run / "ground_truth.ply"), "--json"]
-    )
-    assert r.exit_code == 0, r.output
+    scores = {}
+    for name, extra in (("as recorded", []), ("water", ["--sound-speed", water])):
+        out = run / f"map {name}"
+        r = runner.invoke(app, ["map", str(run / "log"), "--trajectory", str(run / "est"),
+                                "--out", str(out), "-q", *extra])  # fmt: skip
+        assert r.exit_code == 0, r.output
+        r = runner.invoke(app, ["evaluate", "map", str(out), str(run / "ground_truth.ply"),
+                                "--json"])  # fmt: skip
+        assert r.exit_code == 0, r.output
+        scores[name] = json.loads(r.stdout)
     # the default (tpu) map's surface: the calm run's flat floor within a few cm, its std
-    # covering most of it
-    scores = json.loads(r.stdout)
-    assert scores["surface_rmse_m"] < 0.05 and scores["within_2sigma"] > 0.5
+    # covering most of it; from the ranges as recorded, 1.6 % too deep
+    assert scores["water"]["surface_rmse_m"] < 0.05 and scores["water"]["within_2sigma"] > 0.5
+    assert scores["as recorded"]["surface_bias_m"] > scores["water"]["surface_bias_m"] + 0.02
+    config = __import__("yaml").safe_load((run / "map water" / "config.yaml").read_text())
+    assert config["result"]["log"]["sound_speed"]["water_m_s"] == float(water)
 
 
 @pytest.mark.realdata

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 from undertow.errors import ConfigError, DataError, UndertowError
+from undertow.io import LogOptions
+from undertow.io.sound_speed import correct_sound_speed
 from undertow.log import Log
 from undertow.seastate import SeaStateEstimate, WaveWindow, estimate_sea_state
 from undertow.sim import load_scenario, simulate
@@ -214,7 +216,11 @@ def test_dvl_only_log_body_frame(sims):
 
 
 def test_dvl_with_gyro_gives_relative_direction(sims):
-    log = sims("survey", 0.07, 0.9).log
+    sim = sims("survey", 0.07, 0.9)
+    # without a barometer the DVL's depth is the water's less its altitude: read as a user who
+    # set the water's sound speed would (the DVL converts with 1500 m/s, 1.6 % long here)
+    water = LogOptions(sound_speed_m_s=sim.scenario.water.sound_speed_m_s)
+    log = correct_sound_speed(sim.log, water, state=False)
     est = estimate_sea_state(log.replace(pressure=None, dead_reckoning=None))
     first = est.windows[0]  # first leg along +x: waves from ahead, relative direction 180
     assert first.direction_deg is None and first.relative_direction_deg is not None

@@ -89,14 +89,39 @@ def test_dvl_altitude_and_sonar_range_over_flat_floor():
         sonar={"range_sigma": 0.01, "range_sigma_fraction": 0.0},
     )
     log = simulate(s, seed=2).log
+    # both convert the echo's travel time with the sound speed they are set to (1500 m/s)
+    k_dvl = s.dvl.sound_speed_setting / s.water.sound_speed_m_s
+    k_sonar = s.sonar.sound_speed_setting / s.water.sound_speed_m_s
     z_dvl = 0.5 + 0.284
     alt = log.dvl.altitude[log.dvl.t < 299.0]
     # altitude = mean of 4 beams' r_i cos(tilt): noise sigma_r cos(tilt) / 2
-    assert std_in_chi2_bounds(alt - (3.0 - z_dvl), 0.004 * np.cos(np.deg2rad(22.5)) / 2)
+    sigma = k_dvl * 0.004 * np.cos(np.deg2rad(22.5)) / 2
+    assert std_in_chi2_bounds(alt - k_dvl * (3.0 - z_dvl), sigma)
     assert np.all(log.dvl.beam_valid)
     r = log.sonar.range[log.sonar.t < 299.0]
-    assert std_in_chi2_bounds(r - (3.0 - 0.5 - 0.306), 0.01)  # minimum slant range = vertical
+    # minimum slant range = vertical
+    assert std_in_chi2_bounds(r - k_sonar * (3.0 - 0.5 - 0.306), k_sonar * 0.01)
     assert np.all((log.sonar.confidence >= 0) & (log.sonar.confidence <= 1))
+
+
+@pytest.mark.parametrize("setting", [1440.0, 1500.0])
+def test_sound_speed_scales_the_ranges(setting):
+    """A range is c_set t / 2 of the echo's travel time t: the ranges of one run in waters of
+    two sound speeds differ by their ratio (same seed, same noise draws)."""
+    ranges = {}
+    for water in (1470.0, 1500.0):
+        s = scenario(
+            **AT_REST,
+            dvl={"sound_speed_setting": setting},
+            sonar={"sound_speed_setting": setting},
+            water={"sound_speed_m_s": water},
+        )
+        log = simulate(s, seed=3).log
+        ranges[water] = (log.dvl.beam_range, log.dvl.altitude, log.sonar.range)
+    for slow, fast in zip(ranges[1470.0], ranges[1500.0], strict=True):
+        ok = np.isfinite(slow) & np.isfinite(fast)
+        assert ok.mean() > 0.9
+        np.testing.assert_allclose(slow[ok], fast[ok] * 1500.0 / 1470.0, rtol=1e-12)
 
 
 def test_sonar_sees_the_rock_top_first():
@@ -106,7 +131,8 @@ def test_sonar_sees_the_rock_top_first():
     gt = log.ground_truth
     x_sonar = np.interp(log.sonar.t, gt.t, gt.position[:, 0]) + 0.164
     over = np.abs(x_sonar - rock.center_x_m) < 0.2
-    expected = 3.0 - rock.height_m - (0.5 + 0.306)
+    k = s.sonar.sound_speed_setting / s.water.sound_speed_m_s  # the Ping's sound speed
+    expected = k * (3.0 - rock.height_m - (0.5 + 0.306))
     assert np.median(log.sonar.range[over]) == pytest.approx(expected, abs=0.03)
 
 

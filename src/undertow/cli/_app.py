@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import os
 import sys
 import warnings
@@ -141,6 +142,9 @@ def parse_triple(text: str | None, name: str):
 TopicsOption = Annotated[
     Path | None, typer.Option(help="YAML topic map overriding the BlueROV2 defaults.")
 ]
+QuietOption = Annotated[
+    bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
+]
 OverwriteOption = Annotated[
     bool, typer.Option("--overwrite", help="Replace a non-empty output folder.")
 ]
@@ -158,6 +162,19 @@ TimeOption = Annotated[
         "--time",
         help="Time base of the log: auto (header stamps when every stream has them on one "
         "clock, else the record time), header or record. Default: the settings' log.time.",
+    ),
+]
+
+SoundSpeedOption = Annotated[
+    float | None,
+    typer.Option(
+        "--sound-speed",
+        metavar="M/S",
+        help="The water's sound speed: DVL and sonar ranges and DVL velocities, converted by "
+        "the sensors with the speed they were set to (1500 m/s unless the settings' "
+        "log.dvl_sound_speed_m_s / sonar_sound_speed_m_s say otherwise), are corrected to it. "
+        "Default: the settings' log.sound_speed_m_s or log.water_temperature_c, else none.",
+        show_default=False,
     ),
 ]
 
@@ -187,16 +204,22 @@ def pieces_option(in_pieces: bool | None, piece_s: float | None) -> dict:
     return {"in_pieces": True if in_pieces is None else in_pieces, "piece_s": piece_s}
 
 
-def settings_with_time(config: Path | None, time: str | None):
-    """The settings to pass a job: the ``--config`` path as given, or, with ``--time``, the
-    settings read with their ``log.time`` replaced (one line for a bad value)."""
-    if time is None:
+def settings_with_time(config: Path | None, time: str | None, sound_speed: float | None = None):
+    """The settings to pass a job: the ``--config`` path as given, or, with ``--time`` or
+    ``--sound-speed``, the settings read with their ``log.time`` or ``log.sound_speed_m_s``
+    replaced (one line for a bad value; a sound speed given replaces a water temperature)."""
+    if time is None and sound_speed is None:
         return config
     from ..io.clock import check_policy
     from ..settings import Settings
 
     settings = Settings.from_yaml(config)
-    settings.log = settings.log.model_copy(update={"time": check_policy(time)})
+    update = {} if time is None else {"time": check_policy(time)}
+    if sound_speed is not None:
+        if not (math.isfinite(sound_speed) and sound_speed > 0):
+            raise UndertowError(f"--sound-speed: {sound_speed:g}, expected a speed in m/s > 0")
+        update.update(sound_speed_m_s=float(sound_speed), water_temperature_c=None)
+    settings.log = settings.log.model_copy(update=update)
     return settings
 
 

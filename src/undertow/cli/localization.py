@@ -13,6 +13,8 @@ from ._app import (
     InPiecesOption,
     OverwriteOption,
     PieceSOption,
+    QuietOption,
+    SoundSpeedOption,
     TimeOption,
     TopicsOption,
     app,
@@ -27,10 +29,6 @@ from ._app import (
     settings_with_time,
     user_errors,
 )
-
-QuietOption = Annotated[
-    bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
-]
 
 EstimatorOption = Annotated[
     str,
@@ -98,6 +96,7 @@ def localize(
     config: ConfigOption = None,
     topics: TopicsOption = None,
     time: TimeOption = None,
+    sound_speed: SoundSpeedOption = None,
     overwrite: OverwriteOption = False,
     quiet: QuietOption = False,
 ) -> None:
@@ -113,7 +112,7 @@ def localize(
     with progress_bar(quiet) as progress:
         progress.add_task(_task_label(variant, estimator), total=None)
         result = localize_file(
-            log_path, settings_with_time(config, time), topics=topics, out_dir=out_dir,
+            log_path, settings_with_time(config, time, sound_speed), topics=topics, out_dir=out_dir,
             overwrite=overwrite, profile=profile, calibration=calibration,
             extrapolate=extrapolate, smooth=smooth, wave=condition, estimator=estimator,
             **pieces_option(in_pieces, piece_s), **gate_option(gate),
@@ -192,10 +191,12 @@ def calibrate(
     ),
     config: ConfigOption = None,
     topics: TopicsOption = None,
+    sound_speed: SoundSpeedOption = None,
     quiet: QuietOption = False,
 ) -> None:
     """Estimate the DR drift mu_b, the IMU gyro bias and the DVL scale factor from a run with
-    ground truth, for later runs (`undertow localize --calibration`).
+    ground truth, for later runs (`undertow localize --calibration`); with the water's sound
+    speed given, the scale factor is what it leaves.
 
     Example: `undertow calibrate runs/calm/log runs/calm/ground_truth.tum --out calm_cal.yaml`
     """
@@ -203,7 +204,8 @@ def calibrate(
 
     with progress_bar(quiet) as progress:
         progress.add_task("calibrating", total=None)
-        result = calibrate_file(log_path, ground_truth, config, topics=topics, out=out)
+        settings = settings_with_time(config, None, sound_speed)
+        result = calibrate_file(log_path, ground_truth, settings, topics=topics, out=out)
     print_warnings(result.warnings)
     print_json(result.calibration.to_dict())
     if not quiet:

@@ -14,6 +14,8 @@ from ._app import (
     InPiecesOption,
     OverwriteOption,
     PieceSOption,
+    QuietOption,
+    SoundSpeedOption,
     TimeOption,
     TopicsOption,
     app,
@@ -104,10 +106,9 @@ def map_command(
     config: ConfigOption = None,
     topics: TopicsOption = None,
     time: TimeOption = None,
+    sound_speed: SoundSpeedOption = None,
     overwrite: OverwriteOption = False,
-    quiet: Annotated[
-        bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
-    ] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """Occupancy map of the seafloor from DVL beams and sonar ranges; writes map.npz, map.ply
     (occupied cell centres with mean and variance) and config.yaml.
@@ -124,8 +125,8 @@ def map_command(
     frame = _trajectory_frame(trajectory_frame)
     with progress_bar(quiet) as progress:
         progress.add_task(f"mapping ({method})" if method else "mapping", total=None)
-        result = map_file(log_path, trajectory, settings_with_time(config, time), topics=topics,
-                          prior=prior,
+        settings = settings_with_time(config, time, sound_speed)
+        result = map_file(log_path, trajectory, settings, topics=topics, prior=prior,
                           out_dir=out_dir, overwrite=overwrite, tiles=tiles,
                           scheduler=scheduler, pose_std=_pose_std(pose_std),
                           trajectory_frame=frame, **pieces_option(in_pieces, piece_s),

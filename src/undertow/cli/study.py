@@ -9,6 +9,7 @@ import typer
 
 from ._app import (
     ConfigOption,
+    QuietOption,
     TopicsOption,
     app,
     console,
@@ -18,10 +19,6 @@ from ._app import (
     progress_bar,
     user_errors,
 )
-
-QuietOption = Annotated[
-    bool, typer.Option("--quiet", "-q", help="No progress or summary on stderr.")
-]
 
 
 @app.command("characterize")

@@ -45,6 +45,7 @@ from .._util.plain import json_safe
 from ..log import FRESH_WATER_DENSITY, G0, P_ATM, Log
 from ..rotations import quaternion_to_rpy, rpy_to_matrix
 from .read_options import LogOptions
+from .sound_speed import correct_sound_speed
 
 DEG = math.pi / 180.0
 #: a gyro rate (rad/s) no ROV or small AUV sustains: 300 deg/s (BlueROV2 yaw rates are tens of
@@ -190,7 +191,9 @@ def surface_pressure(log: Log, setting="auto", rho: float = 998.0) -> tuple[floa
 def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
     """``log`` with its gyro in rad/s and its depth references resolved and stated (see the
     module docstring): ``metadata`` ``imu_units``, ``surface_pressure_pa``,
-    ``surface_pressure_source``, ``water_density_kg_m3``, ``water``."""
+    ``surface_pressure_source``, ``water_density_kg_m3``, ``water``; and its acoustic ranges and
+    velocities in the water's sound speed when the options give it (``sound_speed``:
+    :func:`~undertow.io.sound_speed.correct_sound_speed`)."""
     options = options or LogOptions()
     meta = dict(log.metadata)
     lines = list(meta.get("warnings", []))
@@ -238,13 +241,13 @@ def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
     for line in lines[len(meta.get("warnings", [])) :]:
         warnings.warn(line, stacklevel=2)
     meta["warnings"] = lines
-    return log.replace(metadata=meta, **changes)
+    return correct_sound_speed(log.replace(metadata=meta, **changes), options)
 
 
 #: what every output's config.yaml records of how its log was read
 READING_KEYS = ("format", "topics", "topics_guessed", "time_base", "imu_units",
                 "surface_pressure_pa", "surface_pressure_source", "water", "water_density_kg_m3",
-                "depth_z", "gps_origin", "dvl_frame", "mounting_source")  # fmt: skip
+                "depth_z", "gps_origin", "dvl_frame", "mounting_source", "sound_speed")  # fmt: skip
 
 
 def reading_record(metadata: dict) -> dict:

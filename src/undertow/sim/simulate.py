@@ -105,7 +105,9 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
         T,
         rngs["pressure"],
     )
-    sonar = simulate_sonar(motion, tank, s.sonar, mounting.sonar, T, rngs["sonar"])
+    sonar = simulate_sonar(
+        motion, tank, s.sonar, mounting.sonar, s.water.sound_speed_m_s, T, rngs["sonar"]
+    )
     probe = simulate_wave_probe(wave, s.wave_probe, T, rngs["wave_probe"])
     multibeam = None
     if s.multibeam is not None:

@@ -4,10 +4,10 @@ Per map: the paper's C2C and occupied cells (:mod:`undertow.evaluation.cloud`), 
 grid-independent surface metrics (:mod:`undertow.evaluation.surface`): the bathymetric surface
 error (RMSE, bias, coverage) and accuracy, completeness and F-score at tau = 0.05, 0.10, 0.20 m.
 
-The surveyed area is where the log's beams hit the floor with the TRUE pose (the ground truth
-put through the mapping stage's own ray geometry), so it does not depend on the filter or the
-mapper. The true floor is the simulator's heightfield where it exposes one, else its
-ground-truth cloud.
+The surveyed area is where the log's beams hit the floor with the TRUE pose and the true ranges
+(the ground truth put through the mapping stage's own ray geometry, the ranges in the water's
+sound speed: :func:`true_ranges`), so it does not depend on the filter or the mapper. The
+true floor is the simulator's heightfield where it exposes one, else its ground-truth cloud.
 
 A mapping scenario (beyond the paper's carriage runs: ``mhl-basin``, ``field-survey``) is
 localized as a user would (wave from its own probe, the study's noise profile and calibration)
@@ -25,6 +25,8 @@ from ..estimation.characterize import estimate_waves
 from ..estimation.localizer import localize
 from ..evaluation.cloud import evaluate_map
 from ..evaluation.surface import cloud_spacing, evaluate_surface
+from ..io.read_options import LogOptions
+from ..io.sound_speed import correct_sound_speed
 from ..mapping.config import MappingConfig
 from ..mapping.run import map_log
 from ..mapping.samples import build_samples
@@ -91,8 +93,20 @@ def true_pose_trajectory(ground_truth, rate_hz: float = AREA_POSE_RATE_HZ) -> Tr
     return Trajectory(t[idx], x, P, variant="ground truth")
 
 
+def true_ranges(sim):
+    """``sim``'s log with its DVL and sonar ranges (and DVL velocities) in the water's sound
+    speed: the simulator's own c and the sensors' settings (the DVL and the Ping convert with
+    the speed they are set to: :mod:`undertow.io.sound_speed`), so the beams end on the floor."""
+    s = sim.scenario
+    options = LogOptions(sound_speed_m_s=s.water.sound_speed_m_s,
+                         dvl_sound_speed_m_s=s.dvl.sound_speed_setting,
+                         sonar_sound_speed_m_s=s.sonar.sound_speed_setting)  # fmt: skip
+    return correct_sound_speed(sim.log, options, state=False)
+
+
 def surveyed_area(log) -> np.ndarray:
-    """(K, 2) x-y of every beam hit (DVL and sonar ranges) placed with the true pose."""
+    """(K, 2) x-y of every beam hit (DVL and sonar ranges) placed with the true pose (give it
+    :func:`true_ranges` of a simulation, so the ranges are true too)."""
     trajectory = true_pose_trajectory(log.ground_truth)
     samples = build_samples(log, trajectory, free_resolution=10.0)
     return samples.points[samples.label == 1, :2]
@@ -132,7 +146,7 @@ def evaluate_runs(name: str, sim, trajectories: dict, bki_length_scale: float, a
     go to ``art.maps[(name, "method/variant")]``."""
     log = sim.log
     truth, cloud = floor_truth(sim), sim.floor_cloud
-    area = surveyed_area(log) if area is None else area
+    area = surveyed_area(true_ranges(sim)) if area is None else area
     out = {}
     for method, variant in runs:
         cfg = MappingConfig(method=method, length_scale=bki_length_scale)
@@ -160,7 +174,7 @@ def map_scenario(name: str, seed: int, calibration, profile, bki_length_scale: f
                         extrapolate=True, **scale)  # fmt: skip
         art.trajectories[(name, variant)] = trajectories[variant] = traj
         localization[variant] = trajectory_metrics(traj, sim.log.ground_truth)
-    area = surveyed_area(sim.log)
+    area = surveyed_area(true_ranges(sim))
     mapping = evaluate_runs(name, sim, trajectories, bki_length_scale, art, area,
                             SCENARIO_MAP_RUNS)  # fmt: skip
     return {

@@ -133,6 +133,14 @@ class SonarModel(_Model):
     confidence_window: float = Field(
         0.1, gt=0, description="m; confidence = share of cone rays within this of the first return"
     )
+    sound_speed_setting: float = Field(
+        1500.0,
+        gt=0,
+        description=(
+            "c_set the Ping converts its echo's travel time with (ping-protocol"
+            " set_speed_of_sound; 1500 m/s, the Ping1D's default, left set in the fresh water)"
+        ),
+    )
 
 
 class MultibeamModel(_Model):

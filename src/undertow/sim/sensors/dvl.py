@@ -6,7 +6,8 @@ directions R_wd b_i with
 R_wd = R_wb R_bd (Mounting.dvl). Per report at t_n, with v_d = R_wd^T v the DVL-point velocity
 over the fixed floor in the DVL frame:
 
-    r_i   = ray cast from the DVL origin along R_wd b_i onto the floor (tank.py) + n_r
+    r_i   = (c_set / c_true) (ray cast from the DVL origin along R_wd b_i onto the floor
+            (tank.py) + n_r)                                                (range)
     m_i   = (c_set / c_true) b_i . v_d + n_b,   n_b ~ N(0, sigma_b^2)      (radial velocity)
     v_hat = (B^T B)^{-1} B^T m   over the valid beams (>= 3), B rows b_i,
             Cov = sigma_b^2 (B^T B)^{-1}  ->  sigma_x = sigma_b / (sqrt2 sin tilt),
@@ -23,7 +24,8 @@ The paper's Table I values are measured data; the simulator does NOT copy them. 
 noise scales likewise with the vertical orbital displacement RMS. c_set / c_true is the
 sound-speed scale error: each beam's radial velocity is c f_D / (2 f_0) (the Doppler relation,
 f_0 the carrier and f_D the Doppler shift), so a DVL with fixed beam angles scales every
-velocity by the sound speed it is set to.
+velocity by the sound speed it is set to; each range is c t / 2 of the echo's two-way travel
+time t, so it scales every range (and the altitude) by the same ratio.
 
 Dead reckoning (A50 ``position_local``): orientation = true body roll, pitch, yaw plus a
 constant-rate drift (uncalibrated gyro bias) and white noise; position integrated (forward
@@ -88,13 +90,13 @@ def simulate_dvl(
     U, W = wave.velocity_amplitude_at(depth, t)  # U(d, t): the sea state at each report
     zeta_rms = (W / wave.omega_at(t)) / np.sqrt(2.0)
     range_sigma = np.hypot(config.range_sigma, config.wave_range_noise_coefficient * zeta_rms)
-    beam_range = true_range + range_sigma[:, None] * rng.standard_normal((n, 4))
+    scale = config.sound_speed_setting / sound_speed_true
+    beam_range = scale * (true_range + range_sigma[:, None] * rng.standard_normal((n, 4)))
     beam_valid = np.isfinite(beam_range)
     beam_valid &= (beam_range >= config.min_range) & (beam_range <= config.max_range)
     beam_range = np.where(beam_valid, beam_range, np.nan)
 
     v_d = np.einsum("nji,nj->ni", R_wd, kin.velocity)
-    scale = config.sound_speed_setting / sound_speed_true
     radial = scale * v_d @ B.T + rng.normal(0.0, config.beam_velocity_sigma, (n, 4))
     velocity, info_inv = least_squares_velocity(B, radial, beam_valid)
 

@@ -6,7 +6,10 @@ Barometer at depth d (world z of the sensor point, lever arm included):
 
 Ping sonar: the first return inside the cone of full angle alpha is the minimum slant range over
 the cone, found by casting a fan (the axis plus ``rings`` rings of ``azimuths`` rays at half
-angles j alpha / (2 rings)) and taking the minimum r*; measured r = r* + N(0, s_0^2 + (f r*)^2).
+angles j alpha / (2 rings)) and taking the minimum r*; measured
+r = (c_set / c_true) (r* + N(0, s_0^2 + (f r*)^2)): the Ping converts the echo's two-way travel
+time t to c_set t / 2 with the sound speed it is set to (ping-protocol ``set_speed_of_sound``,
+1500 m/s by default), c_true the water's.
 Confidence = share of the fan's rays whose range is within ``confidence_window`` of r* (a wide
 flat echo is a confident one; a ray fan split by the rock edge is not). No return in
 [min_range, max_range]: range NaN, confidence 0.
@@ -57,7 +60,13 @@ def sonar_fan(beam_angle_deg: float, rings: int, azimuths: int) -> np.ndarray:
 
 
 def simulate_sonar(
-    motion, tank: Tank, config: SonarModel, mount: SensorMount, duration: float, rng
+    motion,
+    tank: Tank,
+    config: SonarModel,
+    mount: SensorMount,
+    sound_speed_true: float,
+    duration: float,
+    rng,
 ) -> SonarRange:
     t = sample_times(duration, config.rate_hz)
     n = t.size
@@ -73,7 +82,8 @@ def simulate_sonar(
     within = np.abs(ranges - first[:, None]) <= config.confidence_window
     confidence = np.where(hit, within.sum(axis=1) / m, 0.0)
     sigma = np.hypot(config.range_sigma, config.range_sigma_fraction * np.nan_to_num(first))
-    measured = first + sigma * rng.standard_normal(n)
+    scale = config.sound_speed_setting / sound_speed_true
+    measured = scale * (first + sigma * rng.standard_normal(n))
     ok = hit & (measured >= config.min_range) & (measured <= config.max_range)
     return SonarRange(
         t=t,

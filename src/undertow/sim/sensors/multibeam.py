@@ -14,7 +14,10 @@ the depth d = r cos g below the head, projected on the beam (a vertical error dd
 error dd / cos g): the noise grows with range and with the angle off nadir. A level head
 has g_j = theta_j. cos g is floored at 0.05 (a beam near horizontal). A beam whose ray
 misses (NaN) or whose noisy range falls outside [min_range, max_range] has no detection (NaN
-point), as drivers drop it.
+point), as drivers drop it. The ranges are in the water's own sound speed: a multibeam head
+forms and steers its beams with the sound speed measured at its face (a sound velocity probe
+at the transducer, as hydrographic surveys run them: IHO C-13, Manual on Hydrography, ch. 3),
+unlike the DVL and the Ping, which convert travel times with the speed they are set to.
 """
 
 from __future__ import annotations
