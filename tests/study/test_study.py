@@ -6,6 +6,7 @@ from html.parser import HTMLParser
 import pytest
 
 from undertow.study.claims import CLAIMS
+from undertow.study.maps import RECORDED
 from undertow.study.pipeline import StudySettings, run_seed
 from undertow.study.runner import run_study
 
@@ -112,7 +113,7 @@ def test_the_mapping_scenario_table_has_every_metric_with_intervals(study):
     seeds = [json.loads((study.out_dir / f"seeds/seed_{s}.json").read_text()) for s in (0, 1)]
     runs = tables["map_scenarios"]["rock-survey"]["mapping"]
     for key in ("csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed",
-                "tpu/proposed", "tpu/proposed+scale"):  # fmt: skip
+                "tpu/proposed", "tpu/proposed+recorded"):  # fmt: skip
         for metric in ("c2c_mean_m", "occupied_cells", "surface_rmse_m", "surface_bias_m",
                        "coverage", "fscore_5cm", "fscore_10cm", "fscore_20cm",
                        "within_1sigma", "within_2sigma"):  # fmt: skip
@@ -125,10 +126,14 @@ def test_the_mapping_scenario_table_has_every_metric_with_intervals(study):
         assert entry["rock-survey"]["n"] == 2
     assert "## Table IV on a rough floor: rock-survey" in study.markdown
     assert "| surface RMSE (m) |" in study.markdown
-    assert "| tpu (default) | proposed+scale |" in study.markdown
-    # the filter with the calibrated DVL scale factor: its errors in the scenario's facts line
-    loc = tables["map_scenarios"]["rock-survey"]["localization"]["proposed+scale"]
-    assert loc["rmse"]["x_m"]["n"] == 2 and "; proposed+scale x " in study.markdown
+    assert "| tpu (default) | proposed+recorded |" in study.markdown
+    # the filter on the log as recorded (no sound speed given): its errors in the facts line
+    loc = tables["map_scenarios"]["rock-survey"]["localization"]["proposed+recorded"]
+    assert loc["rmse"]["x_m"]["n"] == 2 and "; proposed+recorded x " in study.markdown
+    # read with the water's sound speed, but for it: its ranges, converted with 1500 m/s in
+    # water of 1476, put its floor 1.6 % of the range deeper (z down)
+    bias = {k: runs[f"tpu/{k}"]["surface_bias_m"]["mean"] for k in ("proposed", RECORDED)}
+    assert bias[RECORDED] > bias["proposed"] + 0.015, bias
 
 
 def test_the_table_iv_headline_claim_is_counted_from_the_seeds_and_explained(study):

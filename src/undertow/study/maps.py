@@ -10,8 +10,10 @@ sound speed: :func:`true_ranges`), so it does not depend on the filter or the ma
 true floor is the simulator's heightfield where it exposes one, else its ground-truth cloud.
 
 A mapping scenario (beyond the paper's carriage runs: ``mhl-basin``, ``field-survey``) is
-localized as a user would (wave from its own probe, the study's noise profile and calibration)
-with the baseline and proposed filters, then mapped with the four Table IV runs.
+localized as a user would (wave from its own probe, the study's noise profile and calibration,
+the water's sound speed given) with the baseline and proposed filters, then mapped with the four
+Table IV runs and the default mapper, which also maps the proposed filter on the log as
+recorded (:data:`RECORDED`).
 """
 
 from __future__ import annotations
@@ -35,14 +37,15 @@ from ..sim import load_scenario, simulate
 from ..trajectory import STATE_NAMES, Trajectory
 
 MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("adaptive", "proposed"))
-#: The proposed filter with the calm run's calibrated DVL scale factor (beyond the paper, as in
-#: the wave conditions): a trajectory without the along-track error of a wrong sound speed.
-SCALED = "proposed+scale"
+#: A mapping scenario is read as a user who gave the water's sound speed reads it
+#: (:func:`true_ranges`); this variant is the proposed filter and its map on the log as
+#: recorded instead (no sound speed given: the DVL's and the Ping's 1500 m/s in fresh water).
+RECORDED = "proposed+recorded"
 #: The mapping scenarios add the default mapper (tpu) beside the paper's four maps, and the same
-#: mapper on :data:`SCALED`'s trajectory (what its depth std covers when the pose is better).
-SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"), ("tpu", SCALED))
-#: The filters of a mapping scenario (the paper's two, then :data:`SCALED`).
-SCENARIO_FILTERS = ("baseline", "proposed", SCALED)
+#: mapper on :data:`RECORDED` (what the sound speed left uncorrected costs the map).
+SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"), ("tpu", RECORDED))
+#: The filters of a mapping scenario (the paper's two, then :data:`RECORDED`).
+SCENARIO_FILTERS = ("baseline", "proposed", RECORDED)
 #: The map threshold the paper evaluates at.
 THRESHOLD = 0.5
 #: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
@@ -140,17 +143,18 @@ def floor_relief(truth, area: np.ndarray, resolution: float) -> dict:
 
 
 def evaluate_runs(name: str, sim, trajectories: dict, bki_length_scale: float, art,
-                  area: np.ndarray | None = None, runs=MAP_RUNS) -> dict:  # fmt: skip
-    """Map ``sim``'s log with the Table IV ``runs`` (method, filter variant; trajectories by
-    variant) and evaluate each map over ``area`` (default: :func:`surveyed_area`); the maps
-    go to ``art.maps[(name, "method/variant")]``."""
-    log = sim.log
+                  area: np.ndarray | None = None, runs=MAP_RUNS, logs=None) -> dict:  # fmt: skip
+    """Map ``sim``'s log (or ``logs[variant]``, the log a variant was localized on) with the
+    Table IV ``runs`` (method, filter variant; trajectories by variant) and evaluate each map
+    over ``area`` (default: :func:`surveyed_area`); the maps go to
+    ``art.maps[(name, "method/variant")]``."""
+    logs = logs or {}
     truth, cloud = floor_truth(sim), sim.floor_cloud
     area = surveyed_area(true_ranges(sim)) if area is None else area
     out = {}
     for method, variant in runs:
         cfg = MappingConfig(method=method, length_scale=bki_length_scale)
-        result = map_log(log, trajectories[variant], cfg)
+        result = map_log(logs.get(variant, sim.log), trajectories[variant], cfg)
         key = f"{method}/{variant}"
         art.maps[(name, key)] = result.map
         out[key] = map_metrics(result.map, truth, cloud, area)
@@ -161,22 +165,25 @@ def map_scenario(name: str, seed: int, calibration, profile, bki_length_scale: f
                  trajectory_metrics) -> dict:  # fmt: skip
     """One mapping scenario: simulate, localize (:data:`SCENARIO_FILTERS`) with the wave from
     its own probe, map with :data:`SCENARIO_MAP_RUNS` and evaluate; also how rough its floor
-    is. The paper's filters leave the DVL scale factor at 1 (as the paper); :data:`SCALED`
-    divides out the calibration's."""
+    is. Read as a user who gave the water's sound speed (:func:`true_ranges`), but for
+    :data:`RECORDED`; the filters leave the DVL scale factor at 1 (the paper's filters do not
+    correct it, and the sound speed leaves none to correct)."""
     sim = simulate(load_scenario(name), seed=seed)
     art.simulations[name] = sim
     measured = estimate_waves(sim.log.wave_probe)
     wave = "calm" if measured.calm else (measured.amplitude_m, measured.frequency_hz)
+    water = true_ranges(sim)
+    logs = {v: sim.log if v == RECORDED else water for v in SCENARIO_FILTERS}
     trajectories, localization = {}, {}
     for variant in SCENARIO_FILTERS:
         base, scale = filter_options(variant)
-        traj = localize(sim.log, base, profile=profile, wave=wave, calibration=calibration,
-                        extrapolate=True, **scale)  # fmt: skip
+        traj = localize(logs[variant], base, profile=profile, wave=wave,
+                        calibration=calibration, extrapolate=True, **scale)  # fmt: skip
         art.trajectories[(name, variant)] = trajectories[variant] = traj
         localization[variant] = trajectory_metrics(traj, sim.log.ground_truth)
-    area = surveyed_area(true_ranges(sim))
+    area = surveyed_area(water)
     mapping = evaluate_runs(name, sim, trajectories, bki_length_scale, art, area,
-                            SCENARIO_MAP_RUNS)  # fmt: skip
+                            SCENARIO_MAP_RUNS, logs)  # fmt: skip
     return {
         "duration_s": float(sim.log.ground_truth.t[-1] - sim.log.ground_truth.t[0]),
         "wave": {"amplitude_m": measured.amplitude_m, "frequency_hz": measured.frequency_hz},

@@ -27,7 +27,7 @@ from .claim_model import (
     table1,
     unit_of,
 )
-from .maps import SCALED
+from .maps import RECORDED
 
 
 def _auto_close(m: Measured) -> str:
@@ -291,8 +291,8 @@ CALIBRATION_TARGETS = {"within_1sigma": (0.6827, 0.07), "within_2sigma": (0.9545
 _OTHER_MAPS = ("csm/proposed", "bki/proposed", "adaptive/proposed", "csm/baseline")
 
 
-#: The default mapper on the filter with the DVL scale factor calibrated
-SCALED_RUN = f"tpu/{SCALED}"
+#: The default mapper on the log as recorded (no sound speed given)
+RECORDED_RUN = f"tpu/{RECORDED}"
 
 
 def _tpu_why_not(m: Measured) -> str:
@@ -302,7 +302,7 @@ def _tpu_why_not(m: Measured) -> str:
 def _calibration_facts(m: Measured) -> str:
     run = "tpu/proposed"
     v = {k: m[map_metric(run, k, scenario=True)] for k in CALIBRATION_TARGETS}
-    scaled = {k: m[map_metric(SCALED_RUN, k, scenario=True)] for k in CALIBRATION_TARGETS}
+    recorded = {k: m[map_metric(RECORDED_RUN, k, scenario=True)] for k in CALIBRATION_TARGETS}
     one, two = (CALIBRATION_TARGETS[k][0] for k in ("within_1sigma", "within_2sigma"))
     shape = ""
     if v["within_1sigma"] > one and v["within_2sigma"] < two:
@@ -318,10 +318,10 @@ def _calibration_facts(m: Measured) -> str:
         f"{run}: {v['within_1sigma']:.1%} of the true floor within 1 sigma, "
         f"{v['within_2sigma']:.1%} within 2 sigma (a normal error: {one:.1%}, {two:.1%})"
         f"{shape}; the map's std carries the pose covariance the filter gave it: "
-        f"{_pose_calibration(m, 'proposed')}; {_map_facts(m, [run])}; on the filter with the "
-        f"DVL scale factor calibrated ({SCALED_RUN}: {_pose_calibration(m, SCALED)}), "
-        f"{scaled['within_1sigma']:.1%} within 1 sigma and {scaled['within_2sigma']:.1%} "
-        "within 2"
+        f"{_pose_calibration(m, 'proposed')}; {_map_facts(m, [run])}; on the log as recorded, "
+        f"its DVL and sonar converted with a sound speed not the water's ({RECORDED_RUN}: "
+        f"{_pose_calibration(m, RECORDED)}), {recorded['within_1sigma']:.1%} within 1 sigma "
+        f"and {recorded['within_2sigma']:.1%} within 2"
     )  # fmt: skip
 
 
