@@ -94,12 +94,25 @@ def correct_sound_speed(log: Log, options, state: bool = True) -> Log:
         done.append(f"sonar ranges x {k_sonar:.5f} (set to {options.sonar_sound_speed_m_s:g} m/s)")
     if done and state:
         src = f"{log.source}: " if log.source else ""
-        line = (f"{src}sound speed {c:.1f} m/s from {source}: " + "; ".join(done)
-                + "; set log: {dvl_sound_speed_m_s: C, sonar_sound_speed_m_s: C} to change what"
-                " the sensors were set to")  # fmt: skip
+        line = src + sound_speed_line(options, done)
         warnings.warn(line, stacklevel=3)
         meta["warnings"] = [*meta.get("warnings", []), line]
     return log.replace(metadata=meta, **changes)
+
+
+def sound_speed_line(options, done=None) -> str:
+    """The one line that states the correction of the ``log:`` settings ``options``: the
+    water's sound speed and where it comes from, and what was scaled (``done``; default: the
+    factors of both sensors)."""
+    c, source = water_sound_speed(options)
+    if done is None:
+        done = [f"DVL ranges and velocities x {c / options.dvl_sound_speed_m_s:.5f} (set to "
+                f"{options.dvl_sound_speed_m_s:g} m/s)",
+                f"sonar ranges x {c / options.sonar_sound_speed_m_s:.5f} (set to "
+                f"{options.sonar_sound_speed_m_s:g} m/s)"]  # fmt: skip
+    return (f"sound speed {c:.1f} m/s from {source}: " + "; ".join(done)
+            + "; set log: {dvl_sound_speed_m_s: C, sonar_sound_speed_m_s: C} to change what the"
+            " sensors were set to")  # fmt: skip
 
 
 def scaled_dvl(dvl, k: float):

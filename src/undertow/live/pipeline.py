@@ -54,7 +54,9 @@ from ..estimation.localizer import calibration_fields
 from ..estimation.online import OnlineLocalizer
 from ..estimation.rows import FILTER_STREAMS
 from ..io.results import save_map
+from ..io.sound_speed import correct_sound_speed, sound_speed_line, water_sound_speed
 from ..io.trajectory_stream import save_stored_trajectory
+from ..log import Log
 from ..mapping.online import OnlineMapper
 from ..mapping.samples import rays_from_pose
 from ..records import Record, concat_logs, records_to_log
@@ -156,6 +158,11 @@ class LiveSession:
         self._next_commit = -math.inf
         self.status_callback = None  # called with the status dict every STATUS_PERIOD_S
         self.notes: list[str] = []
+        # the water's sound speed (log: {sound_speed_m_s | water_temperature_c}): the DVL's and
+        # the sonar's ranges and velocities scaled to it before the filter and the map
+        self._water = water_sound_speed(settings.log)[0]
+        if self._water is not None:
+            self.notes.append(sound_speed_line(settings.log))
         self.autopilot = open_bridge(self)  # live.autopilot: the estimate to the autopilot
 
     # -- lifecycle ---------------------------------------------------------------------------
@@ -296,7 +303,7 @@ class LiveSession:
                 self.recorder.write_wave(update.t, w.amplitude_m, w.frequency_hz or math.nan)
                 if self.view is not None:
                     self.view.publish_wave(update.t, w.amplitude_m, w.frequency_hz or math.nan)
-        chunk = records_to_log(released).replace(mounting=self.mounting)
+        chunk = self.chunk_log(released)
         self.localizer.push(chunk)
         self._checkpoints.released(self.buffer.horizon, continued=self.localizer.at_preview)
         if not self.localizer.ready:  # the filter will start from these records: keep them
@@ -317,6 +324,15 @@ class LiveSession:
         # the states both have taken are on disk: the filter lets go of them
         self.localizer.release(self._taken())
         return True
+
+    def chunk_log(self, records) -> Log:
+        """The records as a Log with the session's mounting, its ranges and DVL velocities in
+        the water's sound speed when the settings give it (the recording keeps them as
+        received)."""
+        chunk = records_to_log(records).replace(mounting=self.mounting)
+        if self._water is None:
+            return chunk
+        return correct_sound_speed(chunk, self.settings.log, state=False)
 
     def _taken(self) -> int:
         """The states the recording (and the store) and the map have both taken."""
@@ -404,7 +420,7 @@ class LiveSession:
         pending = [r for r in self.buffer.pending() if r.stream in FILTER_STREAMS and r.t > after]
         states = None
         if pending:
-            chunk = records_to_log(pending).replace(mounting=self.mounting)
+            chunk = self.chunk_log(pending)
             states = self.localizer.peek(chunk, start=None if start is None else start[1])
             self._checkpoints.reached(pending[-1].t, self.localizer.preview_state,
                                       fresh=start is None)  # fmt: skip
