@@ -199,6 +199,19 @@ def test_metadata_yaml_non_string_topic_name(tmp_path, small_bag):
         assert "\n" not in str(exc)
 
 
+def test_metadata_yaml_files_entry_a_string_keeps_what_was_read(tmp_path, small_bag):
+    """Fuzz (make fuzz, seed 0): ``files: "\\0"`` in metadata.yaml made rosbags' close raise
+    AttributeError after the messages were read; the log is kept and the failure noted."""
+    bag = _bag_copy(small_bag, tmp_path)
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    meta["rosbag2_bagfile_information"]["files"] = "\0"
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    good, _ = _read_quietly(small_bag)
+    with pytest.warns(UserWarning, match="closing the bag failed"):
+        log = read_log(bag)
+    assert len(log.dvl) == len(good.dvl) > 0 and len(log.imu) == len(good.imu)
+
+
 def test_corrupt_bag_message_says_what_is_wrong(tmp_path, small_bag):
     """rosbags raises a bare MemoryError on a damaged mcap record length; the one line says
     what that means instead of only "(MemoryError)"."""

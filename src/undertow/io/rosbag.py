@@ -307,7 +307,7 @@ def bag_index(path) -> tuple[dict[str, tuple[str, int]], float]:
         span = max(int(reader.end_time) - int(reader.start_time), 0) if topics else 0
         return topics, span / 1e9
     finally:
-        reader.close()
+        _close(reader)
 
 
 def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
@@ -319,8 +319,18 @@ def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
         available, used, guessed, conns = _select(reader, topics, notes)
         _read_messages(reader, conns, used, rows, notes, path)
     finally:
-        reader.close()
+        _close(reader, notes)
     return _finish(rows, notes, path, (available, used, guessed), topics, options, recovered)
+
+
+def _close(reader, notes: Notes | None = None) -> None:
+    """Close the bag; a failure to close (rosbags on a corrupt ``metadata.yaml``, e.g. a
+    ``files`` entry that is a string) keeps what was read and is noted, not raised."""
+    try:
+        reader.close()
+    except Exception as exc:  # noqa: BLE001  (rosbags raises many types for corrupt input)
+        if notes is not None:
+            notes.add("closing the bag failed (what was read is kept)", 1, _one_line(exc))
 
 
 def _open(path: Path, recovered: Recovered | None, notes: Notes):
