@@ -18,7 +18,8 @@ For a seed s, with every simulator parameter from the built-in scenarios (never 
    cells) and the surface metrics (:mod:`undertow.study.maps`);
 5b. (beyond the paper) the same four maps on the mapping scenarios (``map_scenarios``: the
    basin with walls, beach and a rough floor, and a field survey over a rough seabed), whose
-   floors let a lateral pose error show in the map.
+   floors let a lateral pose error show in the map; read with the water's sound speed given,
+   with the default mapper beside, also on the log as recorded (:mod:`undertow.study.maps`).
 
 6. (beyond the paper) the changing-sea scenarios: the sea state changes during the run; the
    proposed filter with the true schedule, with ``--wave auto``, with each fixed condition,
