@@ -112,7 +112,35 @@ def test_a_real_log_read_with_a_sound_speed_is_corrected_and_records_it():
         np.testing.assert_array_equal(np.isfinite(a), np.isfinite(b))
         np.testing.assert_allclose(a[np.isfinite(a)], k * b[np.isfinite(b)])
     assert fixed.metadata["sound_speed"]["dvl_factor"] == pytest.approx(k)
+    assert fixed.metadata["sound_speed"]["dvl_set_from"] == "the A50's fixed value, assumed"
     assert raw.metadata["sound_speed"]["source"] == "not corrected"
+
+
+def test_the_dvl_setting_comes_from_its_messages_unless_set(tmp_path):
+    """A standard DVL message (marine_acoustic_msgs/Dvl) says the sound speed it converted
+    with: the reader takes it as the DVL's setting (the sidecar, which also records the
+    simulated DVL's, is left out here); the settings still win."""
+    import yaml
+
+    from undertow.io import write_log
+
+    log = simulate(_scenario(1475.0, 1500.0), seed=2).log
+    bag = write_log(log, tmp_path / "bag", flavor="standard")
+    sidecar = bag / "undertow.yaml"
+    doc = yaml.safe_load(sidecar.read_text())
+    del doc["metadata"]["dvl_sound_speed_m_s"]
+    sidecar.write_text(yaml.safe_dump(doc))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        read = read_log(bag, options=LogOptions(sound_speed_m_s=1476.0))
+        given = read_log(bag, options=LogOptions(sound_speed_m_s=1476.0,
+                                                 dvl_sound_speed_m_s=1500.0))  # fmt: skip
+    assert read.metadata["dvl_sound_speed_m_s"] == 1475.0
+    record = read.metadata["sound_speed"]
+    assert record["dvl_set_from"] == "the DVL's messages"
+    assert record["dvl_factor"] == pytest.approx(1476.0 / 1475.0)
+    assert given.metadata["sound_speed"]["dvl_factor"] == pytest.approx(1476.0 / 1500.0)
+    np.testing.assert_allclose(read.dvl.altitude * 1475.0, given.dvl.altitude * 1500.0)
 
 
 def test_one_sound_speed_or_one_temperature_not_both():

@@ -12,8 +12,8 @@ one line and recorded in the log's metadata (and so in every output's ``config.y
       gps_origin: null      # [lat, lon, alt]: origin of the local frame of GPS fixes
       sound_speed_m_s: null # the water's sound speed (m/s): DVL and sonar ranges and DVL
       water_temperature_c: null   # velocities corrected to it (or to Coppens' at this
-      dvl_sound_speed_m_s: 1500   # temperature); what the DVL and the sonar were set to
-      sonar_sound_speed_m_s: 1500 # (undertow.io.sound_speed)
+      dvl_sound_speed_m_s: null  # temperature); what the DVL (null: its messages', else
+      sonar_sound_speed_m_s: 1500 # 1500) and the sonar were set to (undertow.io.sound_speed)
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ class LogOptions(BaseModel):
     gps_origin: tuple[float, float, float] | None = None
     sound_speed_m_s: float | None = Field(None, gt=0, allow_inf_nan=False)
     water_temperature_c: float | None = Field(None, ge=0, le=35, allow_inf_nan=False)
-    dvl_sound_speed_m_s: float = Field(DEFAULT_SET_SOUND_SPEED, gt=0, allow_inf_nan=False)
+    dvl_sound_speed_m_s: float | None = Field(None, gt=0, allow_inf_nan=False)
     sonar_sound_speed_m_s: float = Field(DEFAULT_SET_SOUND_SPEED, gt=0, allow_inf_nan=False)
 
     @model_validator(mode="after")

@@ -20,7 +20,8 @@ Conventions of the sources (their message files):
 - ``marine_acoustic_msgs/Dvl`` and WHOI's ``ds_sensor_msgs/Dvl``: ``velocity_mode`` (0: not
   set), ``velocity_covar`` (-1: unknown), ``beam_unit_vec``, ``range``; the beam velocities
   (``beam_velocity``; ds's ``raw_velocity`` only when ``coordinate_mode`` is 0, beam
-  coordinates), ``num_good_beams``.
+  coordinates), ``num_good_beams``; the sound speed the DVL converted with (``sound_speed``,
+  ds's ``speed_sound``), which :mod:`undertow.io.sound_speed` takes as the DVL's setting.
 - A body velocity as ``geometry_msgs/TwistWithCovarianceStamped`` (6x6 covariance, its
   top-left 3x3 the linear velocity's) or ``TwistStamped``: valid when finite.
 
@@ -74,6 +75,8 @@ class DvlFields:
     good_beams: str | None = None
     #: the message's ``time`` field, kept to match the raw JSON topic's reports
     report_time: str | None = None
+    #: the sound speed the DVL converted with (m/s; NaN or absent: not said)
+    sound_speed: str | None = None
 
 
 _WL = {"valid": "velocity_valid", "fom": "fom", "beams": "beams", "beam_id": "id",
@@ -90,10 +93,16 @@ DVL_TYPES: dict[str, DvlFields] = {
     UUV_DVL: DvlFields(**_UUV),
     COLA2_DVL: DvlFields(**_UUV),
     MARINE_DVL: DvlFields(
-        **_MARINE, ranges_valid="beam_ranges_valid", beam_velocities="beam_velocity"
+        **_MARINE,
+        ranges_valid="beam_ranges_valid",
+        beam_velocities="beam_velocity",
+        sound_speed="sound_speed",
     ),  # fmt: skip
     DS_DVL: DvlFields(
-        **_MARINE, beam_velocities="raw_velocity", beam_velocity_if=("coordinate_mode", 0)
+        **_MARINE,
+        beam_velocities="raw_velocity",
+        beam_velocity_if=("coordinate_mode", 0),
+        sound_speed="speed_sound",
     ),  # fmt: skip
     TWIST_COV: DvlFields(
         velocity="twist.twist.linear", covariance="twist.covariance", altitude=None
@@ -159,6 +168,8 @@ def dvl_report(msgtype: str, msg) -> dict:
         extra["good_beams"] = int(_get(msg, f.good_beams, 0))
     if f.report_time is not None:
         extra["key"] = (_get(msg, f.report_time), *velocity)
+    if f.sound_speed is not None:
+        extra["sound_speed"] = float(_get(msg, f.sound_speed, math.nan))
     report["extra"] = extra
     return report
 

@@ -145,6 +145,7 @@ class Rows:
         self.times: np.ndarray | None = None
         self.dvl = DvlRows()
         self.dvl_mode_given: list[bool] = []
+        self.dvl_sound_speed: list[float] = []  # what the DVL's messages say it converted with
         self.json_velocity: list[tuple[float, dict]] = []
         self.json_position: list[tuple] = []
         self.rows: dict[str, list] = {k: [] for k in ACCEPTED}
@@ -265,6 +266,8 @@ class Rows:
         extra = report.pop("extra")
         if "mode_given" in extra:
             self.dvl_mode_given.append(extra.pop("mode_given"))
+        if "sound_speed" in extra:
+            self.dvl_sound_speed.append(extra.pop("sound_speed"))
         if report.get("beam_units") is not None:
             self.dvl_units_given = True
         header = getattr(msg, "header", None)
@@ -526,6 +529,10 @@ def build_dvl(rows: Rows, notes: Notes, metadata: dict) -> Dvl | None:
             ]
             notes.add("dvl: velocity_mode never set; valid = at least 3 good beams", len(good))
         dvl, order = rows.dvl.build(notes)
+        said = np.asarray(rows.dvl_sound_speed, float)
+        said = said[np.isfinite(said) & (said > 0)]
+        if said.size:  # the sound speed it converted with: its setting (undertow.io.sound_speed)
+            metadata["dvl_sound_speed_m_s"] = float(np.median(said))
         return _merge_json(dvl, order, rows, metadata) if len(dvl) else None
     if rows.json_velocity:
         fallback = DvlRows()

@@ -418,6 +418,8 @@ def driver_message(b: MessageBuilder, t: float, frame: str, r: VelocityReport):
 def _dvl_standard(log: Log, b: MessageBuilder, frame: str):
     d = log.dvl
     dvl_t = b.T[MARINE_DVL]
+    # the sound speed the DVL converted with, when the log says (a simulated DVL's setting)
+    sound_speed = np.float32(log.metadata.get("dvl_sound_speed_m_s", np.nan))
     minus = np.full(4, -1.0, np.float32)
     for i in range(len(d)):
         h, ns = b.header(d.t[i], frame)
@@ -438,7 +440,7 @@ def _dvl_standard(log: Log, b: MessageBuilder, frame: str):
                 course_gnd=math.atan2(v[1], v[0]),
                 speed_gnd=math.hypot(v[0], v[1]),
                 num_good_beams=int(d.beam_valid[i].sum()),
-                sound_speed=np.float32(np.nan),
+                sound_speed=sound_speed,
                 beam_ranges_valid=bool(d.beam_valid[i].any()),
                 beam_velocities_valid=True,
                 beam_unit_vec=[b.vec(u) for u in d.beam_unit[i]],

@@ -17,11 +17,14 @@ ranges with its own). A 1500 m/s setting in fresh water at 15-20 C (1466-1482 m/
 1.2-2.3 % too long: a floor 2.5 m below the sensor mapped 3-6 cm too deep, a track 1.2-2.3 m
 too long per 100 m run.
 
-The set values are ``dvl_sound_speed_m_s`` and ``sonar_sound_speed_m_s`` (neither sensor's
-message carries its own): 1500 m/s by default, the Water Linked A50's fixed value (its
-documentation: "The DVL-A50 uses a constant speed of sound equal to 1500 m/s", configurable
-on later firmware through ``set_config``'s ``speed_of_sound``) and the Ping1D's default
-(ping-protocol ``set_speed_of_sound``, 1,500,000 mm/s).
+The set values are ``dvl_sound_speed_m_s`` and ``sonar_sound_speed_m_s``. The DVL's, when
+not set, is the one its messages said (``marine_acoustic_msgs/Dvl.sound_speed``, WHOI's
+``speed_sound``; the log's metadata ``dvl_sound_speed_m_s``), else 1500 m/s, the Water Linked
+A50's fixed value (its documentation: "The DVL-A50 uses a constant speed of sound equal to
+1500 m/s", configurable on later firmware through ``set_config``'s ``speed_of_sound``; its
+driver's messages do not carry it). The sonar's is 1500 m/s unless set, the Ping1D's default
+(ping-protocol ``set_speed_of_sound``, 1,500,000 mm/s; its ``distance`` message does not
+carry it).
 
 The water's sound speed is ``sound_speed_m_s``, or from ``water_temperature_c`` by Coppens'
 equation (A. B. Coppens, "Simple equations for the speed of sound in Neptunian waters", JASA
@@ -39,6 +42,7 @@ beams with the sound speed measured at its face).
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import replace
 
@@ -70,25 +74,37 @@ def water_sound_speed(options) -> tuple[float | None, str]:
     return None, "not corrected"
 
 
+def dvl_set_speed(options, metadata: dict) -> tuple[float, str]:
+    """(c_set of the DVL in m/s, where it comes from): the settings', else the log's (its
+    messages'), else the A50's fixed 1500 m/s (module doc)."""
+    if options.dvl_sound_speed_m_s is not None:
+        return float(options.dvl_sound_speed_m_s), "settings"
+    said = metadata.get("dvl_sound_speed_m_s") if isinstance(metadata, dict) else None
+    if isinstance(said, (int, float)) and math.isfinite(said) and said > 0:
+        return float(said), "the DVL's messages"
+    return DEFAULT_SET_SOUND_SPEED, "the A50's fixed value, assumed"
+
+
 def correct_sound_speed(log: Log, options, state: bool = True) -> Log:
     """``log`` with its DVL and sonar ranges and DVL velocities in the water's sound speed
     (module doc), recorded in ``metadata["sound_speed"]`` and, with ``state``, said in one line
     (a warning, also kept in ``metadata["warnings"]``); unchanged (and recorded so) without a
     water sound speed in ``options`` (:class:`~undertow.io.read_options.LogOptions`)."""
     c, source = water_sound_speed(options)
-    record = {"water_m_s": c, "source": source, "dvl_set_m_s": options.dvl_sound_speed_m_s,
+    dvl_set, dvl_from = dvl_set_speed(options, log.metadata)
+    record = {"water_m_s": c, "source": source, "dvl_set_m_s": dvl_set, "dvl_set_from": dvl_from,
               "sonar_set_m_s": options.sonar_sound_speed_m_s}  # fmt: skip
     meta = dict(log.metadata)
     meta["sound_speed"] = record
     if c is None:
         return log.replace(metadata=meta)
-    k_dvl, k_sonar = c / options.dvl_sound_speed_m_s, c / options.sonar_sound_speed_m_s
+    k_dvl, k_sonar = c / dvl_set, c / options.sonar_sound_speed_m_s
     record.update(dvl_factor=k_dvl, sonar_factor=k_sonar)
     changes, done = {}, []
     if log.dvl is not None and len(log.dvl):
         changes["dvl"] = scaled_dvl(log.dvl, k_dvl)
-        done.append(f"DVL ranges and velocities x {k_dvl:.5f} (set to "
-                    f"{options.dvl_sound_speed_m_s:g} m/s)")  # fmt: skip
+        done.append(f"DVL ranges and velocities x {k_dvl:.5f} (set to {dvl_set:g} m/s: "
+                    f"{dvl_from})")  # fmt: skip
     if log.sonar is not None and len(log.sonar):
         changes["sonar"] = replace(log.sonar, range=np.asarray(log.sonar.range) * k_sonar)
         done.append(f"sonar ranges x {k_sonar:.5f} (set to {options.sonar_sound_speed_m_s:g} m/s)")
@@ -106,8 +122,9 @@ def sound_speed_line(options, done=None) -> str:
     factors of both sensors)."""
     c, source = water_sound_speed(options)
     if done is None:
-        done = [f"DVL ranges and velocities x {c / options.dvl_sound_speed_m_s:.5f} (set to "
-                f"{options.dvl_sound_speed_m_s:g} m/s)",
+        dvl_set, dvl_from = dvl_set_speed(options, {})
+        done = [f"DVL ranges and velocities x {c / dvl_set:.5f} (set to {dvl_set:g} m/s: "
+                f"{dvl_from})",
                 f"sonar ranges x {c / options.sonar_sound_speed_m_s:.5f} (set to "
                 f"{options.sonar_sound_speed_m_s:g} m/s)"]  # fmt: skip
     return (f"sound speed {c:.1f} m/s from {source}: " + "; ".join(done)

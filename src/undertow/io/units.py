@@ -247,7 +247,8 @@ def resolve_units(log: Log, options: LogOptions | None = None) -> Log:
 #: what every output's config.yaml records of how its log was read
 READING_KEYS = ("format", "topics", "topics_guessed", "time_base", "imu_units",
                 "surface_pressure_pa", "surface_pressure_source", "water", "water_density_kg_m3",
-                "depth_z", "gps_origin", "dvl_frame", "mounting_source", "sound_speed")  # fmt: skip
+                "depth_z", "gps_origin", "dvl_frame", "mounting_source", "sound_speed",
+                "dvl_sound_speed_m_s")  # fmt: skip
 
 
 def reading_record(metadata: dict) -> dict:

@@ -148,6 +148,8 @@ def wave_metadata(s: Scenario, wave: LinearWave | WaveField, duration: float) ->
         "water_depth_m": s.water.depth_m,
         "water_density_kg_m3": s.water.density_kg_m3,
         "surface_pressure_pa": s.water.surface_pressure_pa,
+        # what the simulated DVL converts with (a standard DVL message's sound_speed)
+        "dvl_sound_speed_m_s": s.dvl.sound_speed_setting,
     }
 
 
