@@ -137,7 +137,7 @@ def test_the_dvl_setting_comes_from_its_messages_unless_set(tmp_path):
                                                  dvl_sound_speed_m_s=1500.0))  # fmt: skip
     assert read.metadata["dvl_sound_speed_m_s"] == 1475.0
     record = read.metadata["sound_speed"]
-    assert record["dvl_set_from"] == "the DVL's messages"
+    assert record["dvl_set_from"] == "the log (its DVL messages' sound_speed)"
     assert record["dvl_factor"] == pytest.approx(1476.0 / 1475.0)
     assert given.metadata["sound_speed"]["dvl_factor"] == pytest.approx(1476.0 / 1500.0)
     np.testing.assert_allclose(read.dvl.altitude * 1475.0, given.dvl.altitude * 1500.0)

@@ -81,7 +81,7 @@ def dvl_set_speed(options, metadata: dict) -> tuple[float, str]:
         return float(options.dvl_sound_speed_m_s), "settings"
     said = metadata.get("dvl_sound_speed_m_s") if isinstance(metadata, dict) else None
     if isinstance(said, (int, float)) and math.isfinite(said) and said > 0:
-        return float(said), "the DVL's messages"
+        return float(said), "the log (its DVL messages' sound_speed)"
     return DEFAULT_SET_SOUND_SPEED, "the A50's fixed value, assumed"
 
 
