@@ -131,7 +131,10 @@ def test_a50_link_receives_the_log_with_the_served_clock(short_log):
         np.testing.assert_array_equal(getattr(live.dvl, name), getattr(dvl, name), name)
     np.testing.assert_array_equal(live.dead_reckoning.position, dr.position)
     np.testing.assert_allclose(live.dead_reckoning.orientation, dr.orientation, atol=1e-12)
-    assert link.info["config"] == DEFAULT_CONFIG and session.a50.commands == ["get_config"]
+    # the configuration the A50 answers: its defaults, with the sound speed the served reports
+    # were made with (the simulated DVL's setting)
+    expected = {**DEFAULT_CONFIG, "speed_of_sound": short_log.metadata["dvl_sound_speed_m_s"]}
+    assert link.info["config"] == expected and session.a50.commands == ["get_config"]
     # played at 10x: 6 s of log in about 0.6 s of wall time
     walls = [e.wall for e in session.manifest.select("a50")]
     assert 0.45 < walls[-1] - walls[0] < 1.5

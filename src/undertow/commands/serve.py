@@ -32,7 +32,7 @@ from ..io import detect_format
 from ..log import Log
 from ..sim import list_scenarios, load_scenario, simulate
 from ..sim.robot import Faults, Manifest, Player
-from ..sim.robot.a50 import A50Reports, A50Server
+from ..sim.robot.a50 import A50Reports, A50Server, served_config
 from ..sim.robot.autopilot import VirtualAutopilot, load_param_file
 from ..sim.robot.autopilot_link import AutopilotLink, log_attitude, log_depth
 from ..sim.robot.decode import served_log
@@ -299,7 +299,7 @@ def _servers(log, manifest, faults, rngs, host, ports, distance_sensor, autopilo
     dvl_port, ping_port, mavlink = ports
     has = {n for n, s in log.streams().items() if len(s)}
     a50 = (
-        A50Server(host, dvl_port)
+        A50Server(host, dvl_port, served_config(log))
         if dvl_port is not None and has & {"dvl", "dead_reckoning"}
         else None
     )

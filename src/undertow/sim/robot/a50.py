@@ -8,7 +8,8 @@ x y z m, std m, roll pitch yaw in degrees). A client may write commands, one JSO
 (``{"command": "get_config"}``, ``reset_dead_reckoning``, ``calibrate_gyro``, ``set_config`` with
 ``parameters``); each is answered with ``{"type": "response", "response_to": COMMAND, "success":
 true|false, "error_message": "", "result": ..., "format": "json_v3"}`` (the configuration for
-``get_config``, null otherwise). The served reports replay a Log (velocity lines by
+``get_config``, with the ``speed_of_sound`` the served reports were made with when the log says
+it: :func:`served_config`; null otherwise). The served reports replay a Log (velocity lines by
 :func:`undertow.io.a50_json.velocity_report_line`, the writer of the bag tools); commands change
 nothing in what is served (the replayed dead reckoning is not reset), they are answered and
 kept in ``A50Server.commands`` (and the session summary).
@@ -39,6 +40,18 @@ DEFAULT_CONFIG = {
     "periodic_cycling_enabled": True,
 }
 COMMANDS = ("get_config", "set_config", "reset_dead_reckoning", "calibrate_gyro", "trigger_ping")
+
+
+def served_config(log: Log) -> dict:
+    """:data:`DEFAULT_CONFIG` with the ``speed_of_sound`` the served reports were made with
+    (the log's ``dvl_sound_speed_m_s``, a simulated DVL's setting), when the log says it."""
+    said = (log.metadata or {}).get("dvl_sound_speed_m_s")
+    config = dict(DEFAULT_CONFIG)
+    if isinstance(said, (int, float)) and math.isfinite(said) and said > 0:
+        config["speed_of_sound"] = float(said)
+    return config
+
+
 MAX_COMMAND_BYTES = 64 * 1024
 #: JSON structural characters: flipping one of them makes the line undecodable
 _STRUCTURAL = frozenset(b'{}[]:,"')
