@@ -70,8 +70,11 @@ def test_the_autopilot_answers_on_the_served_link(simulation, transport):
         duration=20.0,
     )
     session.autopilot.autopilot.timing = AutopilotTiming(1.0, 1.0, 2.0, 1.0)
-    session.start()
+    # the client's socket before the autopilot boots: its first texts ("origin set" at 1 s of
+    # its clock, 0.25 s of wall time) were lost when a loaded machine bound it later
+    session.open()
     conn = mavutil.mavlink_connection(client, source_system=255, source_component=190)
+    session.start()
     try:
         if transport == "udp":  # the sender's datagrams tell the client where to reply
             conn.wait_heartbeat(timeout=5)
