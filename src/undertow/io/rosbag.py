@@ -63,6 +63,7 @@ from .rosbag_choices import (
     piece_windows,
     resolve_topics,
 )
+from .rosbag_guard import close_bag, empty_bad_files
 from .rosbag_streams import ACCEPTED, Rows, build_dvl
 from .topics import TopicMap
 from .units import DEG, resolve_units
@@ -295,6 +296,7 @@ def bag_index(path) -> tuple[dict[str, tuple[str, int]], float]:
     try:
         reader = AnyReader(_storage(path, recover_crashed(path)), default_typestore=dvl_typestore())
         reader.open()
+        empty_bad_files(reader)
     except ReaderError:
         raise
     except Exception as exc:  # rosbags raises many types for corrupt input
@@ -307,7 +309,7 @@ def bag_index(path) -> tuple[dict[str, tuple[str, int]], float]:
         span = max(int(reader.end_time) - int(reader.start_time), 0) if topics else 0
         return topics, span / 1e9
     finally:
-        _close(reader)
+        close_bag(reader)
 
 
 def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
@@ -319,18 +321,8 @@ def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
         available, used, guessed, conns = _select(reader, topics, notes)
         _read_messages(reader, conns, used, rows, notes, path)
     finally:
-        _close(reader, notes)
+        close_bag(reader, notes)
     return _finish(rows, notes, path, (available, used, guessed), topics, options, recovered)
-
-
-def _close(reader, notes: Notes | None = None) -> None:
-    """Close the bag; a failure to close (rosbags on a corrupt ``metadata.yaml``, e.g. a
-    ``files`` entry that is a string) keeps what was read and is noted, not raised."""
-    try:
-        reader.close()
-    except Exception as exc:  # noqa: BLE001  (rosbags raises many types for corrupt input)
-        if notes is not None:
-            notes.add("closing the bag failed (what was read is kept)", 1, _one_line(exc))
 
 
 def _open(path: Path, recovered: Recovered | None, notes: Notes):
@@ -343,6 +335,8 @@ def _open(path: Path, recovered: Recovered | None, notes: Notes):
         reader.open()
     except Exception as exc:  # rosbags raises many types for corrupt input
         raise ReaderError(f"{path}: cannot open bag ({_one_line(exc)})") from exc
+    if empty_bad_files(reader):
+        notes.add("metadata.yaml: 'files' is not a list (ignored)")
     return reader
 
 
