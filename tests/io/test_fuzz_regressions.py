@@ -220,6 +220,24 @@ def test_metadata_yaml_files_entry_a_string_keeps_what_was_read(tmp_path, small_
     assert len(log.dvl) == len(good.dvl) > 0 and len(log.imu) == len(good.imu)
 
 
+def test_a_bag_that_fails_to_close_keeps_what_was_read(small_bag, monkeypatch):
+    """Any other failure of rosbags to close the bag after reading: the log is the one read,
+    the failure one noted line."""
+    from rosbags.highlevel import AnyReader
+
+    good, _ = _read_quietly(small_bag)
+    real_close = AnyReader.close
+
+    def failing_close(self):
+        real_close(self)
+        raise RuntimeError("cannot close\nat all")
+
+    monkeypatch.setattr(AnyReader, "close", failing_close)
+    with pytest.warns(UserWarning, match=r"closing the bag failed .*RuntimeError: cannot close\)$"):
+        log = read_log(small_bag)  # one line: the exception's first
+    assert len(log.dvl) == len(good.dvl) > 0 and len(log.pressure) == len(good.pressure)
+
+
 def test_corrupt_bag_message_says_what_is_wrong(tmp_path, small_bag):
     """rosbags raises a bare MemoryError on a damaged mcap record length; the one line says
     what that means instead of only "(MemoryError)"."""

@@ -321,7 +321,8 @@ def _read_rosbag(path: Path, topics: TopicMap, options: LogOptions,
         available, used, guessed, conns = _select(reader, topics, notes)
         _read_messages(reader, conns, used, rows, notes, path)
     finally:
-        close_bag(reader, notes)
+        if (failed := close_bag(reader)) is not None:
+            notes.add("closing the bag failed (what was read is kept)", 1, _one_line(failed))
     return _finish(rows, notes, path, (available, used, guessed), topics, options, recovered)
 
 

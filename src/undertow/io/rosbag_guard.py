@@ -5,12 +5,11 @@ or an open file.
   keeps it as given, then fails to close the bag (``files.clear()``) before it closes the
   storage files, which stay open. :func:`empty_bad_files` empties it right after opening
   (rosbags reads the messages from ``relative_file_paths``, not from it).
-- Any other failure to close: :func:`close_bag` keeps what was read and notes it.
+- Any other failure to close: :func:`close_bag` returns it, so that the reader keeps what it
+  read and notes it.
 """
 
 from __future__ import annotations
-
-from .collect import Notes
 
 
 def empty_bad_files(reader) -> bool:
@@ -24,11 +23,10 @@ def empty_bad_files(reader) -> bool:
     return bad
 
 
-def close_bag(reader, notes: Notes | None = None) -> None:
-    """Close the bag; a failure to close keeps what was read and is noted, not raised."""
+def close_bag(reader) -> Exception | None:
+    """Close the bag; a failure to close is returned, not raised (module doc)."""
     try:
         reader.close()
     except Exception as exc:  # noqa: BLE001  (rosbags raises many types for corrupt input)
-        if notes is not None:
-            text = " ".join(f"{type(exc).__name__}: {exc}".split())[:200]
-            notes.add("closing the bag failed (what was read is kept)", 1, text)
+        return exc
+    return None

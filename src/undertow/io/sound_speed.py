@@ -100,33 +100,32 @@ def correct_sound_speed(log: Log, options, state: bool = True) -> Log:
         return log.replace(metadata=meta)
     k_dvl, k_sonar = c / dvl_set, c / options.sonar_sound_speed_m_s
     record.update(dvl_factor=k_dvl, sonar_factor=k_sonar)
-    changes, done = {}, []
-    if log.dvl is not None and len(log.dvl):
+    changes = {}
+    has_dvl = log.dvl is not None and len(log.dvl) > 0
+    has_sonar = log.sonar is not None and len(log.sonar) > 0
+    if has_dvl:
         changes["dvl"] = scaled_dvl(log.dvl, k_dvl)
-        done.append(f"DVL ranges and velocities x {k_dvl:.5f} (set to {dvl_set:g} m/s: "
-                    f"{dvl_from})")  # fmt: skip
-    if log.sonar is not None and len(log.sonar):
+    if has_sonar:
         changes["sonar"] = replace(log.sonar, range=np.asarray(log.sonar.range) * k_sonar)
-        done.append(f"sonar ranges x {k_sonar:.5f} (set to {options.sonar_sound_speed_m_s:g} m/s)")
-    if done and state:
+    if changes and state:
         src = f"{log.source}: " if log.source else ""
-        line = src + sound_speed_line(options, done)
+        line = src + sound_speed_line(options, log.metadata, dvl=has_dvl, sonar=has_sonar)
         warnings.warn(line, stacklevel=3)
         meta["warnings"] = [*meta.get("warnings", []), line]
     return log.replace(metadata=meta, **changes)
 
 
-def sound_speed_line(options, done=None) -> str:
-    """The one line that states the correction of the ``log:`` settings ``options``: the
-    water's sound speed and where it comes from, and what was scaled (``done``; default: the
-    factors of both sensors)."""
+def sound_speed_line(options, metadata=None, dvl: bool = True, sonar: bool = True) -> str:
+    """The one line that states the correction of the ``log:`` settings ``options`` (a water
+    sound speed given): the water's speed and where it comes from, and the factors of the DVL
+    (its setting from :func:`dvl_set_speed` of ``metadata``) and of the sonar, as asked."""
     c, source = water_sound_speed(options)
-    if done is None:
-        dvl_set, dvl_from = dvl_set_speed(options, {})
-        done = [f"DVL ranges and velocities x {c / dvl_set:.5f} (set to {dvl_set:g} m/s: "
-                f"{dvl_from})",
-                f"sonar ranges x {c / options.sonar_sound_speed_m_s:.5f} (set to "
-                f"{options.sonar_sound_speed_m_s:g} m/s)"]  # fmt: skip
+    dvl_set, dvl_from = dvl_set_speed(options, metadata or {})
+    sonar_set = options.sonar_sound_speed_m_s
+    done = [f"DVL ranges and velocities x {c / dvl_set:.5f} (set to {dvl_set:g} m/s: "
+            f"{dvl_from})"] if dvl else []  # fmt: skip
+    if sonar:
+        done.append(f"sonar ranges x {c / sonar_set:.5f} (set to {sonar_set:g} m/s)")
     return (f"sound speed {c:.1f} m/s from {source}: " + "; ".join(done)
             + "; set log: {dvl_sound_speed_m_s: C, sonar_sound_speed_m_s: C} to change what the"
             " sensors were set to")  # fmt: skip
