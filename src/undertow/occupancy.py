@@ -26,7 +26,11 @@ MAP_FILE = "a map.npz written by `undertow map` (or its folder)"
 
 
 #: what each column of :attr:`ColumnStats.sums` holds, per (x, y) column of the map
-COLUMN_SUMS = ("weight", "weight_var_v", "weight_var_x", "weight_var_y")
+COLUMN_SUMS = ("weight", "weight_var_v", "weight_var_x", "weight_var_y", "weight_var_r",
+               "weight2_var_r", "weight_sonar_r2", "weight_dx2", "weight_dy2",
+               "weight_var_lattice")  # fmt: skip
+#: the sums of the maps written before the range sums (these read as zeros: the std as then)
+LEGACY_SUMS = 4
 #: the values of :attr:`ColumnStats.carve` per column: two free intervals' bottoms and tops
 CARVE_FIELDS = 4
 
@@ -35,9 +39,12 @@ CARVE_FIELDS = 4
 class ColumnStats:
     """Per (x, y) column (index i = floor(x / res), j = floor(y / res)): the hit evidence it
     received and that evidence's uncertainties, sum_i w_i, sum_i w_i sigma_v,i^2,
-    sum_i w_i s_x,i^2, sum_i w_i s_y,i^2 (:data:`COLUMN_SUMS`; w_i the kernel-weighted mass of
-    hit i in the column, sigma_v,i its vertical standard deviation, s_x,i and s_y,i the
-    standard deviations of its kernel across the floor). ``carve`` (K, 4) or None: the two
+    sum_i w_i s_x,i^2, sum_i w_i s_y,i^2, sum_i w_i s_r,i^2, sum_i w_i^2 s_r,i^2,
+    sum_i w_i r_s,i^2 (:data:`COLUMN_SUMS`; w_i the kernel-weighted mass of hit i in the
+    column, sigma_v,i its vertical standard deviation, s_x,i and s_y,i the standard deviations
+    of its kernel across the floor, s_r,i the share of sigma_v,i that is its range's own
+    noise, independent from hit to hit, r_s,i its range when a sonar's, else 0; sums of :data:`LEGACY_SUMS` columns, a map written before the last two, read
+    them as zeros). ``carve`` (K, 4) or None: the two
     deepest depth intervals a sonar's cone found free in the column, F_1, T_1, F_2, T_2 (m, z
     down; F_1 >= F_2 the intervals' bottoms, T their tops; NaN where fewer;
     :mod:`undertow.mapping.carve`). Written by the ``tpu`` mapper
@@ -50,7 +57,10 @@ class ColumnStats:
 
     def __post_init__(self) -> None:
         cells = np.asarray(self.cells, dtype=np.int64).reshape(-1, 2)
-        sums = np.asarray(self.sums, dtype=float).reshape(-1, len(COLUMN_SUMS))
+        sums = np.asarray(self.sums, dtype=float)
+        if sums.ndim == 2 and sums.shape[1] == LEGACY_SUMS:
+            sums = np.hstack([sums, np.zeros((len(sums), len(COLUMN_SUMS) - LEGACY_SUMS))])
+        sums = sums.reshape(-1, len(COLUMN_SUMS))
         if len(cells) != len(sums):
             raise DataError(f"ColumnStats: {len(cells)} columns but {len(sums)} rows of sums")
         object.__setattr__(self, "cells", cells)

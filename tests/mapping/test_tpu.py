@@ -87,7 +87,7 @@ def test_a_hit_spread_by_its_pose_keeps_its_mass():
 
 def test_the_kernel_lengths_follow_the_pose_std_within_their_bounds():
     config = MappingConfig(method="tpu")
-    sx, sy, sv, s_r = hit_sigmas(_hit(var=(0.04, 0.09, 1e-4)), (0.005, 0.01, 0.01), 0.005)
+    sx, sy, sv, s_r, _ = hit_sigmas(_hit(var=(0.04, 0.09, 1e-4)), (0.005, 0.01, 0.01), 0.005)
     assert sx[0] == pytest.approx(0.2) and sy[0] == pytest.approx(0.3)
     assert s_r[0] == pytest.approx(0.005) and sv[0] == pytest.approx(math.sqrt(1e-4 + 0.005**2))
     assert config.base_length <= 0.3 / KERNEL_STD <= config.max_length
@@ -97,7 +97,7 @@ def test_a_wide_beams_footprint_adds_to_the_horizontal_std():
     """A first return in a cone of full angle b at range r: a disk of radius r tan(b / 2),
     per-axis std R / 2; the sonar's range noise is s_0 + f r."""
     r, b = 2.0, 25.0
-    sx, sy, _, s_r = hit_sigmas(_hit(z=r, var=(0.01, 0.0, 0.0), sensor=SENSOR_SONAR),
+    sx, sy, _, s_r, _ = hit_sigmas(_hit(z=r, var=(0.01, 0.0, 0.0), sensor=SENSOR_SONAR),
                                 (0.005, 0.01, 0.01), 0.005, b)  # fmt: skip
     foot = r * math.tan(math.radians(b / 2)) / 2
     assert sx[0] == pytest.approx(math.sqrt(0.01 + foot**2))
@@ -124,7 +124,7 @@ def test_a_wide_beams_first_return_falls_short_of_the_floor_on_its_axis():
     r = first[half]
     assert h - r == pytest.approx(r * (1 / math.cos(half) - 1), abs=1e-6)
     assert 0 < h - first[half / 2] < h - r and h - first[0.0] == pytest.approx(0.0, abs=1e-12)
-    _, _, sv, s_r = hit_sigmas(_hit(z=r, var=(0.0, 0.0, 1e-4), sensor=SENSOR_SONAR),
+    _, _, sv, s_r, _ = hit_sigmas(_hit(z=r, var=(0.0, 0.0, 1e-4), sensor=SENSOR_SONAR),
                                (0.005, 0.01, 0.01), 0.005, b)  # fmt: skip
     s_d = h - r  # the shortfall on that plane, r (sec(b / 2) - 1)
     assert sv[0] == pytest.approx(math.sqrt(1e-4 + s_r[0] ** 2 + s_d**2))
@@ -162,14 +162,28 @@ def test_the_trajectorys_wave_is_read_from_its_metadata():
 
 
 def test_the_wave_is_resolved_once_into_the_settings():
-    """with_wave: the settings' wave wins, else the trajectory's (tpu with the wave term only),
-    so a tiled map's tasks, which see only the settings, map with the same wave."""
+    """with_wave: the settings' wave wins, else the trajectory's (tpu with a wave term only),
+    so a tiled map's tasks, which see only the settings, map with the same wave; likewise the
+    depth measurements the filter fused (its depth_std_m, its pressure updates over its span)."""
     t = np.arange(3.0)
     traj = Trajectory(t, np.zeros((3, 18)), np.zeros((3, 18, 18)))
     traj.metadata["wave_noise"] = {"amplitude_m": 0.1, "frequency_hz": 0.5}
     assert with_wave(MappingConfig(), traj).wave == (0.1, 0.5)
     assert with_wave(MappingConfig(wave=(0.2, 0.3)), traj).wave == (0.2, 0.3)
-    assert with_wave(MappingConfig(wave_range_noise=False), traj).wave is None
+    assert with_wave(MappingConfig(wave_range_noise=False), traj).wave == (0.1, 0.5)
+    quiet = MappingConfig(wave_range_noise=False, wave_depth_noise=False)
+    assert with_wave(quiet, traj).wave is None
+    assert with_wave(MappingConfig(), traj).depth_noise is None  # the trajectory does not say
+    traj.metadata["config"] = {"depth_std_m": 0.01}
+    traj.metadata["sensors"] = {"pressure": {"used": 21}}
+    assert with_wave(MappingConfig(), traj).depth_noise == (0.01, 0.1)  # 2 s over 20 intervals
+    given = MappingConfig(depth_noise=(0.002, 0.05))
+    assert with_wave(given, traj).depth_noise == (0.002, 0.05)
+    assert mapper_from_config(with_wave(MappingConfig(), traj)).depth_wave == (0.1, 0.5, 0.01, 0.1)
+    assert (
+        mapper_from_config(with_wave(MappingConfig(wave_depth_noise=False), traj)).depth_wave
+        is None
+    )
     assert with_wave(MappingConfig(method="adaptive"), traj).wave is None
     config = with_wave(MappingConfig(), traj)
     assert mapper_from_config(config).wave == (0.1, 0.5)

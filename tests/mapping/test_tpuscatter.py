@@ -24,6 +24,7 @@ from undertow.mapping.tpuscatter import tpu_extent, tpu_hits, tpu_insert_chunks
 from undertow.sim.waves import wavenumber
 
 WAVE = (0.35, 0.2)  # amplitude m, frequency Hz: s_w of centimetres at these depths
+DEPTH_NOISE = (0.05, 0.1)  # the filter's depth std and interval, for the swell in the depth
 SETTINGS = {"resolution": 0.1, "base_length": 0.1, "max_length": 1.7,
             "range_std": (0.005, 0.01, 0.01), "range_std_fraction": 0.005,
             "sonar_beam_width_deg": 25.0}  # fmt: skip
@@ -50,26 +51,33 @@ def _samples(rays, written: bool):
     return samples
 
 
-def _map(batches, written: bool, wave=WAVE, threads: int = 1, max_length: float = 2.0):
+def _map(batches, written: bool, wave=WAVE, threads: int = 1, max_length: float = 2.0,
+         swell: bool = True):  # fmt: skip
+    """``wave``: the waves' range noise (None: none); ``swell``: their pressure in the depth."""
     with numba_threads(threads):
-        mapper = make_mapper("tpu", wave=wave, max_length=max_length)
+        mapper = make_mapper("tpu", wave=WAVE if wave or swell else None,
+                             wave_range_noise=wave is not None, wave_depth_noise=swell,
+                             depth_noise=DEPTH_NOISE, max_length=max_length)  # fmt: skip
         for rays in batches:  # the grid starts small and grows in between and within batches
             mapper.integrate(_samples(rays, written))
         return mapper
 
 
-@pytest.mark.parametrize(("wave", "max_length"), [(WAVE, 2.0), (None, 2.0), (WAVE, 1.7)])
-def test_the_rays_give_the_written_samples_map_bit_for_bit(wave, max_length):
+@pytest.mark.parametrize(("wave", "max_length", "swell"),
+                         [(WAVE, 2.0, True), (None, 2.0, False), (WAVE, 1.7, True),
+                          (None, 2.0, True), (WAVE, 2.0, False)])  # fmt: skip
+def test_the_rays_give_the_written_samples_map_bit_for_bit(wave, max_length, swell):
     """(A cap of 1.7 m: l / cap * cap is not always l, as it is for 2 m.)"""
     batches = [_fan(seed) for seed in range(3)]
-    written = _map(batches, True, wave, max_length=max_length)
-    rays = _map(batches, False, wave, max_length=max_length)
+    written = _map(batches, True, wave, max_length=max_length, swell=swell)
+    rays = _map(batches, False, wave, max_length=max_length, swell=swell)
     assert written.grid.n_chunks > 64  # grown, and resumed after each growth
     assert same_map(written, rays)
     occupancy = rays.occupancy()
     assert len(occupancy) > 1000 and np.all(occupancy.alpha >= rays.alpha0)
-    if wave is not None:  # the wave is in play: without it the map differs
-        assert not same_map(rays, _map(batches, False, None, max_length=max_length))
+    if wave is not None or swell:  # a wave in play: without it the map differs
+        calm = _map(batches, False, None, max_length=max_length, swell=False)
+        assert not same_map(rays, calm)
 
 
 def test_the_column_sums_from_the_rays_are_the_written_samples_sums():

@@ -31,11 +31,10 @@ import numpy as np
 from numba import njit
 
 from ..occupancy import CARVE_FIELDS, COLUMN_SUMS, ColumnStats, column_keys
-from .carve import FIRST_CELL, add_carve, carve_inputs, decode, encode
+from .carve import ALPHA_SUMS, FIRST_CELL, add_carve, carve_inputs, decode, encode
 from .chunks import CHUNK_SHIFT, find_or_insert
 from .grid import ChunkedGrid
 from .kernels import sincos
-from .tpu import KERNEL_STD
 from .tpuscatter import TpuHits
 
 #: the share of the map's resident budget the column sums may hold in memory
@@ -57,9 +56,10 @@ class ColumnGrid:
     def add_hits(self, hits: TpuHits, extent) -> None:
         """Add hits given as :class:`~undertow.mapping.tpuscatter.TpuHits` (the ray path);
         ``extent``: a box holding them (:func:`~undertow.mapping.tpuscatter.tpu_extent`'s)."""
-        self._add(hits.x, hits.y, hits.l, hits.weight, hits.var_v, extent, hits.reach)
+        self._add(hits.x, hits.y, hits.l, hits.weight, hits.var_v, hits.parts, extent,
+                  hits.reach)  # fmt: skip
 
-    def add_written(self, x, y, lx, ly, weight, var_v) -> None:
+    def add_written(self, x, y, lx, ly, weight, var_v, parts) -> None:
         """Add the hits of written samples, as :func:`~undertow.mapping.tpu.tpu_hit_weights`
         gives them."""
         if len(x):
@@ -67,10 +67,12 @@ class ColumnGrid:
             l = np.stack([lx, ly], axis=1)
             # contiguous, as the ray path gives them: one compiled add_column_sums, not two
             x, y = np.ascontiguousarray(x), np.ascontiguousarray(y)
-            self._add(x, y, l, weight, var_v, extent, self.reach(l))
+            parts = np.ascontiguousarray(parts)
+            self._add(x, y, l, weight, var_v, parts, extent, self.reach(l))
 
-    def _add(self, x, y, l, weight, var_v, extent, reach: float) -> None:
-        """Add hits at (x, y) with kernel lengths l (n, 2), weights w and sigma_v^2, inside the
+    def _add(self, x, y, l, weight, var_v, parts, extent, reach: float) -> None:
+        """Add hits at (x, y) with kernel lengths l (n, 2), weights w, sigma_v^2 and the parts
+        (n, 4) of :data:`~undertow.mapping.tpuscatter.HIT_PARTS`, inside the
         x-y box ``extent`` (lo, hi); ``reach`` the largest finite l (:meth:`reach`). Hits with
         a value not finite, or w or l not positive, are left out (a hit without weight adds
         nothing to the map either)."""
@@ -78,8 +80,8 @@ class ColumnGrid:
         if n == 0:
             return
         res = self.resolution
-        self.grid.write(add_column_sums, n, (x, y, l, weight, var_v, res), self._box(extent),
-                        reach)  # fmt: skip
+        self.grid.write(add_column_sums, n, (x, y, l, weight, var_v, parts, res),
+                        self._box(extent), reach)  # fmt: skip
 
     def _box(self, extent):
         """The grid box of the column cells over the x-y box ``extent`` (lo, hi)."""
@@ -114,14 +116,15 @@ class ColumnGrid:
         (those are kept, not added)."""
         if stats is None or not len(stats):
             return
-        values = stats.sums
+        values = stats.sums[:, :ALPHA_SUMS]
         if stats.carve is not None:
-            values = np.hstack([stats.sums, encode(stats.carve)])
+            values = np.hstack([values, encode(stats.carve)])
+        ranged = np.zeros_like(values)
+        ranged[:, : len(COLUMN_SUMS) - ALPHA_SUMS] = stats.sums[:, ALPHA_SUMS:]
         k = values.shape[1]
         cells = np.column_stack([np.repeat(stats.cells, k, axis=0),
                                  np.tile(np.arange(k), len(stats))])  # fmt: skip
-        mass = values.reshape(-1)
-        self.grid.add_mass(cells, mass, np.zeros_like(mass))
+        self.grid.add_mass(cells, values.reshape(-1), ranged.reshape(-1))
 
     def stats(self) -> ColumnStats:
         """The sums per column (:class:`~undertow.occupancy.ColumnStats`, with the carved
@@ -131,13 +134,16 @@ class ColumnGrid:
         k = len(COLUMN_SUMS)
         n = FIRST_CELL + CARVE_FIELDS
         columns, values = [], []
-        for cells, alpha, _ in self.grid.iter_cells():
+        for cells, alpha, beta in self.grid.iter_cells():
             ok = (cells[:, 2] >= 0) & (cells[:, 2] < n)
-            cells, alpha = cells[ok], alpha[ok]
+            cells, alpha, beta = cells[ok], alpha[ok], beta[ok]
             part, first, inverse = np.unique(column_keys(cells), return_index=True,
                                              return_inverse=True)  # fmt: skip
-            total = np.zeros((len(part), n))
-            total[inverse.reshape(-1), cells[:, 2]] = alpha  # each (i, j, c) once in a part
+            total = np.zeros((len(part), n + k - ALPHA_SUMS))
+            row = inverse.reshape(-1)
+            total[row, cells[:, 2]] = alpha  # each (i, j, c) once in a part
+            ranged = cells[:, 2] < k - ALPHA_SUMS
+            total[row[ranged], n + cells[ranged, 2]] = beta[ranged]
             keep = total[:, 0] > 0
             columns.append(cells[first[keep], :2])
             values.append(total[keep])
@@ -147,7 +153,8 @@ class ColumnGrid:
         columns, values = np.concatenate(columns), np.concatenate(values)
         order = np.lexsort((columns[:, 1], columns[:, 0]))
         values = values[order]
-        return ColumnStats(columns[order], values[:, :k], decode(values[:, FIRST_CELL:n]))
+        sums = np.hstack([values[:, :ALPHA_SUMS], values[:, n:]])
+        return ColumnStats(columns[order], sums, decode(values[:, FIRST_CELL:n]))
 
 
 @njit(cache=True, inline="always")
@@ -161,10 +168,12 @@ def _kernel(d, l):
 
 
 @njit(cache=True)
-def add_column_sums(start, x, y, l, weight, var_v, res, table_keys, table_vals, chunk_keys,
-                    n_chunks, alpha, beta):  # fmt: skip
-    """From hit ``start``: add (w, w sigma_v^2, w (c l_x)^2, w (c l_y)^2) k(|dx|; l_x)
-    k(|dy|; l_y) to cells (i, j, 0 .. 3) of every column (i, j) whose centre ((i + 1/2) res,
+def add_column_sums(start, x, y, l, weight, var_v, parts, res, table_keys, table_vals,
+                    chunk_keys, n_chunks, alpha, beta):  # fmt: skip
+    """From hit ``start``: add (w, w sigma_v^2, w sigma_x^2, w sigma_y^2) k to the alpha mass
+    of cells (i, j, 0 .. 3) and (w s_r'^2 k, (w k)^2 s_r'^2, w r_s^2 k) to the beta mass of
+    cells (i, j, 0 .. 2) (``parts``: sigma_x^2, sigma_y^2, s_r'^2, r_s^2 per hit),
+    k = k(|dx|; l_x) k(|dy|; l_y), of every column (i, j) whose centre ((i + 1/2) res,
     ...) lies within :data:`SUPPORT` of the hit's kernel lengths (module doc). A hit starts
     only when the chunk arrays have room for every chunk it may place; returns the first hit
     without that room (the caller grows the arrays and resumes there), or n."""
@@ -174,7 +183,9 @@ def add_column_sums(start, x, y, l, weight, var_v, res, table_keys, table_vals, 
     for s in range(start, x.shape[0]):
         lx, ly, w = l[s, 0], l[s, 1], weight[s]
         m[0], m[1] = w, w * var_v[s]
-        m[2], m[3] = w * (KERNEL_STD * lx) ** 2, w * (KERNEL_STD * ly) ** 2
+        m[2], m[3] = w * parts[s, 0], w * parts[s, 1]
+        ind, ind2, far = w * parts[s, 2], w * w * parts[s, 2], w * parts[s, 3]
+        lat = w * parts[s, 4]
         if not (
             w > 0.0
             and lx > 0.0
@@ -184,6 +195,9 @@ def add_column_sums(start, x, y, l, weight, var_v, res, table_keys, table_vals, 
             and np.isfinite(m[1])
             and np.isfinite(m[2])
             and np.isfinite(m[3])
+            and np.isfinite(ind2)
+            and np.isfinite(far)
+            and np.isfinite(lat)
         ):
             continue
         rx, ry = SUPPORT * lx, SUPPORT * ly
@@ -218,9 +232,18 @@ def add_column_sums(start, x, y, l, weight, var_v, res, table_keys, table_vals, 
                     wx = kx[i - i0]
                     if wx == 0.0:
                         continue
+                    ox = (i + 0.5) * res - x[s]
                     for j in range(ja, jb + 1):
                         k = wx * ky[j - j0]
+                        oy = (j + 0.5) * res - y[s]
                         cell = alpha[last, i & 7, j & 7]
                         for c in range(4):
                             cell[c] += m[c] * k
+                        ranged = beta[last, i & 7, j & 7]
+                        ranged[0] += ind * k
+                        ranged[1] += ind2 * k * k
+                        ranged[2] += far * k
+                        ranged[3] += w * k * ox * ox
+                        ranged[4] += w * k * oy * oy
+                        ranged[5] += lat * k
     return x.shape[0]

@@ -18,6 +18,7 @@ from .._util.validate import validate
 from ..occupancy import OCCUPIED_THRESHOLD
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
 def _as_sequence(value):
@@ -93,6 +94,15 @@ class MappingConfig(BaseModel):
     wave: Annotated[tuple[Finite, Finite] | None, BeforeValidator(_as_sequence)] = Field(
         None, description="tpu: (amplitude m, frequency Hz) of that wave; None: the "
         "trajectory's (mapping.tpu.with_wave)",
+    )  # fmt: skip
+    wave_depth_noise: bool = Field(
+        True, description="tpu: add the swell's pressure the trajectory's depth carries, as its "
+        "filter passed it on, to the pose's depth variance (mapping.depth_wave)",
+    )  # fmt: skip
+    depth_noise: Annotated[tuple[Positive, Positive] | None, BeforeValidator(_as_sequence)] = (
+        Field(None, description="tpu: (std m, sample interval s) of the depth measurements the "
+              "trajectory's filter fused; None: the trajectory's (its depth_std_m and pressure "
+              "updates)")
     )  # fmt: skip
     alpha0: float = Field(1e-10, gt=0, allow_inf_nan=False)
     beta0: float = Field(1e-10, gt=0, allow_inf_nan=False)

@@ -41,7 +41,7 @@ from .grid import ChunkedGrid, points_extent
 from .kernels import MODE_CELL, MODE_PRODUCT, MODE_RADIAL
 from .rayscatter import ray_extent
 from .samples import SENSOR_SONAR, RaySamples, Samples
-from .tpu import tpu_hit_weights, tpu_training
+from .tpu import depth_wave_of, tpu_hit_weights, tpu_training
 from .tpuscatter import tpu_extent, tpu_hits
 
 DEFAULT_MEMORY_GB = 8.0  # when the machine's RAM cannot be read
@@ -257,7 +257,8 @@ class TpuBkiMapper(Mapper):
     method = "tpu"
 
     def __init__(self, *, base_length, max_length, range_std, range_std_fraction,
-                 sonar_beam_width_deg, wave=None, sonar_carve=True, **base) -> None:  # fmt: skip
+                 sonar_beam_width_deg, wave=None, depth_wave=None, sonar_carve=True,
+                 **base) -> None:  # fmt: skip
         super().__init__(**base)
         self.sonar_beam_width_deg = float(sonar_beam_width_deg)
         #: whether the sonar's first returns carve their cones free (:mod:`~undertow.mapping.carve`)
@@ -265,6 +266,9 @@ class TpuBkiMapper(Mapper):
         #: (amplitude m, frequency Hz) of the waves whose orbital motion adds to the range
         #: noise (the settings' ``wave``, resolved by :func:`~undertow.mapping.tpu.with_wave`)
         self.wave = wave
+        #: (a m, f Hz, std m, interval s) of the swell in the poses' depth
+        #: (:mod:`~undertow.mapping.depth_wave`; :func:`~undertow.mapping.tpu.depth_wave_of`)
+        self.depth_wave = None if depth_wave is None else tuple(float(v) for v in depth_wave)
         self.base_length, self.max_length = float(base_length), float(max_length)
         self.range_std = tuple(float(v) for v in range_std)  # DVL, sonar, multibeam
         self.range_std_fraction = float(range_std_fraction)
@@ -275,7 +279,8 @@ class TpuBkiMapper(Mapper):
         return {"resolution": self.resolution, "base_length": self.base_length,
                 "max_length": self.max_length, "range_std": self.range_std,
                 "range_std_fraction": self.range_std_fraction,
-                "sonar_beam_width_deg": self.sonar_beam_width_deg, "wave": self.wave}  # fmt: skip
+                "sonar_beam_width_deg": self.sonar_beam_width_deg, "wave": self.wave,
+                "depth_wave": self.depth_wave}  # fmt: skip
 
     def _scatter(self, samples: Samples) -> None:
         """Samples kept as rays are scattered straight from them
@@ -356,7 +361,10 @@ class TpuBkiMapper(Mapper):
                 "sonar_beam_width_deg": self.sonar_beam_width_deg,
                 "sonar_carve": self.sonar_carve,
                 "wave": None if self.wave is None else
-                {"amplitude_m": self.wave[0], "frequency_hz": self.wave[1]}}  # fmt: skip
+                {"amplitude_m": self.wave[0], "frequency_hz": self.wave[1]},
+                "depth_wave": None if self.depth_wave is None else
+                dict(zip(("amplitude_m", "frequency_hz", "depth_std_m", "interval_s"),
+                         self.depth_wave))}  # fmt: skip
 
 
 def out_of_memory(resolution: float) -> ConfigError:
@@ -384,6 +392,7 @@ def mapper_from_config(config: MappingConfig, prior=None) -> Mapper:
                               sonar_beam_width_deg=config.sonar_beam_width_deg,
                               sonar_carve=config.sonar_carve,
                               wave=config.wave if config.wave_range_noise else None,
+                              depth_wave=depth_wave_of(config),
                               range_std_fraction=config.range_std_fraction, **base)  # fmt: skip
     else:
         mapper = AdaptiveBkiMapper(l_min=config.l_min, l_max=config.l_max,

@@ -30,18 +30,11 @@ each cell's hit evidence w_k = alpha_k - alpha_0 (the kernel-weighted hits it re
 
 the mean of where the hits say the floor is. Its standard deviation s is, by default, the
 **propagated uncertainty** of the column's hits (the map's :class:`~undertow.occupancy.
-ColumnStats`: :mod:`undertow.mapping.columns`), their vertical uncertainty plus their
-horizontal uncertainty carried through the floor's slope,
-
-    s^2 = V / W + (X / W) (dd/dx)^2 + (Y / W) (dd/dy)^2,
-
-V / W the hits' mean sigma_v^2 in the column, X / W and Y / W the mean variances of their
-kernels across the floor, dd/dx and dd/dy central differences of the surface's depths (one-
-sided beside a column without data). This is how hydrography combines a sounding's vertical
-and horizontal uncertainty over a sloping floor (TVU' = sqrt(TVU^2 + (THU tan(slope))^2):
-Hare, Eakins and Amante, "Modelling bathymetric uncertainty", International Hydrographic
-Review 6, 2011; IHO S-44 6th ed. 2020). It does not shrink with the number of hits: the
-pose's errors, which dominate it, are shared by the hits of a pass.
+ColumnStats`: :mod:`undertow.mapping.columns`; the equations in
+:mod:`undertow.mapping.depth_std`): the pose's depth uncertainty the hits share, their range
+noise averaged over them, a wide beam's shortfall on the floor's slope, their horizontal
+uncertainty carried through that slope (hydrography's TVU' = sqrt(TVU^2 + (THU
+tan(slope))^2)), and the relief their scatter shows beyond all that.
 
 The **spread** (``uncertainty="spread"``; the std of a map without column sums, written
 before them) is where the hits' evidence lies about d,
@@ -74,11 +67,11 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import DataError
 from ..occupancy import OCCUPIED_THRESHOLD, OccupancyMap, column_keys
 from .carve import carved
+from .depth_std import propagated_std
 from .iho import DEFAULT_IHO_ORDER, NO_ORDER, check_order, meets_order
 
 
@@ -307,7 +300,9 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     surface = _grid(cells[starts, :2], covered, d, var, res, "spread")
     if uncertainty == "spread":
         return surface
-    return propagated_std(surface, occupancy.columns)
+    width = float(occupancy.metadata.get("sonar_beam_width_deg", 0.0) or 0.0)
+    raw = _grid(cells[starts, :2], covered, d, spread, res, "spread").std ** 2
+    return propagated_std(surface, occupancy.columns, width, raw)
 
 
 def carved_cells(cells: np.ndarray, z: np.ndarray, columns, resolution: float) -> np.ndarray:
@@ -343,51 +338,6 @@ def _uncertainty(occupancy: OccupancyMap, uncertainty: str | None) -> str:
             "by this version); use 'spread'"
         )
     return uncertainty
-
-
-def propagated_std(surface: Surface, columns) -> Surface:
-    """``surface`` with its std replaced by the propagated uncertainty of the column's hits
-    (module doc; ``columns``: :class:`~undertow.occupancy.ColumnStats`, a column no hit landed
-    in taking the nearest one's):
-
-        s^2 = V / W + (X / W) (dd/dx)^2 + (Y / W) (dd/dy)^2,
-
-    the slope dd/dx by central differences of the surface's depths (one-sided beside a column
-    without data, 0 with neither neighbour)."""
-    ny, nx = surface.shape
-    res = surface.resolution
-    held = columns.sums[:, 0] > 0
-    if not held.any() or not surface.coverage.any():
-        return surface
-    j, i = np.nonzero(surface.coverage)
-    i0 = int(round(surface.x0 / res - 0.5))
-    j0 = int(round(surface.y0 / res - 0.5))
-    cells = columns.cells[held]
-    nearest = cKDTree(cells).query(np.stack([i + i0, j + j0], axis=1))[1]
-    means = np.full((ny, nx, 3), np.nan)
-    means[j, i] = columns.sums[held][nearest, 1:] / columns.sums[held][nearest, :1]
-    gx, gy = _slope(surface.depth, 1, res), _slope(surface.depth, 0, res)
-    var = means[..., 0] + means[..., 1] * gx * gx + means[..., 2] * gy * gy
-    std = np.where(surface.coverage & np.isfinite(var), np.sqrt(np.maximum(var, 0.0)),
-                   surface.std)  # fmt: skip
-    return Surface(surface.x0, surface.y0, res, surface.depth, std, surface.coverage, "propagated")
-
-
-def _slope(depth: np.ndarray, axis: int, res: float) -> np.ndarray:
-    """dd/d(axis) of a depth grid by central differences, one-sided where a neighbour has no
-    data, 0 where neither has."""
-    ahead = np.full(depth.shape, np.nan)
-    behind = np.full(depth.shape, np.nan)
-    inner = [slice(None)] * 2
-    outer = [slice(None)] * 2
-    inner[axis], outer[axis] = slice(1, None), slice(None, -1)
-    diff = depth[tuple(inner)] - depth[tuple(outer)]
-    ahead[tuple(outer)] = diff  # d[k + 1] - d[k] at k
-    behind[tuple(inner)] = diff  # d[k] - d[k - 1] at k
-    both = np.stack([ahead, behind])
-    n = np.sum(np.isfinite(both), axis=0)
-    total = np.nansum(both, axis=0)
-    return np.where(n > 0, total / np.maximum(n, 1), 0.0) / res
 
 
 def surface_from_points(points, resolution: float, origin: tuple[float, float] | None = None,

@@ -72,6 +72,7 @@ import numpy as np
 from numba import njit
 
 from ..sim.waves import wavenumber_array
+from .depth_wave import depth_wave_terms, swell_variances, trajectory_depth_noise
 from .samples import SENSOR_SONAR, Samples
 
 #: standard deviation of the sparse kernel k(d; l) in units of l: sqrt(1/6 - 1/pi^2)
@@ -99,13 +100,33 @@ def trajectory_wave(trajectory) -> tuple[float, float] | None:
 
 
 def with_wave(config, trajectory):
-    """``config`` with its ``wave`` resolved: as given, else :func:`trajectory_wave` of the
-    trajectory when the tpu mapper adds the wave's range noise (``wave_range_noise``); other
-    methods, or no wave, unchanged. Resolved once per map, so tiles and the whole agree."""
-    if config.method != "tpu" or not config.wave_range_noise or config.wave is not None:
+    """``config`` with its ``wave`` and ``depth_noise`` resolved for the ``tpu`` mapper: as
+    given, else the wave the trajectory's filter used (:func:`trajectory_wave`) when the
+    mapper adds the wave's range noise or the swell in the depth (``wave_range_noise``,
+    ``wave_depth_noise``), and the depth measurements it fused
+    (:func:`~undertow.mapping.depth_wave.trajectory_depth_noise`) for the latter. Other
+    methods unchanged; what the trajectory does not say stays None. Resolved once per map, so
+    tiles and the whole agree."""
+    if config.method != "tpu":
         return config
-    wave = trajectory_wave(trajectory)
-    return config if wave is None else config.model_copy(update={"wave": wave})
+    update = {}
+    if config.wave is None and (config.wave_range_noise or config.wave_depth_noise):
+        wave = trajectory_wave(trajectory)
+        if wave is not None:
+            update["wave"] = wave
+    if config.wave_depth_noise and config.depth_noise is None:
+        noise = trajectory_depth_noise(trajectory)
+        if noise is not None:
+            update["depth_noise"] = noise
+    return config.model_copy(update=update) if update else config
+
+
+def depth_wave_of(config):
+    """(a, f, std, interval) of the swell in the depth the ``config`` (resolved by
+    :func:`with_wave`) adds, or None."""
+    if not config.wave_depth_noise or config.wave is None or config.depth_noise is None:
+        return None
+    return (*config.wave, *config.depth_noise)
 
 
 def wave_range_std(hits: Samples, rows, wave, resolution: float) -> np.ndarray:
@@ -128,14 +149,34 @@ def wave_std(d, z, wave, resolution: float) -> np.ndarray:
     d, z = np.asarray(d, float), np.asarray(z, float)
     if wave is None or not z.size:
         return np.zeros(z.size)
-    amplitude, frequency = wave
+    e_1, e_2, m = wave_exponentials(d, z, wave[1], resolution)
+    # K_s = sinh(k (h - d)) / sinh(k h) as a ratio of exponentials (no overflow when deep)
+    return wave[0] * np.nan_to_num((e_1 - e_2) / -m) / np.sqrt(2.0)
+
+
+def wave_exponentials(d, z, frequency: float, resolution: float):
+    """(exp(-k d), exp(-k (2 h - d)), expm1(-2 k h)) of :func:`wave_std` (d clipped to [0, h])."""
     h = np.maximum(np.round(z / resolution) * resolution, resolution)
     depths, index = np.unique(h, return_inverse=True)
     k = wavenumbers(2.0 * np.pi * frequency, depths)[index]
     d = np.clip(d, 0.0, h)
-    # K_s = sinh(k (h - d)) / sinh(k h) as a ratio of exponentials (no overflow when deep)
-    k_s = (np.exp(-k * d) - np.exp(-k * (2.0 * h - d))) / -np.expm1(-2.0 * k * h)
-    return amplitude * np.nan_to_num(k_s) / np.sqrt(2.0)
+    return np.exp(-k * d), np.exp(-k * (2.0 * h - d)), np.expm1(-2.0 * k * h)
+
+
+def swell_depth_variance(hits: Samples, rows, var_z, depth_wave, resolution: float):
+    """The swell's share of the pose's depth variance of the samples ``rows`` of ``hits``
+    (:mod:`undertow.mapping.depth_wave`, K_p = cosh(k (h - d)) / cosh(k h) at the sensor's
+    depth d); zeros without ``depth_wave`` (a, f, std, interval) or where the ray is unknown."""
+    out = np.zeros(len(rows))
+    ray = hits.ray[rows]
+    known = ray >= 0
+    if depth_wave is None or not known.any() or not len(hits.origins):
+        return out
+    e_1, e_2, m = wave_exponentials(hits.origins[ray[known], 2], hits.points[rows[known], 2],
+                                    depth_wave[1], resolution)  # fmt: skip
+    var = np.ascontiguousarray(var_z[known], dtype=float)
+    out[known] = swell_variances(var, (e_1 + e_2) / (2.0 + m), *depth_wave_terms(depth_wave))
+    return out
 
 
 @njit(cache=True)
@@ -150,12 +191,15 @@ def wavenumbers(omega, depths):
 
 
 def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
-               sonar_beam_width_deg: float = 0.0, wave=None, resolution: float = 0.1):  # fmt: skip
-    """(sigma_x, sigma_y, sigma_v, s_r') of every hit of ``samples`` (label 1, in order; the
-    free samples need none; module doc): the horizontal standard deviations (pose and
-    footprint), the vertical one, and the range noise in these waves. ``range_std``: s_0 of
+               sonar_beam_width_deg: float = 0.0, wave=None, resolution: float = 0.1,
+               depth_wave=None):  # fmt: skip
+    """(sigma_x, sigma_y, sigma_v, s_r', r_s^2) of every hit of ``samples`` (label 1, in order;
+    the free samples need none; module doc): the horizontal standard deviations (pose and
+    footprint), the vertical one, the range noise in these waves, and the squared range of
+    a sonar's hit (0 for the others). ``range_std``: s_0 of
     the DVL, the sonar and the multibeam (by ``Samples.sensor``; a sample of unknown sensor
-    takes the largest); ``wave``: (amplitude, frequency) or None."""
+    takes the largest); ``wave``: (amplitude, frequency) or None; ``depth_wave``: (a, f, std,
+    interval) of the swell in the pose's depth (:mod:`undertow.mapping.depth_wave`) or None."""
     rows = np.flatnonzero(samples.label > 0.5)
     var = samples.pose_variance[rows]
     ray = samples.ray[rows]
@@ -175,8 +219,9 @@ def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
     sonar = sensor == SENSOR_SONAR
     s_b2 = np.where(sonar, (rng * tan_half / 2.0) ** 2, 0.0)
     s_d2 = np.where(sonar, shortfall(rng, tan_half) ** 2, 0.0)
+    var_z = var[:, 2] + swell_depth_variance(samples, rows, var[:, 2], depth_wave, resolution)
     return (np.sqrt(var[:, 0] + s_b2), np.sqrt(var[:, 1] + s_b2),
-            np.sqrt(var[:, 2] + s_r**2 + s_d2), s_r)  # fmt: skip
+            np.sqrt(var_z + s_r**2 + s_d2), s_r, np.where(sonar, rng * rng, 0.0))  # fmt: skip
 
 
 def shortfall(r, tan_half):
@@ -204,18 +249,24 @@ def lattice_weights(z, sigma_v, resolution: float):
 
 def tpu_hit_weights(samples: Samples, *, resolution: float, base_length: float,
                     max_length: float, range_std, range_std_fraction: float,
-                    sonar_beam_width_deg: float = 0.0, wave=None):  # fmt: skip
+                    sonar_beam_width_deg: float = 0.0, wave=None, depth_wave=None):  # fmt: skip
     """Per hit of ``samples`` (label 1, in order; module doc): (x, y, l_x, l_y, weight
-    sigma_0 (l_0 / l_x) (l_0 / l_y) s_r'^2 / sigma_v^2, sigma_v^2)."""
-    sx, sy, sv, s_r = hit_sigmas(samples, range_std, range_std_fraction, sonar_beam_width_deg,
-                                 wave, resolution)  # fmt: skip
+    sigma_0 (l_0 / l_x) (l_0 / l_y) s_r'^2 / sigma_v^2, sigma_v^2, parts (n, 5): sigma_x^2,
+    sigma_y^2, s_r'^2, r_s^2 and the lattice's v r^2, as
+    :data:`~undertow.mapping.tpuscatter.HIT_PARTS`)."""
+    sx, sy, sv, s_r, r2 = hit_sigmas(samples, range_std, range_std_fraction, sonar_beam_width_deg,
+                                     wave, resolution, depth_wave)  # fmt: skip
     hit = samples.label > 0.5
     lx = np.clip(sx / KERNEL_STD, base_length, max_length)
     ly = np.clip(sy / KERNEL_STD, base_length, max_length)
     precision = np.divide(s_r * s_r, sv * sv, out=np.ones_like(sv), where=sv > 0)
     weight = samples.sigma0[hit] * (base_length / lx) * (base_length / ly) * precision
     points = samples.points[hit]
-    return points[:, 0], points[:, 1], lx, ly, weight, sv * sv
+    z = samples.points[hit, 2]
+    u = (z - (np.floor(z / resolution) + 0.5) * resolution) / resolution
+    lattice = np.minimum(np.abs(u) * (1.0 - np.abs(u)) + (sv / resolution) ** 2, 1.0 - u * u)
+    parts = np.stack([sx * sx, sy * sy, s_r * s_r, r2, lattice * resolution**2], axis=1)
+    return points[:, 0], points[:, 1], lx, ly, weight, sv * sv, parts
 
 
 def tpu_training(samples: Samples, hits=None, **settings):
@@ -225,7 +276,7 @@ def tpu_training(samples: Samples, hits=None, **settings):
     of :func:`tpu_hit_weights`; ``hits``: its result when already computed."""
     if hits is None:
         hits = tpu_hit_weights(samples, **settings)
-    _, _, lx, ly, weight, var_v = hits
+    _, _, lx, ly, weight, var_v, _ = hits
     resolution, base_length = settings["resolution"], settings["base_length"]
     sv = np.sqrt(var_v)
     hit = samples.label > 0.5

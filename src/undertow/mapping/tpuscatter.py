@@ -37,6 +37,7 @@ import numpy as np
 from numba import njit
 
 from .chunks import CHUNK_SHIFT, find, find_or_insert, pack_key
+from .depth_wave import depth_wave_terms, swell_variance
 from .rayscatter import (
     BLOCK,
     PLACED_CACHE,
@@ -49,14 +50,20 @@ from .samples import SENSOR_SONAR
 from .tpu import KERNEL_STD, wavenumbers
 
 _TWO_PI = 2.0 * np.pi
+#: what :attr:`TpuHits.parts` holds per hit: its horizontal variances sigma_x^2 and sigma_y^2,
+#: its range's own noise s_r'^2, its range squared when it is a sonar's (0 for the others:
+#: the shortfall s_d = r (sec(b / 2) - 1) scales with it) and the variance v r^2 of its
+#: three cells about its depth (:func:`~undertow.mapping.tpu.lattice_weights`)
+HIT_PARTS = ("var_x", "var_y", "var_r", "sonar_r2", "var_lattice")
 _NO_WAVE = (np.zeros((2, 0)), np.zeros(0))  # hit_lattice's exponentials without a wave
 
 
 class TpuHits(NamedTuple):
     """Per hit (ray) i: the point's x, y (o + r v), its lengths along x and y as the scatter
     takes them (``l``, (R, 2)), its three cells' z (R, 3) and weights (R, 3; 0: left out); the
-    free samples' lengths (3,), as the scatter takes them; the hit's weight (R,) and
-    vertical variance sigma_v^2 (R,); and the largest finite length of ``l`` (m, 0 when none
+    free samples' lengths (3,), as the scatter takes them; the hit's weight (R,), its
+    vertical variance sigma_v^2 (R,) and the parts of its uncertainty the column sums keep
+    (R, 5: :data:`HIT_PARTS`); and the largest finite length of ``l`` (m, 0 when none
     is), the reach of the hits' column sums."""
 
     x: np.ndarray
@@ -67,6 +74,7 @@ class TpuHits(NamedTuple):
     l_free: np.ndarray
     weight: np.ndarray
     var_v: np.ndarray
+    parts: np.ndarray
     reach: float
 
 
@@ -104,23 +112,26 @@ def hit_constants(resolution: float, base_length: float, max_length: float, rang
 
 def tpu_hits(rays, *, resolution: float, base_length: float, max_length: float, range_std,
              range_std_fraction: float, sonar_beam_width_deg: float = 0.0,
-             wave=None) -> TpuHits:  # fmt: skip
+             wave=None, depth_wave=None) -> TpuHits:  # fmt: skip
     """:class:`TpuHits` of ``rays`` (:class:`~undertow.mapping.samples.Rays`), the arguments
     as :func:`~undertow.mapping.tpu.tpu_training`'s (the same values, bit for bit)."""
     k = hit_constants(float(resolution), float(base_length), float(max_length),
                       tuple(float(v) for v in range_std), float(range_std_fraction),
                       float(sonar_beam_width_deg))  # fmt: skip
-    if wave is None:
-        e, m, amplitude = _NO_WAVE[0], _NO_WAVE[1], 0.0
+    frequency = wave[1] if wave is not None else depth_wave[1] if depth_wave is not None else 0
+    if not frequency:
+        e, m = _NO_WAVE
     else:  # the exponentials by numpy, as wave_std takes them (numba's differ in the last bit)
-        amplitude, frequency = float(wave[0]), float(wave[1])
-        args = wave_arguments(rays.origin, rays.direction, rays.r, 2.0 * np.pi * frequency, k.res)
+        args = wave_arguments(rays.origin, rays.direction, rays.r, 2.0 * np.pi * float(frequency),
+                              k.res)  # fmt: skip
         e, m = np.exp(args[:2]), np.expm1(args[2])
-    *out, weight, var_v, reach = hit_lattice(rays.origin, rays.direction, rays.r, rays.var,
-                                             rays.sig, rays.sensor, e, m, amplitude, k.s0,
-                                             k.fraction, k.unknown, k.tan_half, k.base,
-                                             k.max_length, k.cap, k.res)  # fmt: skip
-    return TpuHits(*out, k.l_free, weight, var_v, reach)
+    amplitude = 0.0 if wave is None else float(wave[0])
+    swell = depth_wave_terms(depth_wave)
+    *out, weight, var_v, parts, reach = hit_lattice(rays.origin, rays.direction, rays.r, rays.var,
+                                                    rays.sig, rays.sensor, e, m, amplitude, swell,
+                                                    k.s0, k.fraction, k.unknown, k.tan_half,
+                                                    k.base, k.max_length, k.cap, k.res)  # fmt: skip
+    return TpuHits(*out, k.l_free, weight, var_v, parts, reach)
 
 
 @njit(cache=True, error_model="numpy")
@@ -155,12 +166,16 @@ def _wave_std(e1, e2, m, amplitude):
 
 
 @njit(cache=True, error_model="numpy")
-def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fraction, unknown,
-                tan_half, base, max_length, cap, res):  # fmt: skip
-    """(x, y, l (R, 2), z (R, 3), w (R, 3), weight, var_v) of :class:`TpuHits`: per ray the
+def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, swell, s0, fraction,
+                unknown, tan_half, base, max_length, cap, res):  # fmt: skip
+    """(x, y, l (R, 2), z (R, 3), w (R, 3), weight, var_v, parts) of :class:`TpuHits`: per ray
+    the
     hit m = o + r v,
     the wave's s_w (:func:`_wave_std` of the exponentials ``e`` (2, R) and ``m`` (R,) of
-    :func:`wave_arguments`' arguments; 0 where ``e`` is empty: no wave), its range ||m - o||,
+    :func:`wave_arguments`' arguments; 0 where ``e`` is empty: no wave), the swell's share of
+    the pose's depth variance (:func:`~undertow.mapping.depth_wave.swell_variance` of K_p =
+    (e_1 + e_2) / (2 + m) and ``swell``, :func:`~undertow.mapping.depth_wave.depth_wave_terms`'
+    a, cos(omega Delta), R), its range ||m - o||,
     s_r' = hypot(s_0 + f ||m - o||, s_w), the footprint s_b (the sonar:
     ||m - o|| tan(b / 2) / 2) and shortfall s_d (the sonar: ||m - o|| (sec(b / 2) - 1)),
     sigma_x,y = sqrt(s_x,y^2 + s_b^2), sigma_v = sqrt(s_z^2 + s_r'^2 + s_d^2),
@@ -171,7 +186,7 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
     shortfall = np.sqrt(1.0 + tan_half * tan_half) - 1.0  # sec(b / 2) - 1
     hx, hy = np.empty(n), np.empty(n)
     hl, hz, hw = np.empty((n, 2)), np.empty((n, 3)), np.empty((n, 3))
-    h_weight, h_var = np.empty(n), np.empty(n)
+    h_weight, h_var, h_parts = np.empty(n), np.empty(n), np.zeros((n, 5))
     reach = 0.0
     for i in range(n):
         m0 = origin[i, 0] + r[i] * direction[i, 0]
@@ -181,7 +196,11 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
         rng = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
         s = np.int64(sensor[i])
         s = s if 0 <= s < 3 else unknown
-        s_w = _wave_std(e[0, i], e[1, i], m[i], amplitude) if e.shape[1] == n else 0.0
+        s_w, var_z = 0.0, var[i, 2]
+        if e.shape[1] == n:
+            s_w = _wave_std(e[0, i], e[1, i], m[i], amplitude)
+            k_p = (e[0, i] + e[1, i]) / (2.0 + m[i])
+            var_z = var_z + swell_variance(var_z, k_p, swell[0], swell[1], swell[2])
         s_r = np.hypot(s0[s] + fraction[s] * rng, s_w)
         s_b2, s_d2 = 0.0, 0.0
         if s == SENSOR_SONAR:
@@ -189,8 +208,9 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
             s_b2 = s_b * s_b
             s_d = rng * shortfall
             s_d2 = s_d * s_d
+            h_parts[i, 3] = rng * rng
         sx, sy = np.sqrt(var[i, 0] + s_b2), np.sqrt(var[i, 1] + s_b2)
-        sv = np.sqrt(var[i, 2] + s_r * s_r + s_d2)
+        sv = np.sqrt(var_z + s_r * s_r + s_d2)
         lx = min(max(sx / KERNEL_STD, base), max_length)
         ly = min(max(sy / KERNEL_STD, base), max_length)
         precision = s_r * s_r / (sv * sv) if sv > 0 else 1.0
@@ -207,13 +227,15 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, s0, fra
         w_minus = max((u * u + v - u) / 2.0, 0.0)
         w_plus = max((u * u + v + u) / 2.0, 0.0)
         w_zero = max(1.0 - w_minus - w_plus, 0.0)
+        h_parts[i, 4] = v * res * res
         hz[i, 0], hz[i, 1], hz[i, 2] = zc + res * -1.0, zc + res * 0.0, zc + res * 1.0
         hw[i, 0], hw[i, 1], hw[i, 2] = weight * w_minus, weight * w_zero, weight * w_plus
         h_weight[i], h_var[i] = weight, sv * sv
+        h_parts[i, 0], h_parts[i, 1], h_parts[i, 2] = sx * sx, sy * sy, s_r * s_r
         for j in range(2):
             if np.isfinite(hl[i, j]):
                 reach = max(reach, hl[i, j])
-    return hx, hy, hl, hz, hw, h_weight, h_var, reach
+    return hx, hy, hl, hz, hw, h_weight, h_var, h_parts, reach
 
 
 @njit(cache=True, error_model="numpy")

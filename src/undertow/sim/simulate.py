@@ -106,7 +106,7 @@ def simulate(scenario: Scenario, seed: int | None = None) -> SimulationResult:
         rngs["pressure"],
     )
     sonar = simulate_sonar(
-        motion, tank, s.sonar, mounting.sonar, s.water.sound_speed_m_s, T, rngs["sonar"]
+        motion, tank, s.sonar, mounting.sonar, s.water.sound_speed_m_s, T, rngs["sonar"], wave
     )
     probe = simulate_wave_probe(wave, s.wave_probe, T, rngs["wave_probe"])
     multibeam = None

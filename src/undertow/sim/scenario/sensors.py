@@ -128,6 +128,10 @@ class SonarModel(_Model):
     fan_azimuths: int = Field(12, ge=3, description="rays per ring")
     range_sigma: float = Field(0.01, ge=0, description="m, assumed")
     range_sigma_fraction: float = Field(5.0e-3, ge=0, description="Ping2 0.5 % of range")
+    wave_range_noise_coefficient: float = Field(
+        1.0, ge=0, description="extra range sigma = coeff x vertical orbital displacement RMS "
+        "(the DVL's wave range term)"
+    )  # fmt: skip
     min_range: float = Field(0.3, ge=0, description="Ping2 spec")
     max_range: float = Field(100.0, gt=0, description="Ping2 spec: 100 m range")
     confidence_window: float = Field(

@@ -7,9 +7,11 @@ Barometer at depth d (world z of the sensor point, lever arm included):
 Ping sonar: the first return inside the cone of full angle alpha is the minimum slant range over
 the cone, found by casting a fan (the axis plus ``rings`` rings of ``azimuths`` rays at half
 angles j alpha / (2 rings)) and taking the minimum r*; measured
-r = (c_set / c_true) (r* + N(0, s_0^2 + (f r*)^2)): the Ping converts the echo's two-way travel
-time t to c_set t / 2 with the sound speed it is set to (ping-protocol ``set_speed_of_sound``,
-1500 m/s by default), c_true the water's.
+r = (c_set / c_true) (r* + N(0, s_0^2 + (f r*)^2 + (kappa_r zeta_rms(d))^2)): the Ping converts
+the echo's two-way travel time t to c_set t / 2 with the sound speed it is set to
+(ping-protocol ``set_speed_of_sound``, 1500 m/s by default), c_true the water's; the wave term
+is the DVL's (dvl.py: the acoustic path's disturbance, kappa_r times the vertical orbital
+displacement RMS at the sonar's depth d), which a Ping on the same vehicle meets alike.
 Confidence = share of the fan's rays whose range is within ``confidence_window`` of r* (a wide
 flat echo is a confident one; a ray fan split by the rock edge is not). No return in
 [min_range, max_range]: range NaN, confidence 0.
@@ -67,6 +69,7 @@ def simulate_sonar(
     sound_speed_true: float,
     duration: float,
     rng,
+    wave: LinearWave | WaveField | None = None,
 ) -> SonarRange:
     t = sample_times(duration, config.rate_hz)
     n = t.size
@@ -82,6 +85,10 @@ def simulate_sonar(
     within = np.abs(ranges - first[:, None]) <= config.confidence_window
     confidence = np.where(hit, within.sum(axis=1) / m, 0.0)
     sigma = np.hypot(config.range_sigma, config.range_sigma_fraction * np.nan_to_num(first))
+    if wave is not None and config.wave_range_noise_coefficient > 0:
+        _, W = wave.velocity_amplitude_at(kin.position[:, 2], t)  # as the DVL's (dvl.py)
+        zeta_rms = (W / wave.omega_at(t)) / np.sqrt(2.0)
+        sigma = np.hypot(sigma, config.wave_range_noise_coefficient * zeta_rms)
     scale = config.sound_speed_setting / sound_speed_true
     measured = scale * (first + sigma * rng.standard_normal(n))
     ok = hit & (measured >= config.min_range) & (measured <= config.max_range)
