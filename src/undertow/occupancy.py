@@ -38,13 +38,15 @@ CARVE_FIELDS = 4
 @dataclass(frozen=True, eq=False)
 class ColumnStats:
     """Per (x, y) column (index i = floor(x / res), j = floor(y / res)): the hit evidence it
-    received and that evidence's uncertainties, sum_i w_i, sum_i w_i sigma_v,i^2,
-    sum_i w_i s_x,i^2, sum_i w_i s_y,i^2, sum_i w_i s_r,i^2, sum_i w_i^2 s_r,i^2,
-    sum_i w_i r_s,i^2 (:data:`COLUMN_SUMS`; w_i the kernel-weighted mass of hit i in the
-    column, sigma_v,i its vertical standard deviation, s_x,i and s_y,i the standard deviations
-    of its kernel across the floor, s_r,i the share of sigma_v,i that is its range's own
-    noise, independent from hit to hit, r_s,i its range when a sonar's, else 0; sums of :data:`LEGACY_SUMS` columns, a map written before the last two, read
-    them as zeros). ``carve`` (K, 4) or None: the two
+    received and that evidence's uncertainties, the sums of :data:`COLUMN_SUMS` (W, V, X, Y,
+    R, U, Q, D_x, D_y, L of :mod:`undertow.mapping.depth_std`): sum_i w_i, and sum_i w_i of
+    sigma_v,i^2, s_x,i^2, s_y,i^2, s_r,i^2, then sum_i w_i^2 s_r,i^2, and sum_i w_i of r_s,i^2,
+    dx_i^2, dy_i^2, c_i (w_i the kernel-weighted mass of hit i in the column, sigma_v,i its
+    vertical standard deviation, s_x,i and s_y,i its horizontal ones, s_r,i the share of
+    sigma_v,i that is its range's own noise, independent from hit to hit, r_s,i its range when
+    a sonar's, else 0, dx_i and dy_i the column centre's offset from it, c_i the variance of
+    the cells the mapper put it on; sums of :data:`LEGACY_SUMS` columns, a map written before
+    the last six, read them as zeros). ``carve`` (K, 4) or None: the two
     deepest depth intervals a sonar's cone found free in the column, F_1, T_1, F_2, T_2 (m, z
     down; F_1 >= F_2 the intervals' bottoms, T their tops; NaN where fewer;
     :mod:`undertow.mapping.carve`). Written by the ``tpu`` mapper

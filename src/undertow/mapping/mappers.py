@@ -364,7 +364,7 @@ class TpuBkiMapper(Mapper):
                 {"amplitude_m": self.wave[0], "frequency_hz": self.wave[1]},
                 "depth_wave": None if self.depth_wave is None else
                 dict(zip(("amplitude_m", "frequency_hz", "depth_std_m", "interval_s"),
-                         self.depth_wave))}  # fmt: skip
+                         self.depth_wave, strict=True))}  # fmt: skip
 
 
 def out_of_memory(resolution: float) -> ConfigError:
