@@ -104,6 +104,32 @@ def test_dvl_altitude_and_sonar_range_over_flat_floor():
     assert np.all((log.sonar.confidence >= 0) & (log.sonar.confidence <= 1))
 
 
+def test_sonar_range_noise_grows_with_the_waves_as_the_dvls():
+    """The Ping meets the acoustic path's wave disturbance the DVL's ranges do: its range
+    noise is hypot(s_0, kappa_r a sinh(k (h - d)) / sinh(k h) / sqrt 2) at its depth d."""
+    s = scenario(
+        "wave-a0.10-f0.75", **AT_REST, sonar={"range_sigma": 0.004, "range_sigma_fraction": 0.0}
+    )
+    log = simulate(s, seed=4).log
+    wave = build_wave(s)
+    k, h, a, d = wave.k, s.water.depth_m, 0.1, 0.5 + 0.306
+    zeta = a * np.sinh(k * (h - d)) / np.sinh(k * h) / np.sqrt(2)
+    scale = s.sonar.sound_speed_setting / s.water.sound_speed_m_s
+    r = log.sonar.range[log.sonar.t < 299.0]
+    assert std_in_chi2_bounds(r - scale * (h - d), scale * np.hypot(0.004, zeta))
+    calm = scenario(
+        "wave-a0.10-f0.75",
+        **AT_REST,
+        sonar={
+            "range_sigma": 0.004,
+            "range_sigma_fraction": 0.0,
+            "wave_range_noise_coefficient": 0.0,
+        },
+    )
+    r = simulate(calm, seed=4).log.sonar.range[log.sonar.t < 299.0]
+    assert std_in_chi2_bounds(r - scale * (h - d), scale * 0.004)
+
+
 @pytest.mark.parametrize("setting", [1440.0, 1500.0])
 def test_sound_speed_scales_the_ranges(setting):
     """A range is c_set t / 2 of the echo's travel time t: the ranges of one run in waters of

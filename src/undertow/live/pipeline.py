@@ -564,11 +564,12 @@ def _filter_params(settings: Settings, calibration) -> dict:
 
 def _live_mapping(settings: Settings):
     """The mapping config of a live session: the adaptive kernel needs fixed bounds online; tpu
-    maps without the wave term (the wave is not known yet when a ping is mapped)."""
+    maps without the wave terms, in the ranges and in the poses' depth (the wave, and the
+    filter's pressure updates, are not known yet when a ping is mapped)."""
     config = settings.mapping
     if config.method == "adaptive" and config.variance_bounds is None:
         config = config.model_copy(update={"variance_bounds": LIVE_VARIANCE_BOUNDS})
-    return config.model_copy(update={"wave_range_noise": False})
+    return config.model_copy(update={"wave_range_noise": False, "wave_depth_noise": False})
 
 
 def _write_yaml(path: Path, doc: dict) -> None:
