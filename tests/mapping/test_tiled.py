@@ -89,15 +89,16 @@ def test_tiled_equals_single_process(survey, method):
 
 
 def test_tiled_tpu_with_a_wave_equals_single_process(survey):
-    """The wave's range noise depends on each hit alone (its depth, its sensor's): tiles map
-    as the whole, and differ from the map without it."""
-    config = MappingConfig(method="tpu", wave=(0.15, 0.33))
+    """The wave's range noise and its swell in the poses' depth depend on each hit alone (its
+    depth, its sensor's, its pose's): tiles map as the whole, and differ from the map without."""
+    config = MappingConfig(method="tpu", wave=(0.15, 0.33), depth_noise=(0.01, 0.1))
     result = map_tiled(survey, config, TILE_M, scheduler="sync")
     single = single_process(survey, config)
     assert_same_map(result.map, single)
     np.testing.assert_array_equal(result.map.columns.cells, single.columns.cells)
     np.testing.assert_allclose(result.map.columns.sums, single.columns.sums, rtol=1e-12)
     assert result.metadata["wave"] == (0.15, 0.33)
+    assert result.metadata["depth_noise"] == (0.01, 0.1)
     calm = single_process(survey, MappingConfig(method="tpu"))
     assert not np.array_equal(sorted_map(calm)[1], sorted_map(single)[1])
 

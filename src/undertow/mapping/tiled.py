@@ -71,6 +71,8 @@ TPU_FIELDS = (
     "sonar_carve",
     "wave_range_noise",
     "wave",
+    "wave_depth_noise",
+    "depth_noise",
 )
 
 
