@@ -200,3 +200,17 @@ def test_column_sums_merge_column_by_column():
     np.testing.assert_array_equal(merged.sums, [np.arange(1.0, 11.0), [3] * 10, [3] * 10])
     with pytest.raises(DataError, match="2 columns but 1 rows"):
         ColumnStats([[0, 0], [1, 1]], [[1, 2, 3, 4]])
+
+
+def test_sums_without_carved_intervals_seed_a_grid_whole():
+    """A prior's sums with no carved intervals (or a map's of before them) go into the column
+    grid and come back: the four alpha sums, the six beta sums, no interval."""
+    from undertow.mapping.columns import ColumnGrid
+
+    grid = ColumnGrid(RES)
+    sums = np.arange(1.0, 21.0).reshape(2, 10)
+    grid.add_stats(ColumnStats([[3, -4], [7, 2]], sums))
+    back = grid.stats()
+    np.testing.assert_array_equal(back.cells, [[3, -4], [7, 2]])
+    np.testing.assert_allclose(back.sums, sums, rtol=1e-6)  # float32 storage
+    assert np.isnan(back.carve).all()

@@ -6,21 +6,24 @@ the sparse kernel of ``eq:kernel`` at the column's centre, as the map's product 
 the hit's cells: :mod:`undertow.mapping.tpu`), the hits' evidence and its uncertainties
 (:data:`~undertow.occupancy.COLUMN_SUMS`):
 
-    W = sum_i w_i,   V = sum_i w_i sigma_v,i^2,   X = sum_i w_i (c l_x,i)^2,
-    Y = sum_i w_i (c l_y,i)^2,
+    W = sum_i w_i,   V = sum_i w_i sigma_v,i^2,   X = sum_i w_i sigma_x,i^2,
+    Y = sum_i w_i sigma_y,i^2,   R = sum_i w_i s_r,i^2,   U = sum_i w_i^2 s_r,i^2,
+    Q = sum_i w_i r_s,i^2,   D_x = sum_i w_i dx_i^2,   D_y = sum_i w_i dy_i^2,
+    L = sum_i w_i c_i,
 
-sigma_v,i the hit's vertical standard deviation (pose, range, waves, a wide beam's shortfall)
-and c l_x,i, c l_y,i the standard deviations of its kernel across the floor (c =
-:data:`~undertow.mapping.tpu.KERNEL_STD`; the pose's and a wide beam's horizontal
-uncertainty, at least the base kernel's): how far from where it was placed the map spreads
-it. The surface reads V / W, X / W and Y / W as the column's vertical and horizontal
-uncertainty (:func:`~undertow.mapping.surface.evidence_surface`). The sums are kept in a
-second :class:`~undertow.mapping.grid.ChunkedGrid` of the map's resolution whose cells
-(i, j, c) hold sum c of column (i, j) as alpha mass (float32, as the map's masses), written by
-:func:`add_column_sums` (one kernel evaluation per column for the four sums); it spills as
-the map's grid does, with an eighth of its resident budget. Cells (i, j, 4 .. 7) hold the two
-deepest intervals a sonar's cone carved free in the column (:mod:`undertow.mapping.carve`,
-written by :func:`~undertow.mapping.carve.add_carve`).
+sigma_v,i the hit's vertical standard deviation (pose, range, waves, a wide beam's
+shortfall), sigma_x,i and sigma_y,i its horizontal ones (the pose's and a wide beam's
+footprint), s_r,i its range's own noise, r_s,i its range when a sonar's (else 0), dx_i and
+dy_i the column centre's offset from it and c_i the variance of the three cells it was put on
+(:data:`~undertow.mapping.tpuscatter.HIT_PARTS`). The surface reads them as the column
+depth's standard deviation (:mod:`undertow.mapping.depth_std`). The sums are kept in a second
+:class:`~undertow.mapping.grid.ChunkedGrid` of the map's resolution: cells (i, j, 0 .. 3) hold
+W, V, X, Y as alpha mass and cells (i, j, 0 .. 5) the other six as beta mass (float32, as the
+map's masses; a column's ten sums in one chunk), written by :func:`add_column_sums` (one
+kernel evaluation per column for all of them); it spills as the map's grid does, with an
+eighth of its resident budget. Cells (i, j, 4 .. 7) hold the two deepest intervals a sonar's
+cone carved free in the column as alpha mass (:mod:`undertow.mapping.carve`, written by
+:func:`~undertow.mapping.carve.add_carve`).
 """
 
 from __future__ import annotations
@@ -116,10 +119,10 @@ class ColumnGrid:
         (those are kept, not added)."""
         if stats is None or not len(stats):
             return
-        values = stats.sums[:, :ALPHA_SUMS]
-        if stats.carve is not None:
-            values = np.hstack([values, encode(stats.carve)])
-        ranged = np.zeros_like(values)
+        n = len(stats)
+        carve = encode(stats.carve) if stats.carve is not None else np.zeros((n, CARVE_FIELDS))
+        values = np.hstack([stats.sums[:, :ALPHA_SUMS], carve])  # alpha: cells 0 .. 7
+        ranged = np.zeros_like(values)  # beta: the other sums, cells 0 .. 5
         ranged[:, : len(COLUMN_SUMS) - ALPHA_SUMS] = stats.sums[:, ALPHA_SUMS:]
         k = values.shape[1]
         cells = np.column_stack([np.repeat(stats.cells, k, axis=0),
