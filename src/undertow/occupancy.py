@@ -29,7 +29,7 @@ MAP_FILE = "a map.npz written by `undertow map` (or its folder)"
 COLUMN_SUMS = ("weight", "weight_var_v", "weight_var_x", "weight_var_y", "weight_var_r",
                "weight2_var_r", "weight_sonar_r2", "weight_dx2", "weight_dy2",
                "weight_var_lattice")  # fmt: skip
-#: the sums of the maps written before the range sums (these read as zeros: the std as then)
+#: the sums of the maps written before the last six (those read as zeros)
 LEGACY_SUMS = 4
 #: the values of :attr:`ColumnStats.carve` per column: two free intervals' bottoms and tops
 CARVE_FIELDS = 4

@@ -213,3 +213,6 @@ def test_tpu_settings_are_checked():
         MappingConfig.from_dict({"method": "tpu", "base_length": 3.0})
     with pytest.raises(ConfigError, match="range_std_dvl"):
         MappingConfig.from_dict({"range_std_dvl": 0})
+    for bad in ([0.0, 0.1], [0.01, -1.0], [0.01], [0.01, float("nan")]):
+        with pytest.raises(ConfigError, match=r"depth_noise"):
+            MappingConfig.from_dict({"depth_noise": bad})

@@ -57,8 +57,8 @@ from .tpu import shortfall
 KAPPA = 3.0
 #: the stored values are depths plus this (m), so that a cell at zero means "no interval"
 OFFSET = 1000.0
-#: the column sums kept as alpha mass in cells (i, j, 0 ..): the first four (the two range
-#: sums are kept as beta mass, :mod:`undertow.mapping.columns`)
+#: the column sums kept as alpha mass in cells (i, j, 0 ..): the first four (the other six
+#: are kept as beta mass, :mod:`undertow.mapping.columns`)
 ALPHA_SUMS = 4
 #: the first of the four column cells (F_1, T_1, F_2, T_2) the intervals take in the ColumnGrid
 FIRST_CELL = ALPHA_SUMS

@@ -75,7 +75,7 @@ class ColumnGrid:
 
     def _add(self, x, y, l, weight, var_v, parts, extent, reach: float) -> None:
         """Add hits at (x, y) with kernel lengths l (n, 2), weights w, sigma_v^2 and the parts
-        (n, 4) of :data:`~undertow.mapping.tpuscatter.HIT_PARTS`, inside the
+        (n, 5) of :data:`~undertow.mapping.tpuscatter.HIT_PARTS`, inside the
         x-y box ``extent`` (lo, hi); ``reach`` the largest finite l (:meth:`reach`). Hits with
         a value not finite, or w or l not positive, are left out (a hit without weight adds
         nothing to the map either)."""
@@ -174,9 +174,11 @@ def _kernel(d, l):
 def add_column_sums(start, x, y, l, weight, var_v, parts, res, table_keys, table_vals,
                     chunk_keys, n_chunks, alpha, beta):  # fmt: skip
     """From hit ``start``: add (w, w sigma_v^2, w sigma_x^2, w sigma_y^2) k to the alpha mass
-    of cells (i, j, 0 .. 3) and (w s_r'^2 k, (w k)^2 s_r'^2, w r_s^2 k) to the beta mass of
-    cells (i, j, 0 .. 2) (``parts``: sigma_x^2, sigma_y^2, s_r'^2, r_s^2 per hit),
-    k = k(|dx|; l_x) k(|dy|; l_y), of every column (i, j) whose centre ((i + 1/2) res,
+    of cells (i, j, 0 .. 3) and (w s_r'^2 k, (w k)^2 s_r'^2, w r_s^2 k, w dx^2 k, w dy^2 k,
+    w c k) to the beta mass of cells (i, j, 0 .. 5) (``parts``: sigma_x^2, sigma_y^2, s_r'^2,
+    r_s^2 and c per hit, :data:`~undertow.mapping.tpuscatter.HIT_PARTS`; dx, dy the column
+    centre's offset from the hit), k = k(|dx|; l_x) k(|dy|; l_y), of every column (i, j)
+    whose centre ((i + 1/2) res,
     ...) lies within :data:`SUPPORT` of the hit's kernel lengths (module doc). A hit starts
     only when the chunk arrays have room for every chunk it may place; returns the first hit
     without that room (the caller grows the arrays and resumes there), or n."""

@@ -301,7 +301,9 @@ def evidence_surface(occupancy: OccupancyMap, threshold: float = OCCUPIED_THRESH
     if uncertainty == "spread":
         return surface
     width = float(occupancy.metadata.get("sonar_beam_width_deg", 0.0) or 0.0)
-    raw = _grid(cells[starts, :2], covered, d, spread, res, "spread").std ** 2
+    raw = np.full(surface.shape, np.nan)  # the spread before the lattice's least is removed
+    col, row = (cells[starts, :2] - cells[starts, :2].min(axis=0)).T
+    raw[row[covered], col[covered]] = spread[covered]
     return propagated_std(surface, occupancy.columns, width, raw)
 
 

@@ -230,20 +230,28 @@ def shortfall(r, tan_half):
     return r * (np.sqrt(1.0 + tan_half * tan_half) - 1.0)
 
 
+def lattice_spread(z, sigma_v, resolution: float):
+    """(z_c, u, v) of the lattice (module doc): the nearest cell centre z_c to each depth z,
+    its offset u = (z - z_c) / r in cells and the variance v (in cells^2) of the three cells'
+    weights about z, |u| (1 - |u|) + sigma_v^2 / r^2 capped at 1 - u^2."""
+    r = float(resolution)
+    z = np.asarray(z, float)
+    zc = (np.floor(z / r) + 0.5) * r
+    u = (z - zc) / r
+    au = np.abs(u)
+    v = np.minimum(au * (1.0 - au) + (np.asarray(sigma_v, float) / r) ** 2, 1.0 - u * u)
+    return zc, u, v
+
+
 def lattice_weights(z, sigma_v, resolution: float):
     """(centres (n, 3), weights (n, 3)): the three cell centres around each depth z (z_c - r,
     z_c, z_c + r) and the weights that keep its mean z and variance sigma_v^2 plus the
-    least the cells can hold (module doc; v capped at 1 - u^2)."""
-    r = float(resolution)
-    k = np.floor(np.asarray(z, float) / r)
-    zc = (k + 0.5) * r
-    u = (np.asarray(z, float) - zc) / r
-    au = np.abs(u)
-    v = np.minimum(au * (1.0 - au) + (np.asarray(sigma_v, float) / r) ** 2, 1.0 - u * u)
+    least the cells can hold (module doc; :func:`lattice_spread`)."""
+    zc, u, v = lattice_spread(z, sigma_v, resolution)
     w_minus = np.maximum((u * u + v - u) / 2.0, 0.0)
     w_plus = np.maximum((u * u + v + u) / 2.0, 0.0)
     w_zero = np.maximum(1.0 - w_minus - w_plus, 0.0)
-    centres = zc[:, None] + r * np.array([-1.0, 0.0, 1.0])
+    centres = zc[:, None] + float(resolution) * np.array([-1.0, 0.0, 1.0])
     return centres, np.stack([w_minus, w_zero, w_plus], axis=1)
 
 
@@ -262,10 +270,8 @@ def tpu_hit_weights(samples: Samples, *, resolution: float, base_length: float,
     precision = np.divide(s_r * s_r, sv * sv, out=np.ones_like(sv), where=sv > 0)
     weight = samples.sigma0[hit] * (base_length / lx) * (base_length / ly) * precision
     points = samples.points[hit]
-    z = samples.points[hit, 2]
-    u = (z - (np.floor(z / resolution) + 0.5) * resolution) / resolution
-    lattice = np.minimum(np.abs(u) * (1.0 - np.abs(u)) + (sv / resolution) ** 2, 1.0 - u * u)
-    parts = np.stack([sx * sx, sy * sy, s_r * s_r, r2, lattice * resolution**2], axis=1)
+    lattice = lattice_spread(points[:, 2], sv, resolution)[2] * resolution**2
+    parts = np.stack([sx * sx, sy * sy, s_r * s_r, r2, lattice], axis=1)
     return points[:, 0], points[:, 1], lx, ly, weight, sv * sv, parts
 
 

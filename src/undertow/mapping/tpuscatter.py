@@ -169,19 +169,19 @@ def _wave_std(e1, e2, m, amplitude):
 def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, swell, s0, fraction,
                 unknown, tan_half, base, max_length, cap, res):  # fmt: skip
     """(x, y, l (R, 2), z (R, 3), w (R, 3), weight, var_v, parts) of :class:`TpuHits`: per ray
-    the
-    hit m = o + r v,
-    the wave's s_w (:func:`_wave_std` of the exponentials ``e`` (2, R) and ``m`` (R,) of
-    :func:`wave_arguments`' arguments; 0 where ``e`` is empty: no wave), the swell's share of
-    the pose's depth variance (:func:`~undertow.mapping.depth_wave.swell_variance` of K_p =
-    (e_1 + e_2) / (2 + m) and ``swell``, :func:`~undertow.mapping.depth_wave.depth_wave_terms`'
-    a, cos(omega Delta), R), its range ||m - o||,
+    the hit m = o + r v; the wave's s_w (:func:`_wave_std` of the exponentials ``e`` (2, R)
+    and ``m`` (R,) of :func:`wave_arguments`' arguments; 0 where ``e`` is empty: no wave);
+    the swell's share of the pose's depth variance
+    (:func:`~undertow.mapping.depth_wave.swell_variance` of K_p = (e_1 + e_2) / (2 + m) and
+    ``swell``, the a, cos(omega Delta), R of
+    :func:`~undertow.mapping.depth_wave.depth_wave_terms`); its range ||m - o||,
     s_r' = hypot(s_0 + f ||m - o||, s_w), the footprint s_b (the sonar:
     ||m - o|| tan(b / 2) / 2) and shortfall s_d (the sonar: ||m - o|| (sec(b / 2) - 1)),
     sigma_x,y = sqrt(s_x,y^2 + s_b^2), sigma_v = sqrt(s_z^2 + s_r'^2 + s_d^2),
     l_x,y = clip(sigma / c, l_0, l_cap), the weight and the lattice of
-    :mod:`undertow.mapping.tpu` (``unknown``: the sensor taken for a code outside 0 .. 2); and
-    the largest finite l as the scatter takes it (:attr:`TpuHits.reach`)."""
+    :mod:`undertow.mapping.tpu` (``unknown``: the sensor taken for a code outside 0 .. 2),
+    the parts of :data:`HIT_PARTS`; and the largest finite l as the scatter takes it
+    (:attr:`TpuHits.reach`)."""
     n = r.shape[0]
     shortfall = np.sqrt(1.0 + tan_half * tan_half) - 1.0  # sec(b / 2) - 1
     hx, hy = np.empty(n), np.empty(n)
