@@ -55,14 +55,20 @@ def test_each_part_of_the_std_in_closed_form():
     """n hits of weight w per column, each with the pose's depth variance s_z^2, range noise
     s_r^2, a sonar's range r_s (shortfall r_s e at the mapper's e_b) and horizontal variance
     s_h^2, lying a^2 off the column's centre on average and put on cells of variance c about
-    it: s^2 = s_z^2 + s_r^2 / n + r_s^2 e(beta)^2 + s_h^2 |g|^2 + max(S - c - sigma_v^2 -
-    a^2 |g|^2, 0)."""
+    it: s^2 = s_z^2 + s_r^2 / n + r_s^2 e(beta)^2 + s_h^2 |g|^2 + max(S - c - sigma_v'^2 -
+    a^2 |g|^2, 0), sigma_v'^2 the hit's variance with the shortfall of this slope."""
     gx, gy, width = 0.08, -0.05, 25.0
     e_b = 1 / np.cos(np.deg2rad(width / 2)) - 1
     beta = np.arctan(np.hypot(gx, gy))  # below b / 2: the shortfall of this slope
     s_z2, s_r2, r_s, s_h2, a2, c, n = 1e-4, 4e-4, 2.0, 0.04, 0.01, 0.003, 5
     var_v = s_z2 + s_r2 + (r_s * e_b) ** 2
-    for spread, relief in ((0.0, 0.0), (0.05, 0.05 - c - var_v - a2 * (gx**2 + gy**2))):
+    own = s_z2 + s_r2 + (r_s * (1 / np.cos(beta) - 1)) ** 2
+    tilt = a2 * (gx**2 + gy**2)
+    # a first returns' scatter within the mapper's a priori shortfall but beyond this slope's
+    # is relief inside the footprint (the surface does not resolve it): it counts
+    between = c + own + tilt + 0.5 * (var_v - own)
+    cases = ((0.0, 0.0), (0.05, 0.05 - c - own - tilt), (between, 0.5 * (var_v - own)))
+    for spread, relief in cases:
         surface, cells, coverage = _plane_surface(gx, gy, 0.0)
         w = np.linspace(0.2, 1.0, len(cells))
         sums = n * np.stack([w, w * var_v, w * s_h2, w * s_h2, w * s_r2, w * w * s_r2,

@@ -15,7 +15,9 @@ and independent errors):
         + U / W^2                                   the range noise, averaged over the hits
         + (Q / W) e(beta)^2                         a wide beam's shortfall on this slope
         + (X / W) (dd/dx)^2 + (Y / W) (dd/dy)^2     the horizontal uncertainty through the slope
-        + max(S - (L + V) / W - (D_x / W) (dd/dx)^2 - (D_y / W) (dd/dy)^2, 0)   relief left out.
+        + max(S - (L + V') / W - (D_x / W) (dd/dx)^2 - (D_y / W) (dd/dy)^2, 0)  relief left out,
+
+    V' = V - Q e_b^2 + Q e(beta)^2                  the hits' own variance at this slope.
 
 - **Shared.** sigma_v,i^2 = s_z^2 + s_r'^2 + s_d^2 (:mod:`undertow.mapping.tpu`): the pose's
   depth variance s_z^2 is one error for the hits of a pass, so it is not averaged (the
@@ -37,10 +39,14 @@ and independent errors):
 - **Relief left out.** S = sum_k w_k (z_k - d)^2 / sum_k w_k is the spread of the column's
   cell evidence about d; less the cells' own spread about each hit (L / W) it is the hits'
   scatter, sum_i w_i (z_i - d)^2 / W. Where they scatter more than their own uncertainties
-  (V / W) and a plane's tilt across where they lie (D_x / W, D_y / W) explain, the floor has
+  (V' / W) and a plane's tilt across where they lie (D_x / W, D_y / W) explain, the floor has
   relief the kernel averaged, or the hits carry pose errors their covariance left out; that
   excess is added (CUBE compares soundings with their hypothesis likewise: Calder and Mayer,
   "Automatic processing of high-rate, high-density multibeam echosounder data", G3 4(6) 2003).
+  The hits' own variance V' takes a wide beam's shortfall at the slope, e(beta), as the std
+  above does, not the mapper's e_b: first returns that scatter more than this slope's
+  shortfall explains come from relief inside the footprint (ripples, stones) the surface
+  smooths away, which puts the beam's axis hits short by more than e(beta).
 
 The slopes dd/dx and dd/dy are central differences of the surface's depths (one-sided beside
 a column without data, 0 with neither neighbour). A map written before the last six sums
@@ -87,11 +93,13 @@ def column_variance(sums, gx, gy, spread, beam_width_deg: float):
     half = np.deg2rad(beam_width_deg) / 2.0
     e_b = 1.0 / np.cos(half) - 1.0
     beta = np.minimum(np.arctan(np.hypot(gx, gy)), half)
-    shortfall = (q / w) * (1.0 / np.cos(beta) - 1.0) ** 2
+    e_beta2 = (1.0 / np.cos(beta) - 1.0) ** 2
+    shortfall = (q / w) * e_beta2
     shared = np.maximum(v - r - q * e_b * e_b, 0.0) / w
     slope = (x / w) * gx * gx + (y / w) * gy * gy
     plane = (dx / w) * gx * gx + (dy / w) * gy * gy
-    relief = np.maximum(spread - (lattice + v) / w - plane, 0.0)
+    own = v - q * e_b * e_b + q * e_beta2  # V': the hits' own variance, shortfall at beta
+    relief = np.maximum(spread - (lattice + own) / w - plane, 0.0)
     return shared + u / (w * w) + shortfall + slope + relief
 
 
