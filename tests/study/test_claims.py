@@ -22,7 +22,7 @@ from undertow.study.claims import (
     TABLE1_CLAIMS,
     evaluate_seed,
 )
-from undertow.study.maps import SCENARIO_FILTERS, SCENARIO_MAP_RUNS
+from undertow.study.maps import SCENARIO_MAP_RUNS, SCENARIO_POSES
 from undertow.study.pipeline import (
     FIELD_VARIANTS,
     MAP_RUNS,
@@ -71,7 +71,7 @@ def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS, maps=MAP_SCENA
     def map_scenario():
         return {"duration_s": draw(600), "wave": {"amplitude_m": draw(0.1), "frequency_hz": draw()},
                 "floor": {"depth_std_m": draw(0.1), "rms_slope": draw(0.1)},
-                "localization": {v: trajectory() for v in SCENARIO_FILTERS},
+                "localization": {v: trajectory() for v in SCENARIO_POSES},
                 "mapping": {f"{m}/{v}": evaluation() for m, v in SCENARIO_MAP_RUNS},
                 "normal": {"within_1sigma": 0.6827, "within_2sigma": 0.9545}}  # fmt: skip
 
@@ -204,6 +204,10 @@ REFERENCE_MAPS = {
         abs(M["tpu/proposed"]["within_1sigma"] - 0.6827) < 0.07 + 1e-12),
     "tpu_depth_std_calibrated:within_2sigma": lambda M: (
         abs(M["tpu/proposed"]["within_2sigma"] - 0.9545) < 0.03 + 1e-12),
+    "tpu_depth_std_calibrated_consistent_pose:within_1sigma": lambda M: (
+        abs(M["tpu/proposed+consistent"]["within_1sigma"] - 0.6827) < 0.07 + 1e-12),
+    "tpu_depth_std_calibrated_consistent_pose:within_2sigma": lambda M: (
+        abs(M["tpu/proposed+consistent"]["within_2sigma"] - 0.9545) < 0.03 + 1e-12),
 }  # fmt: skip
 REFERENCE_TABLE1 = {
     "shorter_waves_more_dvl_noise": lambda t: (
@@ -266,12 +270,17 @@ def test_mapping_scenario_claims_are_explained_from_the_measured_values():
                 assert q.format(sum(q.read(r, name, claim.id) for r in results) / 2) in why
             if claim.id.startswith("tpu_depth_std_calibrated"):
                 # beside the run judged: the same mapper on the log as recorded (no sound
-                # speed given), and both filters' x errors against their own stds
+                # speed given) and from a consistent covariance, and the filters' x and z
+                # errors against their own stds
                 scen = [r["map_scenarios"][name] for r in results]
-                for k in ("within_1sigma", "within_2sigma"):
-                    share = sum(s["mapping"]["tpu/proposed+recorded"][k] for s in scen) / 2
-                    assert f"{share:.1%} within {k[7]}" in why, (k, why)
-                for v in ("proposed", "proposed+recorded"):
+                consistent = "_consistent_pose" in claim.id
+                others = () if consistent else ("recorded", "consistent")
+                for run in others:
+                    for k in ("within_1sigma", "within_2sigma"):
+                        share = sum(s["mapping"][f"tpu/proposed+{run}"][k] for s in scen) / 2
+                        assert f"{share:.1%} within {k[7]}" in why, (run, k, why)
+                poses = ("proposed+consistent",) if consistent else ("proposed+recorded",)
+                for v in ("proposed", *poses):
                     for axis in ("x_m", "z_m"):
                         loc = [s["localization"][v] for s in scen]
                         error = sum(s["rmse"][axis] for s in loc) / 2

@@ -113,7 +113,7 @@ def test_the_mapping_scenario_table_has_every_metric_with_intervals(study):
     seeds = [json.loads((study.out_dir / f"seeds/seed_{s}.json").read_text()) for s in (0, 1)]
     runs = tables["map_scenarios"]["rock-survey"]["mapping"]
     for key in ("csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed",
-                "tpu/proposed", "tpu/proposed+recorded"):  # fmt: skip
+                "tpu/proposed", "tpu/proposed+recorded", "tpu/proposed+consistent"):  # fmt: skip
         for metric in ("c2c_mean_m", "occupied_cells", "surface_rmse_m", "surface_bias_m",
                        "coverage", "fscore_5cm", "fscore_10cm", "fscore_20cm",
                        "within_1sigma", "within_2sigma"):  # fmt: skip
@@ -127,6 +127,12 @@ def test_the_mapping_scenario_table_has_every_metric_with_intervals(study):
     assert "## Table IV on a rough floor: rock-survey" in study.markdown
     assert "| surface RMSE (m) |" in study.markdown
     assert "| tpu (default) | proposed+recorded |" in study.markdown
+    assert "| tpu (default) | proposed+consistent |" in study.markdown
+    # the consistent covariance moves no pose: its errors are the proposed filter's
+    loc = tables["map_scenarios"]["rock-survey"]["localization"]
+    for axis in ("x_m", "y_m", "z_m"):
+        rmse = [loc[v]["rmse"][axis]["mean"] for v in ("proposed", "proposed+consistent")]
+        assert rmse[0] == pytest.approx(rmse[1], rel=1e-12)
     # the filter on the log as recorded (no sound speed given): its errors in the facts line
     loc = tables["map_scenarios"]["rock-survey"]["localization"]["proposed+recorded"]
     assert loc["rmse"]["x_m"]["n"] == 2 and "; proposed+recorded x " in study.markdown

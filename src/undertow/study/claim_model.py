@@ -24,14 +24,14 @@ CONDITION = "<condition>"
 
 Filter = Literal[
     "baseline", "be", "an", "proposed", "proposed+scale", "proposed+auto", "adaptive-r",
-    "proposed+recorded",
+    "proposed+recorded", "proposed+consistent",
 ]  # fmt: skip
 Axis = Literal[
     "x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_m_s", "vy_m_s", "vz_m_s"
 ]  # fmt: skip
 MapRun = Literal[
     "csm/baseline", "csm/proposed", "bki/proposed", "adaptive/proposed", "tpu/proposed",
-    "tpu/proposed+recorded",
+    "tpu/proposed+recorded", "tpu/proposed+consistent",
 ]  # fmt: skip
 #: The F-score's threshold the claims read (the middle of the benchmark's thresholds).
 TAU = TAUS[len(TAUS) // 2]

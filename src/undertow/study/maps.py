@@ -41,11 +41,18 @@ MAP_RUNS = (("csm", "baseline"), ("csm", "proposed"), ("bki", "proposed"), ("ada
 #: (:func:`true_ranges`); this variant is the proposed filter and its map on the log as
 #: recorded instead (no sound speed given: the DVL's and the Ping's 1500 m/s in fresh water).
 RECORDED = "proposed+recorded"
-#: The mapping scenarios add the default mapper (tpu) beside the paper's four maps, and the same
-#: mapper on :data:`RECORDED` (what the sound speed left uncorrected costs the map).
-SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"), ("tpu", RECORDED))
+#: The proposed filter's trajectory with its position covariance scaled per axis to its own
+#: error against the ground truth (:func:`consistent_covariance`: an oracle only a simulation
+#: has), so that the map's depth std is judged with a pose covariance that means what it says.
+CONSISTENT = "proposed+consistent"
+#: The mapping scenarios add the default mapper (tpu) beside the paper's four maps, the same
+#: mapper on :data:`RECORDED` (what the sound speed left uncorrected costs the map) and from
+#: :data:`CONSISTENT` (the map's std apart from the filter's covariance).
+SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"), ("tpu", RECORDED), ("tpu", CONSISTENT))
 #: The filters of a mapping scenario (the paper's two, then :data:`RECORDED`).
 SCENARIO_FILTERS = ("baseline", "proposed", RECORDED)
+#: Every pose a mapping scenario maps from: its filters, then :data:`CONSISTENT`.
+SCENARIO_POSES = (*SCENARIO_FILTERS, CONSISTENT)
 #: The map threshold the paper evaluates at.
 THRESHOLD = 0.5
 #: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
@@ -94,6 +101,24 @@ def true_pose_trajectory(ground_truth, rate_hz: float = AREA_POSE_RATE_HZ) -> Tr
     x[:, 3:6] = np.unwrap(ground_truth.orientation[idx], axis=0)
     P = np.zeros((len(idx), len(STATE_NAMES), len(STATE_NAMES)))
     return Trajectory(t[idx], x, P, variant="ground truth")
+
+
+def consistent_covariance(trajectory: Trajectory, ground_truth) -> Trajectory:
+    """``trajectory`` with its covariance P scaled to S P S, S = diag(k_x, k_y, k_z, 1, ...),
+    k_j^2 = mean(e_j^2) / mean(P_jj) over its poses inside the ground truth's span (e_j the
+    position error against the ground truth interpolated at the pose's time): each position
+    axis's mean variance is then its mean squared error, and P stays positive semidefinite (a
+    congruence). An axis without error or variance keeps its scale 1."""
+    gt = ground_truth
+    inside = (trajectory.t >= gt.t[0]) & (trajectory.t <= gt.t[-1])
+    scale = np.ones(trajectory.P.shape[1])
+    for j in range(3):
+        error = trajectory.position[inside, j] - np.interp(trajectory.t[inside], gt.t,
+                                                             gt.position[:, j])  # fmt: skip
+        variance = float(np.mean(trajectory.P[inside, j, j])) if inside.any() else 0.0
+        if variance > 0 and np.isfinite(variance):
+            scale[j] = np.sqrt(float(np.mean(error**2)) / variance) or 1.0
+    return trajectory.replace(P=trajectory.P * scale[None, :, None] * scale[None, None, :])
 
 
 def true_ranges(sim):
@@ -153,7 +178,9 @@ def evaluate_runs(name: str, sim, trajectories: dict, bki_length_scale: float, a
     area = surveyed_area(true_ranges(sim)) if area is None else area
     out = {}
     for method, variant in runs:
-        cfg = MappingConfig(method=method, length_scale=bki_length_scale)
+        # the consistent covariance's z variance holds the swell the map would add to it
+        cfg = MappingConfig(method=method, length_scale=bki_length_scale,
+                            wave_depth_noise=variant != CONSISTENT)  # fmt: skip
         result = map_log(logs.get(variant, sim.log), trajectories[variant], cfg)
         key = f"{method}/{variant}"
         art.maps[(name, key)] = result.map
@@ -164,10 +191,11 @@ def evaluate_runs(name: str, sim, trajectories: dict, bki_length_scale: float, a
 def map_scenario(name: str, seed: int, calibration, profile, bki_length_scale: float, art,
                  trajectory_metrics) -> dict:  # fmt: skip
     """One mapping scenario: simulate, localize (:data:`SCENARIO_FILTERS`) with the wave from
-    its own probe, map with :data:`SCENARIO_MAP_RUNS` and evaluate; also how rough its floor
-    is. Read as a user who gave the water's sound speed (:func:`true_ranges`), but for
-    :data:`RECORDED`; the filters leave the DVL scale factor at 1 (the paper's filters do not
-    correct it, and the sound speed leaves none to correct)."""
+    its own probe, scale the proposed filter's covariance to its error (:data:`CONSISTENT`),
+    map with :data:`SCENARIO_MAP_RUNS` and evaluate; also how rough its floor is. Read as a
+    user who gave the water's sound speed (:func:`true_ranges`), but for :data:`RECORDED`;
+    the filters leave the DVL scale factor at 1 (the paper's filters do not correct it, and
+    the sound speed leaves none to correct)."""
     sim = simulate(load_scenario(name), seed=seed)
     art.simulations[name] = sim
     measured = estimate_waves(sim.log.wave_probe)
@@ -181,6 +209,10 @@ def map_scenario(name: str, seed: int, calibration, profile, bki_length_scale: f
                         calibration=calibration, extrapolate=True, **scale)  # fmt: skip
         art.trajectories[(name, variant)] = trajectories[variant] = traj
         localization[variant] = trajectory_metrics(traj, sim.log.ground_truth)
+    trajectories[CONSISTENT] = consistent_covariance(trajectories["proposed"],
+                                                     sim.log.ground_truth)  # fmt: skip
+    localization[CONSISTENT] = trajectory_metrics(trajectories[CONSISTENT], sim.log.ground_truth)
+    logs[CONSISTENT] = water
     area = surveyed_area(water)
     mapping = evaluate_runs(name, sim, trajectories, bki_length_scale, art, area,
                             SCENARIO_MAP_RUNS, logs)  # fmt: skip

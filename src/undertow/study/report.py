@@ -118,13 +118,13 @@ def map_scenario_figures(figdir: Path, tables: dict, art: Artifacts,
     across the floor along one pass."""
     from ..mapping.surface import map_surface
     from ..report import figures_map
-    from .maps import RECORDED, SCENARIO_MAP_RUNS, THRESHOLD, floor_truth
+    from .maps import CONSISTENT, RECORDED, SCENARIO_MAP_RUNS, THRESHOLD, floor_truth
 
     out = []
     for name in tables.get("map_scenario_names") or []:
         sim = art.simulations[name]
         maps = {f"{m}/{v}": art.maps[(name, f"{m}/{v}")]
-                for m, v in SCENARIO_MAP_RUNS if v != RECORDED}  # fmt: skip
+                for m, v in SCENARIO_MAP_RUNS if v not in (RECORDED, CONSISTENT)}  # fmt: skip
         surfaces = {key: map_surface(occ, THRESHOLD) for key, occ in maps.items()}
         top = figures_map.plot_surface_error(
             figdir / f"surface_error_{name}.png", surfaces, floor_truth(sim),
