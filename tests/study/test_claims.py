@@ -22,7 +22,7 @@ from undertow.study.claims import (
     TABLE1_CLAIMS,
     evaluate_seed,
 )
-from undertow.study.maps import SCENARIO_MAP_RUNS, SCENARIO_POSES
+from undertow.study.maps import CONSISTENT, SCENARIO_FILTERS, SCENARIO_MAP_RUNS
 from undertow.study.pipeline import (
     FIELD_VARIANTS,
     MAP_RUNS,
@@ -71,7 +71,7 @@ def fake_result(seed: int, conditions=WAVE_CONDITIONS, seas=SEAS, maps=MAP_SCENA
     def map_scenario():
         return {"duration_s": draw(600), "wave": {"amplitude_m": draw(0.1), "frequency_hz": draw()},
                 "floor": {"depth_std_m": draw(0.1), "rms_slope": draw(0.1)},
-                "localization": {v: trajectory() for v in SCENARIO_POSES},
+                "localization": {v: trajectory() for v in (*SCENARIO_FILTERS, CONSISTENT)},
                 "mapping": {f"{m}/{v}": evaluation() for m, v in SCENARIO_MAP_RUNS},
                 "normal": {"within_1sigma": 0.6827, "within_2sigma": 0.9545}}  # fmt: skip
 

@@ -51,8 +51,6 @@ CONSISTENT = "proposed+consistent"
 SCENARIO_MAP_RUNS = (*MAP_RUNS, ("tpu", "proposed"), ("tpu", RECORDED), ("tpu", CONSISTENT))
 #: The filters of a mapping scenario (the paper's two, then :data:`RECORDED`).
 SCENARIO_FILTERS = ("baseline", "proposed", RECORDED)
-#: Every pose a mapping scenario maps from: its filters, then :data:`CONSISTENT`.
-SCENARIO_POSES = (*SCENARIO_FILTERS, CONSISTENT)
 #: The map threshold the paper evaluates at.
 THRESHOLD = 0.5
 #: The ground truth's pose is decimated to this rate to find where the beams hit (Hz).
