@@ -213,12 +213,13 @@ def test_never_starts_without_an_orientation_source(session):
 
 
 def test_set_wave_applies_to_later_rows(session):
-    """A step of the wave condition between two DVL/DR rows is exactly a two-node WaveTrack
-    (interpolation returns the node value at and beyond a node). A preview made before the
-    step (its DVL rows with the old noise) is not taken by the push after it."""
+    """A step of the wave condition between two rows it adds noise to (DVL, DR, barometer) is
+    exactly a two-node WaveTrack (interpolation returns the node value at and beyond a node). A
+    preview made before the step (its DVL rows with the old noise) is not taken by the push
+    after it."""
     recs, mounting = session
     k = next(i for i, r in enumerate(recs) if r.t >= 30.0)
-    noisy = [r.t for r in recs if r.stream in ("dvl", "dead_reckoning")]
+    noisy = [r.t for r in recs if r.stream in ("dvl", "dead_reckoning", "pressure")]
     before = max(t for t in noisy if t < recs[k].t)
     after = min(t for t in noisy if t >= recs[k].t)
     track = WaveTrack(t=np.array([before, after]), amplitude_m=np.array([0.1, 0.05]),

@@ -63,7 +63,8 @@ def test_the_swell_share_is_the_filters_depth_error_within_a_third():
         data["wave"].update(wave)
         log = simulate(Scenario.model_validate(data), seed=1).log
         a, f = log.metadata["wave"]["amplitude_m"], log.metadata["wave"]["frequency_hz"]
-        trajectory = localize(log, "proposed", wave=(a, f))
+        # the paper's barometer model: the swell left out of the depth noise
+        trajectory = localize(log, "proposed", wave=(a, f), pressure_wave_noise=False)
         gt, p = log.ground_truth, log.pressure
         keep = (p.t > gt.t[0] + 5) & (p.t < min(gt.t[-1], trajectory.t[-1]))
         t = p.t[keep]
@@ -92,3 +93,15 @@ def test_the_filters_depth_noise_comes_from_the_trajectory():
     assert trajectory_depth_noise(traj) == (0.02, 0.2)
     traj.metadata["sensors"] = {"pressure": {"used": 1}}
     assert trajectory_depth_noise(traj) is None
+
+
+def test_a_filter_that_carried_the_swell_gets_nothing_added():
+    t = np.linspace(0.0, 10.0, 11)
+    traj = Trajectory(t, np.zeros((11, 18)), np.zeros((11, 18, 18)))
+    traj.metadata.update(config={"depth_std_m": 0.02, "pressure_wave_noise": True},
+                         sensors={"pressure": {"used": 51}})  # fmt: skip
+    assert trajectory_depth_noise(traj) == (0.02, 0.2)  # no wave noise added (be, baseline)
+    traj.metadata["wave_noise"] = {"condition": "wave-a0.15-f0.33"}
+    assert trajectory_depth_noise(traj) is None  # its depth covariance holds the swell
+    traj.metadata["config"]["pressure_wave_noise"] = False
+    assert trajectory_depth_noise(traj) == (0.02, 0.2)

@@ -175,6 +175,10 @@ def _wave_source(result, by_name: str | None) -> str:
         how = f"from {result.wave_source}; --wave overrides"
     if not result.wave_noise_added:
         how += f"; the {result.variant} variant adds no wave noise"
+    elif result.wave != "calm" and (result.trajectory.metadata.get("config") or {}).get(
+        "pressure_wave_noise"
+    ):
+        how += "; the barometer's noise takes the swell's pressure head (pressure_wave_noise)"
     return how
 
 

@@ -85,6 +85,10 @@ class LocalizerConfig(BaseModel):
     dvl_std_floor_m_s: Positive = 0.001
     dr_orientation_std_rad: PositiveVec3 = (0.005, 0.005, 0.01)
     depth_std_m: Positive = 0.01
+    # the variants with wave noise (an, proposed) add the swell's pressure head a^2 K_p^2 / 2 to
+    # the barometer's R (noise_physics.pressure_head_variance); False: eq:bar_meas_model with
+    # depth_std_m alone, as the paper lists its wave noise (DVL and DR only)
+    pressure_wave_noise: bool = True
     std_floor: Positive = 1e-6  # every measurement std is at least this
     dr_orientation_frame: Literal["body", "dvl"] = "body"
     # initial state (None: zeros, orientation from the first DR report, z from the first depth)
@@ -155,6 +159,11 @@ class LocalizerConfig(BaseModel):
     @property
     def adds_wave_noise(self) -> bool:
         return self.variant in ("an", "proposed")
+
+    @property
+    def adds_pressure_wave_noise(self) -> bool:
+        """The barometer's R carries the swell's pressure head (``pressure_wave_noise``)."""
+        return self.adds_wave_noise and self.pressure_wave_noise
 
     def process_model(self, held=()) -> model.ProcessModel:
         """The record the filter and the smoother predict with: unscented weights of n = 18,

@@ -110,6 +110,13 @@ class WaveNoise:
         """The std devs of ``which`` ("dvl" or "dr") at the times t: the same (3,) at all."""
         return self.dvl_std if which == "dvl" else self.dr_std
 
+    def wave_at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(amplitude m, frequency Hz) of the condition at the times t: the same at all (a 0
+        and f NaN when calm)."""
+        n = np.asarray(t, float).size
+        f = np.nan if self.frequency_hz is None or self.amplitude_m <= 0 else self.frequency_hz
+        return np.full(n, float(self.amplitude_m)), np.full(n, float(f))
+
 
 @dataclass(frozen=True)
 class TrackNoise:
@@ -128,6 +135,18 @@ class TrackNoise:
         values = np.array([n.dvl_std if which == "dvl" else n.dr_std for n in self.nodes])
         t = np.asarray(t, float)
         return np.stack([np.interp(t, self.track.t, values[:, j]) for j in range(3)], axis=1)
+
+    def wave_at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(amplitude m, frequency Hz) at the times t, each interpolated linearly in time between
+        the track's nodes (held outside them); a calm node's frequency is its neighbours' (its
+        amplitude is 0); f NaN when no node has one."""
+        t = np.asarray(t, float)
+        track = self.track
+        a = np.interp(t, track.t, track.amplitude_m)
+        known = np.isfinite(track.frequency_hz)
+        if not known.any():
+            return a, np.full(t.size, np.nan)
+        return a, np.interp(t, track.t[known], track.frequency_hz[known])
 
     def to_dict(self) -> list[dict]:
         """Per node: its time, condition, std devs and how they were found."""

@@ -84,6 +84,25 @@ def orbital_velocity_amplitude(amplitude_m, frequency_hz, depth_m, water_depth_m
     return a * omega * k_h
 
 
+def pressure_head_variance(amplitude_m, frequency_hz, depth_m, g: float = G0) -> np.ndarray:
+    """a^2 K_p^2 / 2 (m^2): the variance of the depth error a barometer at depth d reads under a
+    linear wave of amplitude a and frequency f, the wave's dynamic pressure
+    rho g a K_p(d) cos(theta) taken as a depth, K_p = cosh(k (h - d)) / cosh(k h) (Dean &
+    Dalrymple, "Water Wave Mechanics for Engineers and Scientists", 1991, ch. 4), in deep water:
+    K_p = e^{-k_0 d}, k_0 = omega^2 / g. The deep-water form needs no water depth, so a row's
+    value depends on its own depth and time alone. In water of depth h it is below the
+    finite-depth K_p by at most 8 % above mid-depth, more near the floor (a third at the floor
+    for k_0 h = 1; for larger k_0 h the term vanishes there). Elementwise; d clipped at 0; a = 0,
+    or f or d not finite, gives 0."""
+    a = np.asarray(amplitude_m, float)
+    f = np.asarray(frequency_hz, float)
+    d = np.maximum(np.asarray(depth_m, float), 0.0)
+    with np.errstate(invalid="ignore"):
+        k0 = (2.0 * np.pi * f) ** 2 / g
+        var = 0.5 * (a * np.exp(-k0 * d)) ** 2
+    return np.where(np.isfinite(var) & (a > 0), var, 0.0)
+
+
 def sensor_site(log: Log | Iterable[Log], water_density: float | None = None,
                 surface_pressure: float | None = None, default: SensorSite | None = None
                 ) -> SensorSite | None:  # fmt: skip
@@ -258,6 +277,7 @@ __all__ = [
     "extrapolation_note",
     "orbital_velocity_amplitude",
     "outside_policy",
+    "pressure_head_variance",
     "scale_by_orbital_velocity",
     "sensor_site",
 ]

@@ -28,6 +28,7 @@ from . import filter_loop, model
 from .config import LocalizerConfig
 from .health import dvl_inside, imu_inside, pressure_inside
 from .noise import TrackNoise, WaveNoise
+from .noise_physics import pressure_head_variance
 
 #: the streams the filter reads, one row builder each
 FILTER_STREAMS = ("imu", "dvl", "dead_reckoning", "pressure")
@@ -135,7 +136,11 @@ def pressure_rows(
     warn: bool = True,
     jumps: bool = True,
 ):
-    """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2. None without pressure.
+    """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2, plus the swell's pressure
+    head a^2 K_p(z)^2 / 2 at the row's time and depth for the variants with wave noise
+    (``pressure_wave_noise``; :func:`~undertow.estimation.noise_physics.pressure_head_variance`:
+    the barometer reads the wave's dynamic pressure as depth, an error the size of the swell
+    at the sensor that its noise would otherwise leave out). None without pressure.
     ``jumps`` False: the depth-rate check (:func:`~undertow.estimation.health.depth_jumps`) is
     left to the caller (the online filter, which sees the depths in pieces)."""
     p = log.pressure
@@ -145,7 +150,10 @@ def pressure_rows(
     ok = _finite_rows(d)
     rejected["rejected_pressure"] = _count_false(ok)
     ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected, warn, jumps)
-    return p.t, model.BARO, d, _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1], ok
+    R = _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1]
+    if cfg.adds_pressure_wave_noise:
+        R = R + pressure_head_variance(*noise.wave_at(p.t), d[:, 0])[:, None, None]
+    return p.t, model.BARO, d, R, ok
 
 
 def depth_reference(log: Log, cfg: LocalizerConfig) -> tuple[float, float]:

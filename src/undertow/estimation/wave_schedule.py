@@ -51,6 +51,14 @@ class StepNoise:
         index = np.searchsorted(self.starts, np.asarray(t, float), side="right") - 1
         return values[index]
 
+    def wave_at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(amplitude m, frequency Hz) of each row's step (f NaN in a calm step)."""
+        index = np.searchsorted(self.starts, np.asarray(t, float), side="right") - 1
+        waves = [n.wave_at(np.zeros(1)) for n in self.nodes]
+        a = np.array([w[0][0] for w in waves])
+        f = np.array([w[1][0] for w in waves])
+        return a[index], f[index]
+
     def to_dict(self) -> list[dict]:
         """Per step: the time it starts at (None: from the start) and its noise."""
         return [
