@@ -104,10 +104,12 @@ def test_simulate_localize_evaluate_map_end_to_end(tmp_path):
     assert scores["as recorded"]["surface_bias_m"] > scores["water"]["surface_bias_m"] + 0.02
     config = __import__("yaml").safe_load((run / "map water" / "config.yaml").read_text())
     assert config["result"]["log"]["sound_speed"]["water_m_s"] == float(water)
-    # the filter's depth measurements, for the swell in the poses' depth: read from the
-    # trajectory (its depth_std_m, its pressure updates over its span) and recorded
-    std, interval = config["mapping"]["depth_noise"]
-    assert std == 0.01 and interval == pytest.approx(0.1, rel=0.02)  # the Bar30 at 10 Hz
+    # the proposed filter carried the swell in its barometer's noise, so the map adds none to
+    # the poses' depth (the filter's depth measurements, which it would need, are not taken)
+    est = __import__("yaml").safe_load((run / "est" / "config.yaml").read_text())
+    assert est["config"]["pressure_wave_noise"] is True and est["wave_noise"] is not None
+    assert config["mapping"]["wave_depth_noise"] is True
+    assert config["mapping"]["depth_noise"] is None
 
 
 @pytest.mark.realdata

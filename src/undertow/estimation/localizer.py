@@ -12,17 +12,18 @@ the DVL and DR noise R adapted from the residuals after each update (Akhlaghi, Z
 
 starting from the nominal R, alpha = ``adaptive_r_alpha`` (0.98).
 
-Wave noise (variants ``an``, ``proposed``): a constant condition adds gamma^2 to every DVL
-(and DR) row; a condition that changes over time (a :class:`~undertow.wavetrack.WaveTrack`, a
-log whose ``metadata["wave"]`` is a track with ``t`` lists, or ``wave="auto"``: estimated from
-the log by :mod:`undertow.seastate`) adds each row's gamma(t)^2, gamma interpolated in
-time between the track's nodes (:class:`~undertow.estimation.noise.TrackNoise`); the recording
-of a live session with ``--wave auto`` replays the conditions that session gave its filter, in
-the steps it gave them (:mod:`~undertow.estimation.wave_schedule`; with ``wave`` None or
-``"auto"``: the replay gives the live trajectory). A condition
-(or track node) outside the characterized ones gets the ``extrapolate`` policy
-(:mod:`~undertow.estimation.noise`): ``"physics"`` by default (False): the nearest characterized
-condition scaled by the orbital velocity at the DVL's depth in the log
+Wave noise (variants ``an``, ``proposed``): a constant condition adds gamma^2 to every DVL (and
+DR) row, and the swell's pressure head a^2 K_p^2 / 2 to every barometer row
+(``pressure_wave_noise``; :func:`~undertow.estimation.rows.pressure_rows`); a condition that
+changes over time (a :class:`~undertow.wavetrack.WaveTrack`, a log whose ``metadata["wave"]`` is
+a track with ``t`` lists, or ``wave="auto"``: estimated from the log by
+:mod:`undertow.seastate`) adds each row's gamma(t)^2, gamma interpolated in time between the
+track's nodes (:class:`~undertow.estimation.noise.TrackNoise`); the recording of a live session
+with ``--wave auto`` replays the conditions that session gave its filter, in the steps it gave
+them (:mod:`~undertow.estimation.wave_schedule`; with ``wave`` None or ``"auto"``: the replay
+gives the live trajectory). A condition (or track node) outside the characterized ones gets the
+``extrapolate`` policy (:mod:`~undertow.estimation.noise`): ``"physics"`` by default (False):
+the nearest characterized condition scaled by the orbital velocity at the DVL's depth in the log
 (:func:`~undertow.estimation.noise_physics.sensor_site`), stated in one warning and recorded in
 ``metadata["wave_noise"]``; ``"nearest"`` (True, ``--extrapolate``): the nearest as is;
 ``"refuse"``: an error (an estimated track is never refused: physics).

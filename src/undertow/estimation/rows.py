@@ -3,7 +3,8 @@
 Each sensor's rows (:func:`imu_rows`, :func:`dvl_rows`, :func:`dr_rows`, :func:`pressure_rows`)
 are (t, kind, z, R, ok): the measurement z in the units and frame of the model's measurement
 equations (:mod:`undertow.estimation.model`), its noise covariance R (the config's standard
-deviations, floored, plus the wave noise gamma^2 for the variants that add it) and which rows
+deviations, floored, plus the wave noise for the variants that add it: gamma^2 for the DVL and
+the DR, the swell's pressure head for the barometer) and which rows
 pass the physical envelopes (:mod:`undertow.estimation.health`); rejected rows are counted by
 name. :func:`merged_rows` merges them into one time-sorted
 :data:`~undertow.estimation.filter_loop.MEASUREMENT` array (at equal times IMU, DVL, DR,
