@@ -200,3 +200,16 @@ def test_input_mistakes_are_one_line(run, tmp_path):
     assert line.startswith(f"error: {notes}: no usable pose in TUM file")
     for out in "abcdefg":
         assert not (tmp_path / out).exists()
+
+
+def test_a_tum_trajectory_maps_with_the_waves_the_log_records(simulated_run, tmp_path):
+    """The ground truth as a TUM file says no wave; the bag's sidecar records the run's, which
+    the default mapper takes for its range noise, in one line, and config.yaml records."""
+    run_dir = simulated_run("wave-a0.10-f1.00", 0)
+    r = _map(run_dir / "log", tmp_path / "m", "--trajectory", str(run_dir / "ground_truth.tum"),
+             "--pose-std", "0.02,0.02,0.01")  # fmt: skip
+    assert r.exit_code == 0, r.output
+    said = [ln for ln in r.output.splitlines() if "the waves the log records" in ln]
+    assert len(said) == 1 and "a = 0.1 m, f = 1 Hz" in said[0], r.output
+    config = yaml.safe_load((tmp_path / "m" / "config.yaml").read_text())
+    assert config["mapping"]["wave"] == [0.1, 1.0]

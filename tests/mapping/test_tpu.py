@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from undertow.mapping.tpu import (
     KERNEL_STD,
     hit_sigmas,
     lattice_weights,
+    log_wave,
     trajectory_wave,
     wave_range_std,
     with_wave,
@@ -159,6 +161,26 @@ def test_the_trajectorys_wave_is_read_from_its_metadata():
     traj.metadata["wave_track"] = {"t": [0], "amplitude_m": [0.0], "frequency_hz": [0.0]}
     traj.metadata.pop("wave_noise")
     assert trajectory_wave(traj) is None  # calm
+
+
+def test_a_trajectory_made_elsewhere_takes_the_waves_the_log_records():
+    """A TUM trajectory says no wave: the log's recorded one (a condition, or a track reduced as
+    a trajectory's is) gives the range noise, in one warning; the settings and a trajectory
+    that says one win; a calm or unreadable record gives none."""
+    t = np.arange(3.0)
+    traj = Trajectory(t, np.zeros((3, 18)), np.zeros((3, 18, 18)))
+    log = SimpleNamespace(metadata={"wave": {"amplitude_m": 0.15, "frequency_hz": 0.33}})
+    with pytest.warns(RuntimeWarning, match="the waves the log records"):
+        assert with_wave(MappingConfig(), traj, log).wave == (0.15, 0.33)
+    assert log_wave(SimpleNamespace(metadata={"wave": {"t": [0, 9], "amplitude_m": [0.3, 0.4],
+                                                       "frequency_hz": [0.2, 0.4]}})) == (
+        pytest.approx((math.sqrt((0.09 + 0.16) / 2), 0.3)))  # fmt: skip
+    assert with_wave(MappingConfig(wave=(0.2, 0.3)), traj, log).wave == (0.2, 0.3)
+    traj.metadata["wave_noise"] = {"amplitude_m": 0.1, "frequency_hz": 0.5}
+    assert with_wave(MappingConfig(), traj, log).wave == (0.1, 0.5)
+    for wave in ({"amplitude_m": 0.0, "frequency_hz": None}, {"amplitude_m": "x"}, "calm"):
+        assert log_wave(SimpleNamespace(metadata={"wave": wave})) is None
+    assert log_wave(SimpleNamespace(metadata={})) is None
 
 
 def test_the_wave_is_resolved_once_into_the_settings():

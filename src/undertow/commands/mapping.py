@@ -234,7 +234,7 @@ def _map_tiled_file(log, trajectory, config: MappingConfig, tiles: float, schedu
                     record: dict) -> MappingResult:  # fmt: skip
     """:func:`map_file` with ``tiles``: samples, tiles on Dask, merged map; with ``out_dir``
     the tiles are written to ``out_dir/tiles`` as they finish, then the merged map."""
-    config = with_wave(config, trajectory)  # once, so every tile maps with the same wave
+    config = with_wave(config, trajectory, log)  # once, so every tile maps with the same wave
     with collect_warnings(caught):
         samples = samples_from_config(log, trajectory, config)
         with output_folder(out_dir, overwrite) if out_dir is not None else nullcontext() as out:

@@ -38,7 +38,7 @@ def map_log(
     log: Log, trajectory: Trajectory, config: MappingConfig | None = None, prior=None
 ) -> MappingResult:
     """Training samples from every valid range (DVL beams, sonar), then one mapper pass."""
-    config = with_wave(config or MappingConfig(), trajectory)
+    config = with_wave(config or MappingConfig(), trajectory, log)
     if config.use_dvl and log.sonar is None and log.multibeam is None:
         log.require("dvl", stage="map")
     try:

@@ -67,6 +67,7 @@ The surface that reads this map back (depth and standard deviation per column) i
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 from numba import njit
@@ -86,11 +87,9 @@ def trajectory_wave(trajectory) -> tuple[float, float] | None:
     meta = getattr(trajectory, "metadata", None) or {}
     track = meta.get("wave_track")
     if isinstance(track, dict) and len(track.get("amplitude_m", ())):
-        a = np.asarray(track["amplitude_m"], float)
-        f = np.asarray(track.get("frequency_hz", ()), float)
-        a, f = a[np.isfinite(a)], f[np.isfinite(f)]
-        if a.size and f.size and np.sqrt(np.mean(a * a)) > 0:
-            return float(np.sqrt(np.mean(a * a))), float(np.median(f))
+        wave = _track_wave(track)
+        if wave is not None:
+            return wave
     noise = meta.get("wave_noise")
     if isinstance(noise, dict):
         a, f = noise.get("amplitude_m"), noise.get("frequency_hz")
@@ -99,19 +98,53 @@ def trajectory_wave(trajectory) -> tuple[float, float] | None:
     return None
 
 
-def with_wave(config, trajectory):
+def log_wave(log) -> tuple[float, float] | None:
+    """(amplitude m, frequency Hz) of the waves ``log`` records (its metadata's ``wave``, as
+    ``undertow localize`` reads it when no condition is given: a condition, or a track reduced
+    as :func:`trajectory_wave` reduces one), or None (calm, or none recorded)."""
+    meta = getattr(log, "metadata", None) or {}
+    wave = meta.get("wave")
+    if not isinstance(wave, dict) or "amplitude_m" not in wave:
+        return None
+    try:
+        return _track_wave({"amplitude_m": np.atleast_1d(np.asarray(wave["amplitude_m"], float)),
+                            "frequency_hz": np.atleast_1d(np.asarray(
+                                wave.get("frequency_hz", np.nan), float))})  # fmt: skip
+    except (TypeError, ValueError):
+        return None
+
+
+def _track_wave(track: dict) -> tuple[float, float] | None:
+    """(RMS amplitude, median frequency) of a track's nodes; None when calm or unknown."""
+    a = np.asarray(track["amplitude_m"], float)
+    f = np.asarray(track.get("frequency_hz", ()), float)
+    a, f = a[np.isfinite(a)], f[np.isfinite(f) & (f > 0)]
+    if a.size and f.size and np.sqrt(np.mean(a * a)) > 0:
+        return float(np.sqrt(np.mean(a * a))), float(np.median(f))
+    return None
+
+
+def with_wave(config, trajectory, log=None):
     """``config`` with its ``wave`` and ``depth_noise`` resolved for the ``tpu`` mapper: as
-    given, else the wave the trajectory's filter used (:func:`trajectory_wave`) when the
-    mapper adds the wave's range noise or the swell in the depth (``wave_range_noise``,
-    ``wave_depth_noise``), and the depth measurements it fused
+    given, else the wave the trajectory's filter used (:func:`trajectory_wave`), else the one
+    ``log`` records (:func:`log_wave`: a trajectory made elsewhere says none; stated in one
+    warning), when the mapper adds the wave's range noise or the swell in the depth
+    (``wave_range_noise``, ``wave_depth_noise``), and the depth measurements the filter fused
     (:func:`~undertow.mapping.depth_wave.trajectory_depth_noise`) for the latter. Other
-    methods unchanged; what the trajectory does not say stays None. Resolved once per map, so
-    tiles and the whole agree."""
+    methods unchanged; what neither says stays None. Resolved once per map, so tiles and the
+    whole agree."""
     if config.method != "tpu":
         return config
     update = {}
     if config.wave is None and (config.wave_range_noise or config.wave_depth_noise):
         wave = trajectory_wave(trajectory)
+        if wave is None and log is not None:
+            wave = log_wave(log)
+            if wave is not None:
+                warnings.warn(f"map: the waves the log records (a = {wave[0]:.3g} m, f = "
+                              f"{wave[1]:.3g} Hz) add their range noise; the trajectory says "
+                              "none (mapping: {wave: [A, F]} sets them)", RuntimeWarning,
+                              stacklevel=2)  # fmt: skip
         if wave is not None:
             update["wave"] = wave
     if config.wave_depth_noise and config.depth_noise is None:
