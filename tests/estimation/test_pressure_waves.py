@@ -16,7 +16,7 @@ from undertow.estimation.noise_physics import pressure_head_variance
 from undertow.estimation.rows import pressure_rows
 from undertow.estimation.wave_schedule import schedule_noise
 from undertow.log import G0
-from undertow.sim import Scenario, load_scenario, simulate, write_simulation
+from undertow.sim import Scenario, load_scenario, simulate
 from undertow.sim.waves import depth_factors, wavenumber
 from undertow.wavetrack import WaveTrack
 
@@ -135,8 +135,8 @@ def test_a_free_vehicle_in_a_swell_gets_a_consistent_depth():
     assert out[False][0] > 3.0 and out[False][1] > 3.0
 
 
-def test_localize_says_so_and_config_yaml_records_it(tmp_path):
-    run_dir = write_simulation(simulate(load_scenario("mhl-basin"), seed=3), tmp_path / "run")
+def test_localize_says_so_and_config_yaml_records_it(simulated_run, tmp_path):
+    run_dir = simulated_run("wave-a0.10-f1.00")
     runner = CliRunner()
     args = ["localize", str(run_dir / "log"), "--wave", "wave-a0.10-f1.00", "--out"]
     r = runner.invoke(app, [*args, str(tmp_path / "on")])
