@@ -94,13 +94,12 @@ def pressure_head_variance(amplitude_m, frequency_hz, depth_m, g: float = G0) ->
     finite-depth K_p by at most 8 % above mid-depth, more near the floor (a third at the floor
     for k_0 h = 1; for larger k_0 h the term vanishes there). Elementwise; d clipped at 0; a = 0,
     or f or d not finite, gives 0."""
-    a = np.asarray(amplitude_m, float)
-    f = np.asarray(frequency_hz, float)
-    d = np.maximum(np.asarray(depth_m, float), 0.0)
-    with np.errstate(invalid="ignore"):
-        k0 = (2.0 * np.pi * f) ** 2 / g
-        var = 0.5 * (a * np.exp(-k0 * d)) ** 2
-    return np.where(np.isfinite(var) & (a > 0), var, 0.0)
+    a, f, d = np.broadcast_arrays(*(np.asarray(v, float) for v in (amplitude_m, frequency_hz,
+                                                                  depth_m)))  # fmt: skip
+    known = (a > 0) & np.isfinite(a) & (f > 0) & np.isfinite(f) & np.isfinite(d)
+    k0 = wavenumber(2.0 * np.pi * np.where(known, f, 0.0), math.inf, g)
+    _, _, k_p = depth_factors(k0, math.inf, np.where(known, d, 0.0))
+    return np.where(known, 0.5 * (a * k_p) ** 2, 0.0)
 
 
 def sensor_site(log: Log | Iterable[Log], water_density: float | None = None,

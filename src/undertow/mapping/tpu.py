@@ -72,7 +72,9 @@ import warnings
 import numpy as np
 from numba import njit
 
+from ..errors import ConfigError
 from ..sim.waves import wavenumber_array
+from ..wavetrack import WaveTrack
 from .depth_wave import depth_wave_terms, swell_variances, trajectory_depth_noise
 from .samples import SENSOR_SONAR, Samples
 
@@ -100,18 +102,14 @@ def trajectory_wave(trajectory) -> tuple[float, float] | None:
 
 def log_wave(log) -> tuple[float, float] | None:
     """(amplitude m, frequency Hz) of the waves ``log`` records (its metadata's ``wave``, as
-    ``undertow localize`` reads it when no condition is given: a condition, or a track reduced
-    as :func:`trajectory_wave` reduces one), or None (calm, or none recorded)."""
-    meta = getattr(log, "metadata", None) or {}
-    wave = meta.get("wave")
-    if not isinstance(wave, dict) or "amplitude_m" not in wave:
-        return None
+    ``undertow localize`` reads it when no condition is given: a condition or a track,
+    :meth:`~undertow.wavetrack.WaveTrack.from_dict`, reduced as :func:`trajectory_wave` reduces
+    a track), or None (calm, none recorded, or a record that is no wave track)."""
     try:
-        return _track_wave({"amplitude_m": np.atleast_1d(np.asarray(wave["amplitude_m"], float)),
-                            "frequency_hz": np.atleast_1d(np.asarray(
-                                wave.get("frequency_hz", np.nan), float))})  # fmt: skip
-    except (TypeError, ValueError):
+        track = WaveTrack.from_dict((getattr(log, "metadata", None) or {}).get("wave"))
+    except ConfigError:
         return None
+    return _track_wave({"amplitude_m": track.amplitude_m, "frequency_hz": track.frequency_hz})
 
 
 def _track_wave(track: dict) -> tuple[float, float] | None:
