@@ -1,4 +1,4 @@
-"""The 18-state model restated in plain numpy, run by FilterPy's UnscentedKalmanFilter.
+"""The filter's model restated in plain numpy, run by FilterPy's UnscentedKalmanFilter.
 
 An independent statement of :mod:`undertow.estimation.model` for cross-checks: written from the
 equations (eq:dynamics_model, eq:imu_meas_model .. eq:bar_meas_model and the conventions in
@@ -10,8 +10,13 @@ times against ours, so that both use the same model:
   angles wrapped, biases += mu_b dt;
 - process noise Q = G diag(q_acc / dt) G^T (G = [J dt^2/2; I dt]) plus diag(q_bias dt), with J
   at the current mean;
+- the swell states x[18:20] = (y, xi) (``swell`` = (omega_0, sigma^2, lambda)): moved by
+  scipy's expm(A dt), A = [[0, 1], [-omega_0^2, -2 lambda omega_0]], with the noise of Van
+  Loan's method ("Computing integrals involving the matrix exponential", IEEE TAC 1978) for a
+  white input of intensity q = 4 lambda omega_0 sigma^2 (var(y') = q / (4 lambda omega_0));
+  none (held: identity, no noise) without ``swell``;
 - measurements: IMU R_imu^T omega + b-bar^g, DVL R_dvl^T (v + omega x r_dvl) (mounting),
-  DR wrap(eta_2 + b^g), barometer z + e_3^T R_B^W r_bar;
+  DR wrap(eta_2 + b^g), barometer z + e_3^T R_B^W r_bar + xi;
 - angle-aware sigma-point means (reference-point mean) and wrapped residuals for the state and
   for DR measurements (FilterPy's x_mean_fn, z_mean_fn, residual_x, residual_z);
 - sigma points redrawn from (x, P) before every update, dt capped at ``dt_max``, the scaled
@@ -27,7 +32,8 @@ import numpy as np
 
 from undertow.rotations import rpy_to_matrix, wrap_angle
 
-STATE_ANGLES = np.zeros(18, bool)
+N = 20
+STATE_ANGLES = np.zeros(N, bool)
 STATE_ANGLES[3:6] = True
 
 
@@ -57,14 +63,14 @@ def residual(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 class FilterPyModel:
-    """FilterPy's UKF on the 18-state model; ``step(t, kind, z, R)`` as one measurement of the
+    """FilterPy's UKF on the 20-state model; ``step(t, kind, z, R)`` as one measurement of the
     filter loop (predict to t when t advances, redraw sigma points, update). ``kind`` 0 IMU,
     1 DVL, 2 DR, 3 barometer (z and R then use their first entry)."""
 
     def __init__(self, x0, P0, t0=0.0, *, alpha=1.0, beta=2.0, kappa=0.0, q_acc, q_bias,
                  mu_bias, imu_rotation=np.eye(3), dvl_rotation=np.eye(3),
                  dvl_translation=(0.0, 0.0, 0.0), baro_translation=(0.0, 0.0, 0.0),
-                 dt_max=1.0):  # fmt: skip
+                 dt_max=1.0, swell=None):  # fmt: skip
         from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
         self.q_acc = np.asarray(q_acc, float)
@@ -76,9 +82,10 @@ class FilterPyModel:
         self.baro_r = np.asarray(baro_translation, float)
         self.dt_max = float(dt_max)
         self.t = float(t0)
-        self.points = MerweScaledSigmaPoints(18, alpha, beta, kappa)
+        self.swell = swell
+        self.points = MerweScaledSigmaPoints(N, alpha, beta, kappa)
         self.ukf = UnscentedKalmanFilter(
-            18, 3, 1.0, hx=None, fx=self.fx, points=self.points,
+            N, 3, 1.0, hx=None, fx=self.fx, points=self.points,
             x_mean_fn=lambda s, w: angle_mean(s, w, STATE_ANGLES),
             residual_x=lambda a, b: residual(a, b, STATE_ANGLES),
         )  # fmt: skip
@@ -90,18 +97,35 @@ class FilterPyModel:
         J[:3, :3], J[3:, 3:] = rpy_to_matrix(x[3:6]), euler_rate(x[3], x[4])
         return J
 
+    def _swell(self, dt):
+        """(Phi, Q) of the swell states over dt: expm and Van Loan's method."""
+        from scipy.linalg import expm
+
+        if self.swell is None:
+            return np.eye(2), np.zeros((2, 2))
+        omega, var, lam = self.swell
+        A = np.array([[0.0, 1.0], [-(omega**2), -2.0 * lam * omega]])
+        q = 4.0 * lam * omega * var
+        M = np.zeros((4, 4))
+        M[:2, :2], M[:2, 2:], M[2:, 2:] = -A, np.array([[0, 0], [0, q]]), A.T
+        E = expm(M * dt)
+        Phi = E[2:, 2:].T
+        return Phi, Phi @ E[:2, 2:]
+
     def fx(self, x, dt):
         out = x.copy()
         out[:6] = x[:6] + self._J(x) @ x[6:12] * dt
         out[3:6] = wrap_angle(out[3:6])
-        out[12:] += self.mu * dt
+        out[12:18] += self.mu * dt
+        out[18:20] = self._swell(dt)[0] @ x[18:20]
         return out
 
     def Q(self, x, dt):
         G = np.vstack([self._J(x) * dt**2 / 2, np.eye(6) * dt])
-        Q = np.zeros((18, 18))
+        Q = np.zeros((N, N))
         Q[:12, :12] = G @ np.diag(self.q_acc / dt) @ G.T
-        Q[12:, 12:] = np.diag(self.q_bias * dt)
+        Q[12:18, 12:18] = np.diag(self.q_bias * dt)
+        Q[18:20, 18:20] = self._swell(dt)[1]
         return Q
 
     def hx(self, x, kind):
@@ -111,7 +135,7 @@ class FilterPyModel:
             return self.dvl_R.T @ (x[6:9] + np.cross(x[9:12], self.dvl_r))
         if kind == 2:
             return wrap_angle(x[3:6] + x[12:15])
-        return np.array([x[2] + (rpy_to_matrix(x[3:6]) @ self.baro_r)[2]])
+        return np.array([x[2] + (rpy_to_matrix(x[3:6]) @ self.baro_r)[2] + x[19]])
 
     def step(self, t, kind, z, R):
         f = self.ukf

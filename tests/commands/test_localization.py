@@ -178,7 +178,7 @@ def test_calibrate_without_the_imu_says_so_and_localize_does_not_pretend(run, tm
         "no imu stream"
     ]
     saved = yaml.safe_load(cal.read_text())
-    assert saved["estimated"] == ["dr_bias_drift_rad_s", "dvl_scale_factor"]
+    assert saved["estimated"] == ["dr_bias_drift_rad_s", "dvl_scale_factor", "depth_std_m"]
     assert saved["left_at_default"] == {"gyro_bias_rad_s": "the log has no imu stream"}
     out = run / "cal_est"
     r = runner.invoke(app, ["localize", log, "--out", str(out), "--calibration", str(cal)])

@@ -5,9 +5,21 @@ import pytest
 
 from undertow.errors import DataError, MissingStreamError
 from undertow.estimation.calibration import Calibration, calibrate
-from undertow.log import DeadReckoning, Dvl, GroundTruth, Imu, Log
-from undertow.robot import Mounting
+from undertow.log import (
+    FRESH_WATER_DENSITY,
+    G0,
+    P_ATM,
+    DeadReckoning,
+    Dvl,
+    GroundTruth,
+    Imu,
+    Log,
+    Pressure,
+)
+from undertow.robot import Mounting, SensorMount
 from undertow.rotations import rpy_to_matrix
+
+BAR30_PA = 20.0  # the MS5837-30BA's resolution at OSR 8192: 0.2 mbar
 
 
 def _run(drift=(0.0, 0.0, 2e-4), gyro_bias=(0.01, -0.02, 0.005), scale=1.02, seed=0):
@@ -38,7 +50,11 @@ def _run(drift=(0.0, 0.0, 2e-4), gyro_bias=(0.01, -0.02, 0.005), scale=1.02, see
     imu = Imu(
         t=ti, angular_velocity=np.array(gyro_bias) + rng.normal(scale=0.002, size=(ti.size, 3))
     )
-    return Log(imu=imu, dvl=dvl, dead_reckoning=dr, ground_truth=gt, mounting=mounting)
+    tp = np.arange(0.5, 59.5, 0.1)
+    rho_g = FRESH_WATER_DENSITY * G0
+    p = P_ATM + rho_g * 0.5 + rng.normal(scale=BAR30_PA, size=tp.size)
+    return Log(imu=imu, dvl=dvl, dead_reckoning=dr, ground_truth=gt, mounting=mounting,
+               pressure=Pressure(t=tp, pressure=p))  # fmt: skip
 
 
 def test_recovers_planted_parameters():
@@ -120,4 +136,48 @@ def test_a_missing_stream_leaves_its_parameter_at_the_default_with_a_warning(
         "dr_bias_drift_rad_s",
         "gyro_bias_rad_s",
         "dvl_scale_factor",
+        "depth_std_m",
     }
+
+
+def _pitching_barometer(seed=0, lever=(0.3, 0.0, -0.1), offset_pa=150.0):
+    """A barometer 0.3 m ahead of the origin on a vehicle pitching +-0.2 rad at 0.2 Hz while
+    it heaves, read at 50 Hz with the Bar30's noise and a surface-pressure offset."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 60.0, 0.005)
+    pitch = 0.2 * np.sin(2 * np.pi * 0.2 * t)
+    z = 2.0 + 0.3 * np.sin(2 * np.pi * 0.05 * t)
+    rpy = np.column_stack([0 * t, pitch, 0 * t + 0.4])
+    gt = GroundTruth(t=t, position=np.column_stack([0 * t, 0 * t, z]), orientation=rpy)
+    mounting = Mounting(barometer=SensorMount(translation=lever))
+    tp = np.arange(0.5, 59.5, 0.02)
+    idx = np.searchsorted(t, tp)
+    d = z[idx] + (rpy_to_matrix(rpy[idx]) @ np.asarray(lever))[:, 2]
+    p = P_ATM + offset_pa + FRESH_WATER_DENSITY * G0 * d + rng.normal(scale=BAR30_PA, size=tp.size)
+    return Log(ground_truth=gt, mounting=mounting, pressure=Pressure(t=tp, pressure=p))
+
+
+def test_the_barometer_noise_is_its_spread_about_the_truth_at_the_sensor():
+    """The Bar30's 20 Pa (2.04 mm of fresh water) recovered within its sampling error
+    (std / sqrt(2 n) = 0.9 % for n = 2950) through a lever arm on a pitching vehicle and a
+    surface-pressure offset; without the lever arm the pitch would add 6 cm."""
+    with pytest.warns(RuntimeWarning, match="left at the default"):  # no IMU, DVL or DR
+        cal = calibrate(_pitching_barometer())
+    sigma = BAR30_PA / (FRESH_WATER_DENSITY * G0)
+    assert cal.depth_std_m == pytest.approx(sigma, rel=0.04)
+    assert "depth_std_m" in cal.estimated and cal.samples["pressure"] == 2950
+    with pytest.warns(RuntimeWarning, match="left at the default"):
+        moved = calibrate(_pitching_barometer().replace(mounting=Mounting()))
+    assert moved.depth_std_m > 10 * sigma  # the lever arm matters: the fit uses it
+
+
+def test_the_barometer_noise_is_not_calibrated_in_waves():
+    """A log whose metadata records a swell: the barometer's spread holds the swell's pressure
+    too, so depth_std_m keeps its default and the warning says why."""
+    log = _run().replace(metadata={"wave": {"amplitude_m": 0.1, "frequency_hz": 1.0}})
+    with pytest.warns(RuntimeWarning, match="depth_std_m left at the default 0.01: the log "
+                      "records waves"):  # fmt: skip
+        cal = calibrate(log)
+    assert "depth_std_m" not in cal.estimated and cal.depth_std_m == 0.01
+    calm = log.replace(metadata={"wave": {"amplitude_m": 0.0, "frequency_hz": None}})
+    assert "depth_std_m" in calibrate(calm).estimated

@@ -1,8 +1,10 @@
-"""Sigma-point kernels against the Kalman filter (linear model) and FilterPy (18-state model)."""
+"""Sigma-point kernels against the Kalman filter (linear model) and FilterPy (the filter's model,
+the swell states included)."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from filterpy_reference import FilterPyModel
 
 from undertow.estimation import filter_loop, model, ukf
@@ -44,20 +46,21 @@ def test_linear_gaussian_equals_kalman_filter():
         np.testing.assert_allclose(P, P_kf, rtol=0, atol=1e-9)
 
 
-def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
+def test_linear_update_equals_the_sigma_point_update_on_the_filter_models():
     """The IMU, DVL and DR models are linear: the closed-form update the filter uses for them
     must equal the full unscented update (sigma points through _h), angles and wrap included."""
     rng = np.random.default_rng(7)
-    A = rng.normal(size=(18, 18)) * 0.05
-    P0 = A @ A.T + np.eye(18) * 1e-3
-    x0 = rng.normal(size=18) * 0.3
+    n = model.N_STATE
+    A = rng.normal(size=(n, n)) * 0.05
+    P0 = A @ A.T + np.eye(n) * 1e-3
+    x0 = rng.normal(size=n) * 0.3
     x0[5] = np.pi - 0.01  # yaw next to the wrap
     imu_Rt = np.ascontiguousarray(rpy_to_matrix([np.pi, 0.0, 0.02]).T)
     dvl_Rt = np.ascontiguousarray(rpy_to_matrix([0.0, 0.0, 0.05]).T)
     arm, baro = np.array([0.164, 0.004, 0.284]), np.zeros(3)
     sensors = model.SensorModel(imu_Rt, dvl_Rt, arm, baro, np.full(4, np.inf))
     H = model.jacobians(sensors)
-    wm, wc, lam = ukf.weights(18, 1.0, 2.0, 0.0)
+    wm, wc, lam = ukf.weights(n, 1.0, 2.0, 0.0)
     R = np.diag([1e-3, 2e-3, 5e-4])
     for kind in (model.IMU, model.DVL, model.DR):
         angles = np.full(3, kind == model.DR)
@@ -65,10 +68,10 @@ def test_linear_update_equals_the_sigma_point_update_on_the_18_state_models():
         if kind == model.DR:
             z[2] = -np.pi + 0.02  # across +-pi from the state's yaw + bias
         x, P = x0.copy(), P0.copy()
-        chi, L = np.empty((37, 18)), np.zeros((18, 18))
+        chi, L = np.empty((2 * n + 1, n)), np.zeros((n, n))
         ukf.sigma_points(x, P, lam, model.STATE_ANGLES, L, chi)
-        Zs, col, Rw = np.empty((37, 3)), np.empty(3), np.empty((3, 3))
-        for i in range(37):
+        Zs, col, Rw = np.empty((2 * n + 1, 3)), np.empty(3), np.empty((3, 3))
+        for i in range(2 * n + 1):
             model.h(kind, chi[i], sensors, col, Rw)
             Zs[i] = col
         ukf.update(x, P, chi, Zs, z, R, wm, wc, model.STATE_ANGLES, angles, np.inf)
@@ -94,12 +97,14 @@ BARO_ARM = np.array([0.0, 0.1, -0.05])
 Q_ACC, Q_B, MU = np.full(6, 0.02), np.full(6, 1e-6), np.array([0, 0, 1e-3, 0, 0, 0])
 
 
-def test_full_model_agrees_with_filterpy():
+@pytest.mark.parametrize("swell", [None, (2 * np.pi * 0.8, 0.03**2, 0.1)])
+def test_full_model_agrees_with_filterpy(swell):
     """All four measurement kinds through their mounting, angles near +-pi, equal times
-    (updates without predict), one gap longer than dt_max (capped): every recorded mean and
-    covariance equal to FilterPy's on the numpy model of tests/filterpy_reference.py."""
+    (updates without predict), one gap longer than dt_max (capped), with and without a swell
+    (its transition and noise in the reference by expm and Van Loan's method): every recorded
+    mean and covariance equal to FilterPy's on the numpy model of tests/filterpy_reference.py."""
     rng = np.random.default_rng(7)
-    n, N = 18, 80
+    n, N = model.N_STATE, 80
     kinds = rng.integers(0, 4, N)
     t = np.sort(np.round(rng.uniform(0, 4, N), 2))  # some equal times: updates without predict
     t[N // 2 :] += 1.5  # a gap longer than dt_max
@@ -107,21 +112,25 @@ def test_full_model_agrees_with_filterpy():
     x0 = np.r_[0, 0, 1, 0.05, -0.03, np.pi - 0.05, 0.3, 0, 0, 0, 0, 0.05, np.zeros(6)]
     P0 = np.diag(np.r_[[0.01] * 3, [0.02] * 3, [0.05] * 6, [0.005] * 3, [0.002] * 3] ** 2)
     alpha, beta, kappa = 0.8, 2.0, 0.0
-    ref = FilterPyModel(x0, P0, 0.0, alpha=alpha, beta=beta, kappa=kappa, q_acc=Q_ACC,
-                        q_bias=Q_B, mu_bias=MU, imu_rotation=R_IMU, dvl_rotation=R_DVL,
-                        dvl_translation=R_DVL_ARM, baro_translation=BARO_ARM,
-                        dt_max=dt_max)  # fmt: skip
+    # the filter starts the swell pair held (variance 1e-12), at P_inf once a row sets a swell
+    pair = [1e-12, 1e-12] if swell is None else [swell[1] / swell[0] ** 2, swell[1]]
+    ref = FilterPyModel(np.r_[x0, 0.0, 0.0], np.diag(np.r_[np.diag(P0), pair]), 0.0,
+                        alpha=alpha, beta=beta, kappa=kappa, q_acc=Q_ACC, q_bias=Q_B, mu_bias=MU,
+                        imu_rotation=R_IMU, dvl_rotation=R_DVL, dvl_translation=R_DVL_ARM,
+                        baro_translation=BARO_ARM, dt_max=dt_max, swell=swell)  # fmt: skip
     z = np.zeros((N, 3))
     Rm = np.zeros((N, 3, 3))
     for k in range(N):
         m = 1 if kinds[k] == 3 else 3
-        z[k, :m] = ref.hx(x0, kinds[k]) + rng.normal(0, 0.02, m)
+        z[k, :m] = ref.hx(np.r_[x0, 0.0, 0.0], kinds[k]) + rng.normal(0, 0.02, m)
         Rm[k, :m, :m] = np.diag(rng.uniform(1e-4, 1e-3, m))
     wm, wc, lam = ukf.weights(n, alpha, beta, kappa)
-    process = model.ProcessModel(wm, wc, lam, Q_ACC, Q_B, MU, dt_max, False)
+    damping = 0.1 if swell is None else swell[2]
+    process = model.ProcessModel(wm, wc, lam, Q_ACC, Q_B, MU, dt_max, False, swell_damping=damping)
     sensors = model.SensorModel(np.ascontiguousarray(R_IMU.T), np.ascontiguousarray(R_DVL.T),
                                 R_DVL_ARM, BARO_ARM, np.full(4, np.inf))  # fmt: skip
-    meas = filter_loop.pack_measurements(t, kinds, z, Rm)
+    sw = None if swell is None else np.tile(swell[:2], (N, 1))
+    meas = filter_loop.pack_measurements(t, kinds, z, Rm, sw)
     out_t, out_x, out_P, counts, _ = filter_loop.run_filter(
         meas, 0.0, x0, P0, process, sensors, None
     )
@@ -134,5 +143,5 @@ def test_full_model_agrees_with_filterpy():
     assert counts[used].sum() == N and counts[filter_loop.DT_CAPPED] == 1  # all used, one dt capped
     np.testing.assert_allclose(out_t, [r[0] for r in rows])
     for (_, xr, Pr), xk, Pk in zip(rows, out_x, out_P, strict=True):
-        np.testing.assert_allclose(wrap_angle(xk - xr), 0, atol=1e-9)
-        np.testing.assert_allclose(Pk, Pr, rtol=1e-7, atol=1e-12)
+        np.testing.assert_allclose(wrap_angle(xk - xr[:18]), 0, atol=1e-9)
+        np.testing.assert_allclose(Pk, Pr[:18, :18], rtol=1e-7, atol=1e-12)

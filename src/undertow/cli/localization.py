@@ -178,7 +178,7 @@ def _wave_source(result, by_name: str | None) -> str:
     elif result.wave != "calm" and (result.trajectory.metadata.get("config") or {}).get(
         "pressure_wave_noise"
     ):
-        how += "; the barometer's noise takes the swell's pressure head (pressure_wave_noise)"
+        how += "; the barometer's swell is tracked by two wave-model states (pressure_wave_noise)"
     return how
 
 

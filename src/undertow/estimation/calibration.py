@@ -13,6 +13,12 @@
   moving: s = sum(v_meas . v_true) / sum(|v_true|^2), with v_true the ground
   truth body velocity expressed in the DVL frame, v_true^DVL = R_DVL^T (v^B + omega x r_DVL).
   This is the persistent along-track offset the paper reports but does not model.
+- Barometer noise (m, the filter's ``depth_std_m``): the standard deviation (ddof 1) of
+  e = d(p) - d_true over the pressure samples, d(p) = (p - p_surface) / (rho g) with the log's
+  reference and d_true the ground truth's depth moved to the barometer by its lever arm,
+  z + e_3^T R_B^W r_bar. The mean of e (a surface-pressure or density offset) is left out. Run
+  in calm water it is the sensor's own noise; in waves it takes the swell's dynamic pressure
+  too, which the filter models apart, so a log whose metadata records waves is refused for it.
 """
 
 from __future__ import annotations
@@ -30,11 +36,12 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from .._util.atomic import atomic_path
 from .._util.validate import read_yaml, refuse_renamed, validate
 from ..errors import ConfigError, DataError
+from ..io.units import depth_reference
 from ..log import Log
-from ..rotations import world_to_body, wrap_angle
+from ..rotations import rpy_to_matrix, world_to_body, wrap_angle
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
-Parameter = Literal["dr_bias_drift_rad_s", "gyro_bias_rad_s", "dvl_scale_factor"]
+Parameter = Literal["dr_bias_drift_rad_s", "gyro_bias_rad_s", "dvl_scale_factor", "depth_std_m"]
 PARAMETERS: tuple[str, ...] = get_args(Parameter)
 
 
@@ -48,6 +55,7 @@ class Calibration(BaseModel):
     gyro_bias_rad_s: tuple[Finite, Finite, Finite] = (0.0, 0.0, 0.0)
     dvl_scale_factor: float = Field(1.0, gt=0, allow_inf_nan=False)
     dvl_scale_factor_std: float | None = float("nan")  # NaN / null: not determined
+    depth_std_m: float = Field(0.01, gt=0, allow_inf_nan=False)  # the filter's default
     samples: dict[str, int] | None = None
     source: str = ""
     # the parameters estimated from data (None: not recorded, a file from an older version);
@@ -131,7 +139,8 @@ def calibrate(
     smoothing_s: float = 0.05,
     min_samples: int = MIN_SAMPLES,
 ) -> Calibration:
-    """Estimate mu_b, the IMU gyro bias and the DVL scale factor from ``log`` and its ground truth.
+    """Estimate mu_b, the IMU gyro bias, the DVL scale factor and the barometer's noise from
+    ``log`` and its ground truth (module doc).
 
     Needs the ground_truth stream (repeated timestamps are dropped with a warning, see
     :meth:`~undertow.log.GroundTruth.usable`). Each parameter is
@@ -147,6 +156,7 @@ def calibrate(
         "dr_bias_drift_rad_s": _fit_dr_drift(log, truth),
         "gyro_bias_rad_s": _fit_gyro_bias(log, truth),
         "dvl_scale_factor": _fit_dvl_scale(log, truth, min_speed_m_s),
+        "depth_std_m": _fit_depth_std(log, truth),
     }
     found = dict(fit.found for fit in fits.values() if fit.found is not None)
     counts = dict(fit.samples for fit in fits.values() if fit.values)
@@ -276,6 +286,41 @@ def _fit_dvl_scale(log: Log, truth: _Truth, min_speed_m_s: float) -> _Fit:
     s_std = float(np.sqrt(np.sum(resid**2) / (resid.size - 1) / np.sum(vt * vt)))
     values = {"dvl_scale_factor": s, "dvl_scale_factor_std": s_std}
     return _Fit(values, ("dvl_moving", n), found)
+
+
+def _fit_depth_std(log: Log, truth: _Truth) -> _Fit:
+    """The barometer's noise: std (ddof 1) of its depth about the ground truth's at the sensor
+    (module doc); left at the default for a log whose metadata records waves."""
+    p = log.pressure
+    if p is None or not len(p):
+        return _Fit({}, why_not="the log has no pressure stream")
+    keep = truth.inside(p.t) & np.isfinite(p.pressure)
+    n = int(keep.sum())
+    found = ("depth_std_m (pressure)", n)
+    if n < max(truth.min_samples, 3):
+        why_not = f"{n} finite pressure samples inside the ground truth {truth.span}, {truth.need}"
+        return _Fit({}, found=found, why_not=why_not)
+    wave = log.metadata.get("wave") if isinstance(log.metadata, dict) else None
+    if _has_waves(wave):
+        why_not = ("the log records waves, whose dynamic pressure the barometer reads as depth; "
+                   "calibrate its noise on a calm run")  # fmt: skip
+        return _Fit({}, found=found, why_not=why_not)
+    pos, rpy, _ = truth.gt.interpolate(p.t[keep])
+    lever = rpy_to_matrix(rpy) @ np.asarray(log.mounting.barometer.translation, float)
+    e = p.depth(*depth_reference(log.metadata))[keep] - (pos[:, 2] + lever[:, 2])
+    std = float(np.std(e, ddof=1))
+    if not std > 0:
+        return _Fit({}, found=found, why_not="the barometer's depth about the truth is constant")
+    return _Fit({"depth_std_m": std}, ("pressure", n), found)
+
+
+def _has_waves(wave) -> bool:
+    """Whether a log's recorded wave condition (a dict: ``amplitude_m``, or a track's lists) has
+    any amplitude above 0."""
+    if not isinstance(wave, dict):
+        return False
+    a = np.asarray(wave.get("amplitude_m", 0.0), float)
+    return bool(np.any(np.isfinite(a) & (a > 0)))
 
 
 def _plain_value(value) -> str:

@@ -85,10 +85,15 @@ class LocalizerConfig(BaseModel):
     dvl_std_floor_m_s: Positive = 0.001
     dr_orientation_std_rad: PositiveVec3 = (0.005, 0.005, 0.01)
     depth_std_m: Positive = 0.01
-    # the variants with wave noise (an, proposed) add the swell's pressure head a^2 K_p^2 / 2 to
-    # the barometer's R (noise_physics.pressure_head_variance); False: eq:bar_meas_model with
+    # the variants with wave noise (an, proposed) carry the swell's pressure head at the
+    # barometer (variance a^2 K_p^2 / 2, noise_physics.pressure_head_variance) as two states of
+    # a narrow-band wave model (model.py's module doc); False: eq:bar_meas_model with
     # depth_std_m alone, as the paper lists its wave noise (DVL and DR only)
     pressure_wave_noise: bool = True
+    # the wave model's relative damping lambda: its band around the wave's frequency f is about
+    # +-lambda f wide (a single regular wave is lambda -> 0; Fossen's MSS toolbox, exLinspec.m,
+    # fits lambda to the PM and JONSWAP spectra from 0.1)
+    swell_damping: float = Field(0.1, gt=0.0, lt=1.0, allow_inf_nan=False)
     std_floor: Positive = 1e-6  # every measurement std is at least this
     dr_orientation_frame: Literal["body", "dvl"] = "body"
     # initial state (None: zeros, orientation from the first DR report, z from the first depth)
@@ -143,8 +148,8 @@ class LocalizerConfig(BaseModel):
     @field_validator("initial_state", "initial_std")
     @classmethod
     def _eighteen(cls, value):
-        if value is not None and len(value) != model.N_STATE:
-            raise ValueError(f"needs {model.N_STATE} values (one per state), got {len(value)}")
+        if value is not None and len(value) != model.N_POSE:
+            raise ValueError(f"needs {model.N_POSE} values (one per state), got {len(value)}")
         return value
 
     @property
@@ -162,14 +167,15 @@ class LocalizerConfig(BaseModel):
 
     @property
     def adds_pressure_wave_noise(self) -> bool:
-        """The barometer's R carries the swell's pressure head (``pressure_wave_noise``)."""
+        """The swell's pressure head at the barometer is modelled (``pressure_wave_noise``): as
+        the filter's swell states, as white noise in R for the estimators without them."""
         return self.adds_wave_noise and self.pressure_wave_noise
 
     def process_model(self, held=()) -> model.ProcessModel:
-        """The record the filter and the smoother predict with: unscented weights of n = 18,
-        Gamma densities, the mean drifts (zeros for the variants without bias states).
-        ``held``: names of :data:`HELD_GROUPS` held at 0 because the log has no sensor that
-        informs them."""
+        """The record the filter and the smoother predict with: unscented weights of the
+        filter's N_STATE states, Gamma densities, the mean drifts (zeros for the variants without
+        bias states), the swell's damping. ``held``: names of :data:`HELD_GROUPS` held at 0
+        because the log has no sensor that informs them."""
         wm, wc, lam = weights(model.N_STATE, self.alpha, self.beta, self.kappa)
         unknown = set(held) - set(HELD_GROUPS)
         if unknown:
@@ -186,6 +192,7 @@ class LocalizerConfig(BaseModel):
             freeze_bias=not self.estimates_bias,
             hold_dr_bias="dr_bias" in held,
             hold_gyro_bias="gyro_bias" in held,
+            swell_damping=float(self.swell_damping),
         )
 
     def sensor_model(self, mounting: Mounting) -> model.SensorModel:

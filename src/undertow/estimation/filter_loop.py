@@ -1,14 +1,19 @@
 """The filter loop of the paper's UKF: the merged measurements walked in time order with the
-18-state model of :mod:`undertow.estimation.model` (predict to each measurement, update),
-as numba kernels on plain arrays.
+model of :mod:`undertow.estimation.model` (predict to each measurement, update), as numba
+kernels on plain arrays.
 
 The filter's boundary (:func:`run_filter`) is a few named things: the merged, time-sorted
-measurements as one structured array (:data:`MEASUREMENT`: t, kind, z, R), the process model
+measurements as one structured array (:data:`MEASUREMENT`: t, kind, z, R, swell), the process
+model
 and the unscented weights as one record (:class:`~undertow.estimation.model.ProcessModel`), the
 sensors' mounting and gates as another (:class:`~undertow.estimation.model.SensorModel`), the
 start (t0, x0, P0) and the output times. The loop predicts to each measurement's time (no
 prediction when dt <= 0, dt capped at dt_max) and updates; counters are indexed by the names in
-:data:`COUNT_NAMES`. The records are built from a
+:data:`COUNT_NAMES`. A row's ``swell`` (omega_0 rad/s, sigma^2 m^2; sigma^2 NaN: none) sets the
+swell states' model from its time on (:mod:`~undertow.estimation.model`'s module doc): sigma^2 > 0
+starts them at their stationary covariance when they were held, 0 holds them at 0 again. The
+states recorded are the trajectory's :data:`~undertow.estimation.model.N_POSE`; the loop's own
+state has the swell pair too. The records are built from a
 :class:`~undertow.estimation.config.LocalizerConfig` by its ``process_model`` and
 ``sensor_model``; :mod:`undertow.estimation.localizer` is the Python side.
 
@@ -28,9 +33,11 @@ from .model import (
     BARO,
     DR,
     DVL,
+    N_POSE,
     N_SIGMA,
     N_STATE,
     STATE_ANGLES,
+    SWELL,
     Z_ANGLES,
     Z_LINEAR,
     adapt_r,
@@ -44,10 +51,12 @@ from .model import (
 from .ukf import all_finite, cholesky_repair, sigma_points, update, update_linear
 
 # one merged measurement: time (s), kind (IMU, DVL, DR, BARO), z (the first KIND_DIM[kind]
-# entries used) and its noise covariance R (the leading KIND_DIM[kind] square block used)
+# entries used), its noise covariance R (the leading KIND_DIM[kind] square block used) and the
+# swell from its time on (omega_0 rad/s, sigma^2 m^2; sigma^2 NaN: the row sets none)
 MEASUREMENT = np.dtype(
-    [("t", np.float64), ("kind", np.int64), ("z", np.float64, (3,)), ("R", np.float64, (3, 3))]
-)
+    [("t", np.float64), ("kind", np.int64), ("z", np.float64, (3,)), ("R", np.float64, (3, 3)),
+     ("swell", np.float64, (2,))]
+)  # fmt: skip
 #: the ``out_times`` of a loop that records at each distinct row time
 NO_TIMES = np.empty(0)
 
@@ -77,7 +86,8 @@ class FilterState(NamedTuple):
     the estimate (x, P), the Cholesky factor L of P (valid when ``clock[2]``), ``clock`` =
     (t_cur: the time (x, P) are predicted to, t_last: the last row's time, factored, emit_due:
     the state at t_last is not yet recorded), adaptive-r's running R per kind (``Ra``) and
-    whether it started (``adapted``), the counters (COUNT_NAMES) and NIS sums (NIS_FIELDS)."""
+    whether it started (``adapted``), the counters (COUNT_NAMES), NIS sums (NIS_FIELDS) and the
+    swell model in force (``swell`` = (omega_0, sigma^2); sigma^2 = 0: held)."""
 
     x: np.ndarray
     P: np.ndarray
@@ -87,6 +97,7 @@ class FilterState(NamedTuple):
     adapted: np.ndarray
     counts: np.ndarray
     nis: np.ndarray
+    swell: np.ndarray
 
     def copy(self) -> FilterState:
         return FilterState(*(a.copy() for a in self))
@@ -94,17 +105,22 @@ class FilterState(NamedTuple):
 
 @njit(cache=True)
 def start_state(t0, x0, P0, process, Ra):
-    """The :class:`FilterState` at t0: (x0, P0), the held bias states frozen, no output yet;
+    """The :class:`FilterState` at t0: (x0, P0) (the trajectory's N_POSE states, or all
+    N_STATE), the held bias states frozen, the swell held until a row sets it, no output yet;
     ``Ra`` (4, 3, 3) receives adaptive-r's running R."""
-    x = x0.copy()
-    P = P0.copy()
+    x = np.zeros(N_STATE)
+    P = np.zeros((N_STATE, N_STATE))
+    m = x0.size
+    x[:m] = x0
+    P[:m, :m] = P0
     first, last = held_range(process.freeze_bias, process.hold_dr_bias, process.hold_gyro_bias)
     if last > first:
         freeze_states(x, P, first, last)
+    freeze_states(x, P, SWELL, N_STATE)
     clock = np.array([t0, np.nan, 0.0, 0.0])
     return FilterState(x, P, np.zeros((N_STATE, N_STATE)), clock, Ra,
                        np.zeros(4, dtype=np.bool_), np.zeros(len(COUNT_NAMES), dtype=np.int64),
-                       np.zeros((4, len(NIS_FIELDS))))  # fmt: skip
+                       np.zeros((4, len(NIS_FIELDS))), np.array([np.nan, 0.0]))  # fmt: skip
 
 
 def resume_filter(meas, state: FilterState, process, sensors, flush: bool, innovations=None):
@@ -114,18 +130,20 @@ def resume_filter(meas, state: FilterState, process, sensors, flush: bool, innov
     next call's first row has a later time), so rows fed in any pieces give the outputs and
     final state of one :func:`run_filter` over them all, bit for bit. ``innovations``
     (len(meas), 3), optional: the rows' whitened innovations, as in :func:`run_filter`."""
-    t, kind, z, R = _columns(meas)
+    t, kind, z, R, sw = _columns(meas)
     n_out = _distinct_times(t) + 1 if t.size else 1
     record = np.empty((0, 3)) if innovations is None or t.size == 0 else innovations
     return _filter_from(
-        t, kind, z, R, state, process, sensors, NO_TIMES, False, n_out, flush, record
+        t, kind, z, R, sw, state, process, sensors, NO_TIMES, False, n_out, flush, record
     )
 
 
-def pack_measurements(t, kind, z, R) -> np.ndarray:
-    """The structured :data:`MEASUREMENT` array of (t (N,), kind (N,), z (N, 3), R (N, 3, 3))."""
+def pack_measurements(t, kind, z, R, swell=None) -> np.ndarray:
+    """The structured :data:`MEASUREMENT` array of (t (N,), kind (N,), z (N, 3), R (N, 3, 3),
+    swell (N, 2); None: no row sets a swell)."""
     meas = np.empty(len(t), MEASUREMENT)
     meas["t"], meas["kind"], meas["z"], meas["R"] = t, kind, z, R
+    meas["swell"] = np.nan if swell is None else swell
     return meas
 
 
@@ -166,7 +184,7 @@ def run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None, in
     :func:`resume_filter` (a jitted entry compiles the whole loop again for each combination of
     optional arguments), and runs without the GIL.
     """
-    t, kind, z, R = _columns(meas)
+    t, kind, z, R, sw = _columns(meas)
     at_times = out_times is not None
     if at_times:
         out_times = np.ascontiguousarray(out_times, dtype=np.float64)
@@ -184,38 +202,40 @@ def run_filter(meas, t0, x0, P0, process, sensors, out_times, r_adapted=None, in
     else:
         record = innovations
     out = _filter_from(
-        t, kind, z, R, state, process, sensors, out_times, at_times, n_out, True, record
+        t, kind, z, R, sw, state, process, sensors, out_times, at_times, n_out, True, record
     )
     return out[0], out[1], out[2], state.counts, state.nis
 
 
 @njit(cache=True, nogil=True)  # the link threads run while the filter loops
-def _filter_from(t, kind, z, R, state, process, sensors, out_times, at_times, n_out, flush, record):
+def _filter_from(t, kind, z, R, sw, state, process, sensors, out_times, at_times, n_out, flush,
+                 record):  # fmt: skip
     """:func:`_filter` from ``state`` (:class:`FilterState`, advanced in place); the states
     recorded at ``out_times`` when ``at_times``, else at each distinct row time (one compiled
     loop for both: a None would compile it twice); ``record``: the whitened innovations per
     row (:func:`run_filter`), or (0, 3) for none."""
-    wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias, hold_dr, hold_gyro = process
+    wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias, hold_dr, hold_gyro, damping = process
     first, last = held_range(freeze_bias, hold_dr, hold_gyro)
-    x, P, L, clock, Ra, adapted, counts, nis = state
-    return _filter(t, kind, z, R, x, P, L, clock, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
+    x, P, L, clock, Ra, adapted, counts, nis, swell = state
+    return _filter(t, kind, z, R, sw, x, P, L, clock, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max,
                    last > first, first, last, jacobians(sensors), sensors.gate, sensors,
                    out_times, at_times, n_out, sensors.adapt_r, sensors.adapt_alpha, Ra, adapted,
-                   counts, nis, flush, record)  # fmt: skip
+                   counts, nis, flush, record, swell, damping)  # fmt: skip
 
 
 @njit(cache=True)
 def _columns(meas):
-    """The fields of the :data:`MEASUREMENT` array as contiguous arrays (t, kind, z, R)."""
+    """The fields of the :data:`MEASUREMENT` array as contiguous arrays (t, kind, z, R, swell)."""
     N = meas.size
     t, kind = np.empty(N), np.empty(N, np.int64)
-    z, R = np.empty((N, 3)), np.empty((N, 3, 3))
+    z, R, sw = np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 2))
     for k in range(N):
         t[k] = meas[k].t
         kind[k] = meas[k].kind
         z[k] = meas[k].z
         R[k] = meas[k].R
-    return t, kind, z, R
+        sw[k] = meas[k].swell
+    return t, kind, z, R, sw
 
 
 @njit(cache=True)
@@ -229,19 +249,20 @@ def _distinct_times(t):
 
 
 @njit(cache=True)
-def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt_max, freeze,
-            first, last, H, gate, sensors, out_times, at_times, n_out, adapt, alpha, Ra, adapted,
-            counts, nis, flush, record):  # fmt: skip
+def _filter(t, kind, z, R, sw, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt_max,
+            freeze, first, last, H, gate, sensors, out_times, at_times, n_out, adapt, alpha, Ra,
+            adapted, counts, nis, flush, record, swell, damping):  # fmt: skip
     """The loop of :func:`run_filter` over its unpacked records, from the state (x, P, L_in,
-    clock, Ra, adapted, counts, nis) of a :class:`FilterState`, advanced in place;
+    clock, Ra, adapted, counts, nis, swell) of a :class:`FilterState`, advanced in place; ``sw``
+    the rows' swell, ``damping`` the swell model's lambda;
     H = jacobians(sensors); states first..last-1 held when ``freeze``; ``adapt``: the DVL and
     DR use the adapted R of :func:`~undertow.estimation.model.adapt_r` (in Ra, per kind)
     instead of their rows' R.
     The state at a time is recorded when the next row's time differs, the last one only when
     ``flush``; ``record`` (N, 3) or (0, 3): row k's whitened innovation (:func:`run_filter`)."""
     out_t = np.empty(n_out)
-    out_x = np.empty((n_out, N_STATE))
-    out_P = np.empty((n_out, N_STATE, N_STATE))
+    out_x = np.empty((n_out, N_POSE))
+    out_P = np.empty((n_out, N_POSE, N_POSE))
     ws = predict_workspace()
     L = ws[3]
     xb = np.empty(N_STATE)  # (x, P) before a step, restored when it fails
@@ -260,7 +281,8 @@ def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt
         tk = t[k] if k < N else np.inf
         if at_times:
             k_out = _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
-                                  mu, dt_max, ws, xb, Pb, out_t, out_x, out_P, counts)  # fmt: skip
+                                  mu, dt_max, ws, xb, Pb, out_t, out_x, out_P, counts,
+                                  (swell[0], swell[1], damping))  # fmt: skip
         if k == N:
             break
         if emit_due and tk != t_last:
@@ -282,13 +304,15 @@ def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt
         if not (all_finite(zk) and all_finite(Rk)):
             counts[NONFINITE_REJECTED] += 1
         else:
+            if np.isfinite(sw[k, 1]) and _set_swell(sw[k, 0], sw[k, 1], swell, x, P):
+                factored = False
             dt = tk - t_cur
             if dt > 0:
                 if dt > dt_max:
                     dt = dt_max
                     counts[DT_CAPPED] += 1
                 _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, first, last, ws,
-                              factored, xb, Pb, counts)  # fmt: skip
+                              factored, xb, Pb, counts, (swell[0], swell[1], damping))  # fmt: skip
                 t_cur = tk
             else:
                 counts[NO_PREDICT] += 1
@@ -296,6 +320,8 @@ def _filter(t, kind, z, R, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu, dt
             w3[:] = np.nan
             used = _update_step(kd, zk, Rk, x, P, wm, wc, lam, freeze, first, last, H, gate,
                                 sensors, ws, xb, Pb, counts, nis, w3)  # fmt: skip
+            if swell[1] <= 0.0:  # no swell: its states stay held at 0
+                freeze_states(x, P, SWELL, N_STATE)
             if recording:
                 record[k, 0], record[k, 1], record[k, 2] = w3[0], w3[1], w3[2]
             if use_ra and used:
@@ -322,14 +348,35 @@ def _emit(t_last, x, P, L, out_t, out_x, out_P, k_out, counts):
     L holds its factor). Returns the next output index."""
     counts[REPAIRS] += max(cholesky_repair(P, L), 0)
     out_t[k_out] = t_last
-    out_x[k_out] = x
-    out_P[k_out] = P
+    out_x[k_out] = x[:N_POSE]
+    out_P[k_out] = P[:N_POSE, :N_POSE]
     return k_out + 1
 
 
 @njit(cache=True)
+def _set_swell(omega, var, swell, x, P):
+    """A row's swell (omega_0, sigma^2) into ``swell`` (the model in force): held states start at
+    their stationary covariance diag(sigma^2 / omega_0^2, sigma^2) (module doc of
+    :mod:`~undertow.estimation.model`); sigma^2 = 0 (or no frequency) holds them at 0. Returns
+    whether P changed."""
+    on = var > 0.0 and omega > 0.0 and np.isfinite(omega)
+    was_on = swell[1] > 0.0
+    swell[0] = omega if on else np.nan
+    swell[1] = var if on else 0.0
+    if on and not was_on:
+        freeze_states(x, P, SWELL, N_STATE)
+        P[SWELL, SWELL] = var / (omega * omega)
+        P[SWELL + 1, SWELL + 1] = var
+        return True
+    if was_on and not on:
+        freeze_states(x, P, SWELL, N_STATE)
+        return True
+    return False
+
+
+@njit(cache=True)
 def _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias, mu, dt_max, ws,
-                  xb, Pb, out_t, out_x, out_P, counts):  # fmt: skip
+                  xb, Pb, out_t, out_x, out_P, counts, swell):  # fmt: skip
     """Record every output time before tk: (x, P) predicted on a copy from t_cur (dt capped at
     dt_max), its covariance repaired to SPD. Returns the next output index."""
     while k_out < out_times.size and out_times[k_out] < tk:
@@ -337,22 +384,25 @@ def _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
         Pb[:, :] = P
         dt = min(out_times[k_out] - t_cur, dt_max)
         if dt > 0:
-            counts[REPAIRS] += max(predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws), 0)
+            status = predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws, False, swell)
+            counts[REPAIRS] += max(status, 0)
         counts[REPAIRS] += max(cholesky_repair(Pb, ws[3]), 0)  # emit only a PD covariance
         out_t[k_out] = out_times[k_out]
-        out_x[k_out] = xb
-        out_P[k_out] = Pb
+        out_x[k_out] = xb[:N_POSE]
+        out_P[k_out] = Pb[:N_POSE, :N_POSE]
         k_out += 1
     return k_out
 
 
 @njit(cache=True)
 def _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, first, last, ws, factored, xb,
-                  Pb, counts):  # fmt: skip
-    """Predict (x, P) over dt; a prediction that leaves them non-finite is undone (counted)."""
+                  Pb, counts, swell):  # fmt: skip
+    """Predict (x, P) over dt with the swell model ``swell`` (omega_0, sigma^2, lambda); a
+    prediction that leaves them non-finite is undone (counted)."""
     xb[:] = x
     Pb[:, :] = P
-    counts[REPAIRS] += max(predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, ws, factored), 0)
+    status = predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, ws, factored, swell)
+    counts[REPAIRS] += max(status, 0)
     if not (all_finite(x) and all_finite(P)):
         x[:] = xb
         P[:, :] = Pb

@@ -13,8 +13,9 @@ the DVL and DR noise R adapted from the residuals after each update (Akhlaghi, Z
 starting from the nominal R, alpha = ``adaptive_r_alpha`` (0.98).
 
 Wave noise (variants ``an``, ``proposed``): a constant condition adds gamma^2 to every DVL (and
-DR) row, and the swell's pressure head a^2 K_p^2 / 2 to every barometer row
-(``pressure_wave_noise``; :func:`~undertow.estimation.rows.pressure_rows`); a condition that
+DR) row, and the swell's pressure head at the barometer (variance a^2 K_p^2 / 2) is carried by
+the filter's two swell states (``pressure_wave_noise``; :mod:`~undertow.estimation.model`,
+:func:`~undertow.estimation.rows.swell_columns`); a condition that
 changes over time (a :class:`~undertow.wavetrack.WaveTrack`, a log whose ``metadata["wave"]`` is
 a track with ``t`` lists, or ``wave="auto"``: estimated from the log by
 :mod:`undertow.seastate`) adds each row's gamma(t)^2, gamma interpolated in time between the
@@ -333,7 +334,7 @@ def calibration_fields(calibration: Calibration, config: LocalizerConfig) -> dic
     """The config fields ``calibration`` supplies to ``config``'s variant: those it estimated
     (all of them in a file that does not say). One warning names those the variant would use
     but that were left at their default, so a run is never quietly 'calibrated' with defaults."""
-    names = ["dvl_scale_factor"]
+    names = ["dvl_scale_factor", "depth_std_m"]
     if config.estimates_bias:  # mu_b and the gyro bias belong to the bias model
         names.append("dr_bias_drift_rad_s")
         if config.initial_state is None:

@@ -57,6 +57,7 @@ from .rows import (
     depth_reference,
     dr_rows,
     dvl_rows,
+    filter_pressure_rows,
     imu_rows,
     initial_state,
     merged_rows,
@@ -166,15 +167,16 @@ def _piece_rows(triple: tuple, cfg, noise, rejected: dict) -> np.ndarray:
         part = stream(log, cfg, noise, counts)
         if part is not None:
             parts.append(part)
-    part = pressure_rows(log, cfg, noise, counts, jumps=False)
+    kept = [(t[ok], kind, z[ok], R[ok]) for t, kind, z, R, ok in parts]
+    part = filter_pressure_rows(log, cfg, noise, counts, jumps=False)
     if part is not None:
-        t, kind, z, R, ok = part
+        t, kind, z, R, ok, swell = part
         jumped = _jumps(t, z[:, 0], ok, before, after, cfg, noise)
         counts["rejected_pressure_rate"] = int(jumped.sum())
-        parts.append((t, kind, z, R, ok & ~jumped))
+        ok = ok & ~jumped
+        kept.append((t[ok], kind, z[ok], R[ok], swell[ok]))
     for key, n in counts.items():
         rejected[key] = rejected.get(key, 0) + n
-    kept = [(t[ok], kind, z[ok], R[ok]) for t, kind, z, R, ok in parts]
     return merged_rows(kept, cfg.std_floor**2)[0]
 
 

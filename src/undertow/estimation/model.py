@@ -52,6 +52,29 @@ Zhou and Huang 2017):
 starting from the first row's (nominal) R. The other variants take the same path as before
 (the branch is off), bit for bit.
 
+The swell in the barometer (beyond the paper, ``LocalizerConfig.pressure_wave_noise``): the
+wave's dynamic pressure reaches the barometer as a depth error xi, a narrow-band oscillation
+at the wave's frequency, not white noise. Two more states carry it, x[18:20] = (y, xi), the
+linear wave model of dynamic positioning (Fossen, "Handbook of Marine Craft Hydrodynamics and
+Motion Control", Wiley 2011, ch. 8, the linear wave response approximation):
+
+    y'' + 2 lambda omega_0 y' + omega_0^2 y = w,   xi = y',
+
+whose transfer function from w to xi, s / (s^2 + 2 lambda omega_0 s + omega_0^2), passes
+nothing at zero frequency, so the swell cannot take the place of a slow depth change:
+
+    Baro (kind 3):  z = z + e_3^T R_B^W r_bar + xi
+
+The pair moves by the exact transition Phi(dt) = exp(A dt), A = [[0, 1], [-omega_0^2,
+-2 lambda omega_0]] (:func:`swell_transition`), with the noise that keeps the stationary
+covariance P_inf = diag(sigma^2 / omega_0^2, sigma^2) (for this model var(y') = omega_0^2
+var(y) and cov(y, y') = 0): Q_s = P_inf - Phi P_inf Phi^T, exact for any dt. sigma^2 = a^2
+K_p^2 / 2 is the swell's pressure head variance at the barometer's depth and omega_0 = 2 pi f
+(:func:`~undertow.estimation.noise_physics.pressure_head_variance`); the rows carry them
+(:mod:`undertow.estimation.rows`). Without a swell (calm, or a variant without it) the pair is
+held at 0 like the bias states. The trajectory holds the 18 states of the paper
+(:data:`N_POSE`); the swell states are the filter's own.
+
 The filter loop that walks the measurements with these models is
 :mod:`undertow.estimation.filter_loop`.
 """
@@ -65,7 +88,9 @@ from numba import njit
 
 from .ukf import predict_moments, sigma_points, spread, wrap
 
-N_STATE = 18
+N_POSE = 18  # the paper's states, what a trajectory holds
+SWELL = 18  # first of the two swell states (y, xi), module doc
+N_STATE = N_POSE + 2
 N_SIGMA = 2 * N_STATE + 1
 IMU, DVL, DR, BARO = 0, 1, 2, 3
 KIND_NAMES = ("imu", "dvl", "dead_reckoning", "pressure")
@@ -91,6 +116,8 @@ class ProcessModel(NamedTuple):
     # orientation holds b^g = x[12:15], one without the IMU gyro b-bar^g = x[15:18])
     hold_dr_bias: bool = False
     hold_gyro_bias: bool = False
+    # the swell model's relative damping lambda (module doc)
+    swell_damping: float = 0.1
 
 
 class SensorModel(NamedTuple):
@@ -143,9 +170,44 @@ def euler_rate(phi, theta, T):
 
 
 @njit(cache=True)
-def f(x, dt, mu_bias, out, R, T):
+def swell_transition(dt, omega, lam, Phi):
+    """Phi = exp(A dt) of the swell model, A = [[0, 1], [-omega^2, -2 lambda omega]] (module
+    doc), 0 < lambda < 1: with omega_d = omega sqrt(1 - lambda^2), c = cos(omega_d dt),
+    s = sin(omega_d dt), e = exp(-lambda omega dt),
+
+        Phi = e [[c + (lambda omega / omega_d) s, s / omega_d],
+                 [-(omega^2 / omega_d) s,         c - (lambda omega / omega_d) s]]
+
+    (the damped oscillator's free response). The identity when omega is not finite or 0."""
+    if not (omega > 0.0) or not np.isfinite(omega):
+        Phi[0, 0], Phi[0, 1], Phi[1, 0], Phi[1, 1] = 1.0, 0.0, 0.0, 1.0
+        return
+    wd = omega * np.sqrt(1.0 - lam * lam)
+    e = np.exp(-lam * omega * dt)
+    c, s = np.cos(wd * dt), np.sin(wd * dt)
+    r = lam * omega / wd
+    Phi[0, 0] = e * (c + r * s)
+    Phi[0, 1] = e * s / wd
+    Phi[1, 0] = -e * omega * omega / wd * s
+    Phi[1, 1] = e * (c - r * s)
+
+
+@njit(cache=True)
+def swell_noise(Phi, omega, var, Q):
+    """Q_s = P_inf - Phi P_inf Phi^T into Q[18:20, 18:20], P_inf = diag(var / omega^2, var)
+    (module doc): the noise that keeps the swell's stationary covariance over the step."""
+    s1 = var / (omega * omega)
+    for a in range(2):
+        for b in range(2):
+            v = Phi[a, 0] * s1 * Phi[b, 0] + Phi[a, 1] * var * Phi[b, 1]
+            Q[SWELL + a, SWELL + b] = (s1 if a == 0 else var) * (a == b) - v
+
+
+@njit(cache=True)
+def f(x, dt, mu_bias, out, R, T, Phi):
     """Mean of eq:dynamics_model for one state x (noise-free part), given R = R_B^W(eta) and
-    T = T(phi, theta) already evaluated at x's angles."""
+    T = T(phi, theta) already evaluated at x's angles; the swell states (when x has them) move
+    by ``Phi`` (:func:`swell_transition`)."""
     for i in range(3):
         out[i] = x[i] + dt * (R[i, 0] * x[6] + R[i, 1] * x[7] + R[i, 2] * x[8])
         out[3 + i] = wrap(x[3 + i] + dt * (T[i, 0] * x[9] + T[i, 1] * x[10] + T[i, 2] * x[11]))
@@ -153,11 +215,16 @@ def f(x, dt, mu_bias, out, R, T):
         out[i] = x[i]
     for i in range(6):
         out[12 + i] = x[12 + i] + mu_bias[i] * dt
+    if x.size > N_POSE:
+        y, xi = x[SWELL], x[SWELL + 1]
+        out[SWELL] = Phi[0, 0] * y + Phi[0, 1] * xi
+        out[SWELL + 1] = Phi[1, 0] * y + Phi[1, 1] * xi
 
 
 @njit(cache=True)
 def process_noise(x, dt, q_acc, q_bias, Q, R, T):
-    """Q = G diag(q_acc)/dt G^T (G = [J dt^2/2; I dt]) plus diag(q_bias) dt, J at the mean."""
+    """Q = G diag(q_acc)/dt G^T (G = [J dt^2/2; I dt]) plus diag(q_bias) dt, J at the mean
+    (the swell's block, when x has it, is :func:`swell_noise`'s)."""
     Q[:, :] = 0.0
     rotation(x[3], x[4], x[5], R)
     euler_rate(x[3], x[4], T)
@@ -202,12 +269,12 @@ def h(kind, x, sensors, out, R):
     else:
         r_bar = sensors.baro_r
         rotation(x[3], x[4], x[5], R)
-        out[0] = x[2] + R[2, 0] * r_bar[0] + R[2, 1] * r_bar[1] + R[2, 2] * r_bar[2]
+        out[0] = x[2] + R[2, 0] * r_bar[0] + R[2, 1] * r_bar[1] + R[2, 2] * r_bar[2] + x[SWELL + 1]
 
 
 @njit(cache=True)
 def jacobians(sensors):
-    """H (3, 18) of the linear models IMU, DVL, DR, column j = h(e_j): (3, 3, 18), indexed by
+    """H (3, n) of the linear models IMU, DVL, DR, column j = h(e_j): (3, 3, n), indexed by
     kind (the barometer's row is unused: it is not linear)."""
     H = np.zeros((3, 3, N_STATE))
     e = np.zeros(N_STATE)
@@ -226,10 +293,11 @@ def jacobians(sensors):
 @njit(cache=True)
 def freeze_states(x, P, first=12, last=18):
     """Baseline / AN variants: bias states held at 0 with a tiny variance and no correlation
-    (states first..last-1: all six, or one group a log without its sensor cannot inform)."""
+    (states first..last-1: all six, or one group a log without its sensor cannot inform; the
+    swell pair 18..19 when there is no swell)."""
     for i in range(first, last):
         x[i] = 0.0
-        for j in range(18):
+        for j in range(x.size):
             P[i, j] = 0.0
             P[j, i] = 0.0
         P[i, i] = 1e-12
@@ -247,23 +315,34 @@ def held_range(freeze_bias, hold_dr, hold_gyro):
 
 
 @njit(cache=True)
-def predict_workspace():
-    """Scratch arrays of :func:`predict`: chi, f(chi), residuals, L, Q, R, T, a state."""
-    n, npts = N_STATE, N_SIGMA
+def predict_workspace(n=N_STATE):
+    """Scratch arrays of :func:`predict` for n states: chi, f(chi), residuals, L, Q, R, T, a
+    state, the swell's Phi."""
+    npts = 2 * n + 1
     return (
         np.empty((npts, n)), np.empty((npts, n)), np.empty((n, npts)), np.zeros((n, n)),
-        np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n),
+        np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n), np.eye(2),
     )  # fmt: skip
 
 
 @njit(cache=True)
-def predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
+def predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False,
+            swell=(np.nan, 0.0, 0.1)):  # fmt: skip
     """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place:
     x = mean_i f(chi_i, dt), P = sum_i W^c_i (f(chi_i) - x)(f(chi_i) - x)^T + Q(x, dt), with
-    the fields of :class:`ProcessModel` as arguments.
+    the fields of :class:`ProcessModel` as arguments; x of :data:`N_STATE` states or the
+    trajectory's :data:`N_POSE` (the workspace sized alike, :func:`predict_workspace`).
+    ``swell`` = (omega_0 rad/s, sigma^2 m^2, lambda) of the swell states (module doc); with
+    sigma^2 = 0 they keep Phi = I and no noise (the caller holds them).
 
     ``factored``: the workspace's L already holds the Cholesky factor of P (skip factorizing)."""
-    chi, chi_f, D, L, Q, R, T, xi = ws
+    chi, chi_f, D, L, Q, R, T, xi, Phi = ws
+    omega, var, damping = swell
+    active = x.size > N_POSE and var > 0.0 and omega > 0.0
+    if active:
+        swell_transition(dt, omega, damping, Phi)
+    else:
+        Phi[0, 0], Phi[0, 1], Phi[1, 0], Phi[1, 1] = 1.0, 0.0, 0.0, 1.0
     if factored:
         status = 0
         spread(x, L, lam, STATE_ANGLES, chi)
@@ -276,8 +355,10 @@ def predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False):
             a0, a1, a2 = chi[i, 3], chi[i, 4], chi[i, 5]
             rotation(a0, a1, a2, R)
             euler_rate(a0, a1, T)
-        f(chi[i], dt, mu_bias, chi_f[i], R, T)
+        f(chi[i], dt, mu_bias, chi_f[i], R, T, Phi)
     process_noise(x, dt, q_acc, q_bias, Q, R, T)
+    if active:
+        swell_noise(Phi, omega, var, Q)
     predict_moments(chi_f, wm, wc, Q, STATE_ANGLES, x, P, D)
     return status
 

@@ -18,7 +18,7 @@ from ..log import Log
 from ..trajectory import Trajectory
 from . import filter_loop, model
 from .health import HALF_WINDOW, depth_jumps
-from .rows import FILTER_STREAMS, dr_rows, dvl_rows, imu_rows, merged_rows, pressure_rows
+from .rows import FILTER_STREAMS, dr_rows, dvl_rows, filter_pressure_rows, imu_rows, merged_rows
 
 
 class OutputBlocks:
@@ -48,7 +48,7 @@ class OutputBlocks:
         while i < k:
             b, j = divmod(self.n, self.BLOCK)
             if b == len(self._blocks):
-                B, n_x = self.BLOCK, model.N_STATE
+                B, n_x = self.BLOCK, model.N_POSE
                 self._blocks.append((np.empty(B), np.empty((B, n_x)), np.empty((B, n_x, n_x))))
             m = min(k - i, self.BLOCK - j)
             bt, bx, bP = self._blocks[b]
@@ -60,7 +60,7 @@ class OutputBlocks:
         """(t, x, P) of states n0..n1-1: views of one block, else the blocks' parts joined."""
         B = self.BLOCK
         if n1 <= n0:
-            return np.empty(0), np.empty((0, model.N_STATE)), np.empty((0,) + (model.N_STATE,) * 2)
+            return np.empty(0), np.empty((0, model.N_POSE)), np.empty((0,) + (model.N_POSE,) * 2)
         if n0 < self.released:
             raise ValueError(f"online filter: states from {n0} asked for, those before "
                              f"{self.released} were released")  # fmt: skip
@@ -238,9 +238,9 @@ class OnlineRun:
                 depth_idx.append(np.full(parts[-1][0].size, -1))
         depths = (np.zeros(0), np.zeros(0))
         if chunk.pressure is not None and len(chunk.pressure):
-            t, kind, z, R, ok = pressure_rows(chunk, cfg, self.noise, rejected, warn=False,
-                                               jumps=False)  # fmt: skip
-            parts.append((t[ok], kind, z[ok], R[ok]))
+            t, kind, z, R, ok, swell = filter_pressure_rows(chunk, cfg, self.noise, rejected,
+                                                             warn=False, jumps=False)  # fmt: skip
+            parts.append((t[ok], kind, z[ok], R[ok], swell[ok]))
             depth_idx.append(self.depth.count + np.arange(int(ok.sum())))
             depths = (t[ok], z[ok, 0])
         for key, value in rejected.items() if commit else ():

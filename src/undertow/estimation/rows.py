@@ -4,9 +4,12 @@ Each sensor's rows (:func:`imu_rows`, :func:`dvl_rows`, :func:`dr_rows`, :func:`
 are (t, kind, z, R, ok): the measurement z in the units and frame of the model's measurement
 equations (:mod:`undertow.estimation.model`), its noise covariance R (the config's standard
 deviations, floored, plus the wave noise for the variants that add it: gamma^2 for the DVL and
-the DR, the swell's pressure head for the barometer) and which rows
-pass the physical envelopes (:mod:`undertow.estimation.health`); rejected rows are counted by
-name. :func:`merged_rows` merges them into one time-sorted
+the DR; for the barometer the swell's pressure head as white noise, for the estimators without
+a swell state, the peers) and which rows pass the physical envelopes
+(:mod:`undertow.estimation.health`); rejected rows are counted by name. The UKF carries the
+swell as states instead: its barometer rows (:func:`filter_pressure_rows`) have R of the sensor
+alone and the swell (omega_0, sigma^2) at each row (:func:`swell_columns`).
+:func:`merged_rows` merges them into one time-sorted
 :data:`~undertow.estimation.filter_loop.MEASUREMENT` array (at equal times IMU, DVL, DR,
 barometer), the filter loop's input; :func:`measurements` does both for a whole log.
 :func:`initial_state` is the filter's (x0, P0) from the config and the log's first readings.
@@ -39,29 +42,37 @@ def measurements(log: Log, cfg: LocalizerConfig, noise: WaveNoise | TrackNoise):
     """The merged, time-sorted :data:`~undertow.estimation.filter_loop.MEASUREMENT` array (at equal
     times IMU, DVL, DR, baro) and the rows rejected up front, by stream."""
     parts, rejected = [], {}
-    for stream in (imu_rows, dvl_rows, dr_rows, pressure_rows):
+    for stream in (imu_rows, dvl_rows, dr_rows):
         part = stream(log, cfg, noise, rejected)
         if part is not None:
             t, kind, z, R, ok = part
             parts.append((t[ok], kind, z[ok], R[ok]))
+    part = filter_pressure_rows(log, cfg, noise, rejected)
+    if part is not None:
+        t, kind, z, R, ok, swell = part
+        parts.append((t[ok], kind, z[ok], R[ok], swell[ok]))
     rows, _ = merged_rows(parts, cfg.std_floor**2)
     return rows, rejected
 
 
 def merged_rows(parts, floor2: float) -> tuple[np.ndarray, np.ndarray]:
     """One :data:`~undertow.estimation.filter_loop.MEASUREMENT` array of the streams' rows ``parts``
-    [(t (n,), kind, z (n, d), R (n, d, d))]: z and R zero-padded to three dimensions, the
-    diagonal of R floored at ``floor2``, merged by time, then kind. Also the merge order (the
-    index into the parts' rows concatenated), to carry values kept beside the rows."""
+    [(t (n,), kind, z (n, d), R (n, d, d)[, swell (n, 2)])]: z and R zero-padded to three
+    dimensions, the diagonal of R floored at ``floor2``, the swell NaN where a part has none,
+    merged by time, then kind. Also the merge order (the index into the parts' rows
+    concatenated), to carry values kept beside the rows."""
     n = sum(part[0].size for part in parts)
     rows = np.zeros(n, filter_loop.MEASUREMENT)
-    rt, rk, rz, rR = rows["t"], rows["kind"], rows["z"], rows["R"]
+    rt, rk, rz, rR, rs = rows["t"], rows["kind"], rows["z"], rows["R"], rows["swell"]
+    rs[:] = np.nan
     a = 0
-    for t, kind, z, R in parts:
+    for t, kind, z, R, *swell in parts:
         b, d = a + t.size, z.shape[1]
         rt[a:b], rk[a:b] = t, kind
         rz[a:b, :d] = z
         rR[a:b, :d, :d] = R
+        if swell and swell[0] is not None:
+            rs[a:b] = swell[0]
         a = b
     diagonal = rR.reshape(n, 9)[:, ::4]  # (a view: each row's 3 x 3 are contiguous)
     np.maximum(diagonal, floor2, out=diagonal)
@@ -136,12 +147,14 @@ def pressure_rows(
     rejected: dict,
     warn: bool = True,
     jumps: bool = True,
+    white_swell: bool = True,
 ):
-    """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2, plus the swell's pressure
-    head a^2 K_p(z)^2 / 2 at the row's time and depth for the variants with wave noise
-    (``pressure_wave_noise``; :func:`~undertow.estimation.noise_physics.pressure_head_variance`:
-    the barometer reads the wave's dynamic pressure as depth, an error the size of the swell
-    at the sensor that its noise would otherwise leave out). None without pressure.
+    """Depth z = (p - p_surface) / (rho g) (m), R = depth_std_m^2, plus (``white_swell``, for an
+    estimator without swell states) the swell's pressure head a^2 K_p(z)^2 / 2 at the row's time
+    and depth as white noise for the variants with wave noise (``pressure_wave_noise``;
+    :func:`~undertow.estimation.noise_physics.pressure_head_variance`: the barometer reads the
+    wave's dynamic pressure as depth, an error the size of the swell at the sensor that its
+    noise would otherwise leave out). None without pressure.
     ``jumps`` False: the depth-rate check (:func:`~undertow.estimation.health.depth_jumps`) is
     left to the caller (the online filter, which sees the depths in pieces)."""
     p = log.pressure
@@ -152,9 +165,35 @@ def pressure_rows(
     rejected["rejected_pressure"] = _count_false(ok)
     ok = pressure_inside(p.t, d[:, 0], ok, cfg, rejected, warn, jumps)
     R = _diag([cfg.depth_std_m] * 3, len(p), cfg)[:, :1, :1]
-    if cfg.adds_pressure_wave_noise:
+    if cfg.adds_pressure_wave_noise and white_swell:
         R = R + pressure_head_variance(*noise.wave_at(p.t), d[:, 0])[:, None, None]
     return p.t, model.BARO, d, R, ok
+
+
+def filter_pressure_rows(log: Log, cfg: LocalizerConfig, noise, rejected: dict, warn: bool = True,
+                         jumps: bool = True):  # fmt: skip
+    """The UKF's barometer rows: :func:`pressure_rows` with R of the sensor alone, and the
+    swell at each row (:func:`swell_columns`; None for a variant without it) as a sixth
+    entry. None without pressure."""
+    part = pressure_rows(log, cfg, noise, rejected, warn, jumps, white_swell=False)
+    if part is None:
+        return None
+    t, kind, z, R, ok = part
+    return t, kind, z, R, ok, swell_columns(t, z[:, 0], cfg, noise)
+
+
+def swell_columns(t: np.ndarray, depth: np.ndarray, cfg: LocalizerConfig, noise) -> np.ndarray:
+    """(omega_0 = 2 pi f rad/s, sigma^2 = a^2 K_p(d)^2 / 2 m^2) per barometer row at its time and
+    depth (:func:`~undertow.estimation.noise_physics.pressure_head_variance`), the swell model
+    of the UKF's swell states (:mod:`~undertow.estimation.model`); sigma^2 = 0 where calm or
+    for a variant without it (``pressure_wave_noise`` off or no wave noise)."""
+    out = np.zeros((np.size(t), 2))
+    out[:, 0] = np.nan
+    if cfg.adds_pressure_wave_noise:
+        a, f = noise.wave_at(t)
+        out[:, 1] = pressure_head_variance(a, f, depth)
+        out[:, 0] = np.where(out[:, 1] > 0, 2.0 * np.pi * f, np.nan)
+    return out
 
 
 def depth_reference(log: Log, cfg: LocalizerConfig) -> tuple[float, float]:
@@ -194,7 +233,7 @@ def initial_state(log: Log, cfg: LocalizerConfig):
     P0 = np.diag(np.maximum(np.asarray(cfg.initial_std, float), 1e-9) ** 2)
     if cfg.initial_state is not None:
         return np.array(cfg.initial_state, float), P0
-    x0 = np.zeros(model.N_STATE)
+    x0 = np.zeros(model.N_POSE)
     dr = log.dead_reckoning
     if dr is not None and len(dr):
         ok = np.flatnonzero(_finite_rows(np.asarray(dr.orientation)))

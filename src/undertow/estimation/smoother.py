@@ -102,22 +102,35 @@ def _rts_step(x, P, chi, DfT, m_pred, P_pred, xs_next, Ps_next, wc, angle_mask, 
 
 @njit(cache=True)
 def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze_bias,
-                  hold_dr=False, hold_gyro=False):  # fmt: skip
+                  hold_dr=False, hold_gyro=False, swell_damping=0.1):  # fmt: skip
     """URTS backward pass of the 18-state model over filtered (t, xf (N, 18), Pf (N, 18, 18))
     with the filter's process model: the fields of its
     :class:`~undertow.estimation.model.ProcessModel` as arguments (``*process``); the bias
     states the filter held are held here too.
 
+    The filter's sigma points span its N_STATE states, the swell pair too, which the trajectory
+    leaves out (module doc of :mod:`~undertow.estimation.model`). The states are padded with the
+    pair held at 0 (as the filter holds it without a swell): the Cholesky factor's first 18
+    columns are then those of the 18 states' own, the pair's columns leave the 18 states at
+    their mean and the motion of the 18 does not depend on the pair, so the prediction of the
+    18 states is the filter's, with its weights (``swell_damping`` is not used).
+
     Returns (xs, Ps, counts) with counts as in SMOOTHER_COUNT_NAMES.
     """
-    n = model.N_STATE
+    n, m18, s0 = model.N_STATE, model.N_POSE, model.SWELL
     N = t.size
     first, last = model.held_range(freeze_bias, hold_dr, hold_gyro)
     freeze = last > first
-    xs = xf.copy()
-    Ps = Pf.copy()
+    xa = np.zeros((N, n))
+    Pa = np.zeros((N, n, n))
+    for k in range(N):
+        xa[k, :m18] = xf[k]
+        Pa[k, :m18, :m18] = Pf[k]
+        model.freeze_states(xa[k], Pa[k], s0, n)
+    xs = xa.copy()
+    Ps = Pa.copy()
     counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
-    ws = model.predict_workspace()
+    ws = model.predict_workspace(n)
     ws_rts = _rts_workspace(n)
     m = np.empty(n)
     Pm = np.empty((n, n))
@@ -125,13 +138,14 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
     P = np.empty((n, n))
     for k in range(N - 2, -1, -1):
         dt = min(t[k + 1] - t[k], dt_max)
-        m[:] = xf[k]
-        Pm[:, :] = Pf[k]
+        m[:] = xa[k]
+        Pm[:, :] = Pa[k]
         status = model.predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws)
         if freeze:
             model.freeze_states(m, Pm, first, last)
-        x[:] = xf[k]
-        P[:, :] = Pf[k]
+        model.freeze_states(m, Pm, s0, n)
+        x[:] = xa[k]
+        P[:, :] = Pa[k]
         flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], wc,
                          model.STATE_ANGLES, ws_rts)  # fmt: skip
         if status < 0 or flag < 0 or not (all_finite(x) and all_finite(P)):
@@ -140,9 +154,10 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
         counts[0] += max(status, 0) + flag
         if freeze:
             model.freeze_states(x, P, first, last)
+        model.freeze_states(x, P, s0, n)
         xs[k] = x
         Ps[k] = P
-    return xs, Ps, counts
+    return xs[:, :m18].copy(), Ps[:, :m18, :m18].copy(), counts
 
 
 def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Trajectory:
