@@ -10,11 +10,14 @@ times against ours, so that both use the same model:
   angles wrapped, biases += mu_b dt;
 - process noise Q = G diag(q_acc / dt) G^T (G = [J dt^2/2; I dt]) plus diag(q_bias dt), with J
   at the current mean;
-- the swell states x[18:20] = (y, xi) (``swell`` = (omega_0, sigma^2, lambda)): moved by
-  scipy's expm(A dt), A = [[0, 1], [-omega_0^2, -2 lambda omega_0]], with the noise of Van
+- the swell states x[18:20] = (y, xi) (``swell`` = (omega_0, sigma^2, lambda, beta or None)):
+  moved by scipy's expm(A dt), A = [[0, 1], [-omega^2, -2 lambda omega]], with the noise of Van
   Loan's method ("Computing integrals involving the matrix exponential", IEEE TAC 1978) for a
-  white input of intensity q = 4 lambda omega_0 sigma^2 (var(y') = q / (4 lambda omega_0));
-  none (held: identity, no noise) without ``swell``;
+  white input of intensity q = 4 lambda omega sigma^2 (var(y') = q / (4 lambda omega)), where
+  omega is the encounter frequency of the mean's velocity over ground v = R_B^W nu,
+  |omega_0 - k_0 (v_x cos beta + v_y sin beta)| (k_0 = omega_0^2 / g, at least 0.1 omega_0),
+  or omega_0 with lambda widened to k_0 |v_h| / omega_0 (at most 0.9) when beta is None; none
+  (held: identity, no noise) without ``swell``;
 - measurements: IMU R_imu^T omega + b-bar^g, DVL R_dvl^T (v + omega x r_dvl) (mounting),
   DR wrap(eta_2 + b^g), barometer z + e_3^T R_B^W r_bar + xi;
 - angle-aware sigma-point means (reference-point mean) and wrapped residuals for the state and
@@ -97,13 +100,27 @@ class FilterPyModel:
         J[:3, :3], J[3:, 3:] = rpy_to_matrix(x[3:6]), euler_rate(x[3], x[4])
         return J
 
+    def _band(self, x):
+        """(omega, lambda) of the swell at the mean x: the encounter frequency, or omega_0 with
+        the band widened to the Doppler range when the direction is unknown."""
+        omega0, _, lam, beta = self.swell
+        v = rpy_to_matrix(x[3:6]) @ x[6:9]
+        k0 = omega0**2 / 9.80665
+        if beta is None:
+            return omega0, min(max(lam, k0 * np.hypot(v[0], v[1]) / omega0), 0.9)
+        return max(
+            abs(omega0 - k0 * (v[0] * np.cos(beta) + v[1] * np.sin(beta))), 0.1 * omega0
+        ), lam
+
     def _swell(self, dt):
-        """(Phi, Q) of the swell states over dt: expm and Van Loan's method."""
+        """(Phi, Q) of the swell states over dt at the band of the mean when predicting: expm
+        and Van Loan's method."""
         from scipy.linalg import expm
 
         if self.swell is None:
             return np.eye(2), np.zeros((2, 2))
-        omega, var, lam = self.swell
+        var = self.swell[1]
+        omega, lam = self.band
         A = np.array([[0.0, 1.0], [-(omega**2), -2.0 * lam * omega]])
         q = 4.0 * lam * omega * var
         M = np.zeros((4, 4))
@@ -141,6 +158,8 @@ class FilterPyModel:
         f = self.ukf
         if t > self.t:
             dt = min(t - self.t, self.dt_max)
+            if self.swell is not None:
+                self.band = self._band(f.x)
             f.Q = self.Q(f.x, dt)
             f.predict(dt=dt)
             self.t = t

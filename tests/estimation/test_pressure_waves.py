@@ -1,5 +1,6 @@
-"""The swell's pressure head in the barometer's noise (``pressure_wave_noise``): the physics
-against the simulator's own wave and barometer, the rows, and the filter it makes consistent."""
+"""The swell's pressure head at the barometer (``pressure_wave_noise``): the physics against the
+simulator's own wave and barometer, the rows (white noise for the peers, the swell states' model
+for the UKF), the band at the encounter frequency, and the filter it makes consistent."""
 
 from __future__ import annotations
 
@@ -9,15 +10,18 @@ import yaml
 from typer.testing import CliRunner
 
 from undertow.cli import app
+from undertow.estimation import model
+from undertow.estimation.calibration import Calibration
 from undertow.estimation.config import LocalizerConfig
-from undertow.estimation.localizer import localize
+from undertow.estimation.localizer import calibration_fields, localize, with_log_heading
 from undertow.estimation.noise import NoiseProfile, TrackNoise
 from undertow.estimation.noise_physics import pressure_head_variance
-from undertow.estimation.rows import pressure_rows
+from undertow.estimation.rows import filter_pressure_rows, pressure_rows
 from undertow.estimation.wave_schedule import schedule_noise
 from undertow.log import FRESH_WATER_DENSITY, G0
+from undertow.rotations import rpy_to_matrix
 from undertow.sim import Scenario, load_scenario, simulate
-from undertow.sim.waves import depth_factors, wavenumber
+from undertow.sim.waves import depth_factors, encounter_frequency, wavenumber
 from undertow.wavetrack import WaveTrack
 
 
@@ -93,6 +97,76 @@ def test_the_wave_variants_add_it_to_the_barometers_rows(basin):
     assert np.all(R[:, 0, 0] == 0.01**2)
 
 
+def test_the_filter_rows_carry_the_swell_and_the_sensor_noise_alone(basin):
+    """The UKF's barometer rows: R of the sensor alone, and per row (omega_0, sigma^2, cos beta,
+    sin beta) with sigma^2 the variance the white-noise rows add; none for a variant without."""
+    log = basin
+    a, f = log.metadata["wave"]["amplitude_m"], log.metadata["wave"]["frequency_hz"]
+    noise = NoiseProfile.paper().noise((a, f), extrapolate=True)
+    cfg = LocalizerConfig(variant="proposed", wave_heading_deg=150.0)
+    t, _, z, R, ok, swell = filter_pressure_rows(log, cfg, noise, {})
+    assert np.all(R[:, 0, 0] == cfg.depth_std_m**2)
+    np.testing.assert_allclose(swell[:, 1], pressure_head_variance(a, f, z[:, 0]), rtol=1e-12)
+    np.testing.assert_allclose(swell[:, 0], 2 * np.pi * f)
+    beta = np.radians(150.0)
+    assert np.all(swell[:, 2] == np.cos(beta)) and np.all(swell[:, 3] == np.sin(beta))
+    unknown = filter_pressure_rows(log, cfg.model_copy(update={"wave_heading_deg": None}),
+                                   noise, {})[5]  # fmt: skip
+    assert np.isnan(unknown[:, 2:]).all()
+    for off in (
+        LocalizerConfig(variant="be"),
+        cfg.model_copy(update={"pressure_wave_noise": False}),
+    ):
+        held = filter_pressure_rows(log, off, noise, {})[5]
+        assert np.all(held[:, 1] == 0.0) and np.isnan(held[:, 0]).all()
+
+
+def test_the_band_sits_at_the_encounter_frequency():
+    """model.encounter against the simulator's encounter_frequency (omega - k V cos(beta - psi),
+    its own code) for random attitudes, body velocities and wave directions; with the direction
+    unknown the band stays at omega_0 and its half-width lambda_e omega_0 covers every encounter
+    frequency the speed allows."""
+    rng = np.random.default_rng(3)
+    R = np.empty((3, 3))
+    for _ in range(200):
+        x = np.zeros(20)
+        x[3:6] = rng.uniform([-0.2, -0.2, -np.pi], [0.2, 0.2, np.pi])
+        x[6:9] = rng.normal(0.0, 0.4, 3)
+        omega0, beta = 2 * np.pi * rng.uniform(0.2, 1.0), rng.uniform(-np.pi, np.pi)
+        k0 = omega0**2 / G0
+        v = rpy_to_matrix(x[3:6]) @ x[6:9]
+        speed, course = np.hypot(v[0], v[1]), np.arctan2(v[1], v[0])
+        expected = encounter_frequency(omega0, k0, speed, course, beta)
+        we, lam = model.encounter(x, omega0, np.cos(beta), np.sin(beta), 0.1, R)
+        assert lam == 0.1
+        assert we == pytest.approx(max(abs(float(expected)), 0.1 * omega0), rel=1e-12)
+        w0, lam_e = model.encounter(x, omega0, np.nan, np.nan, 0.1, R)
+        assert w0 == omega0 and lam_e == pytest.approx(min(max(0.1, k0 * speed / omega0), 0.9))
+        if lam_e < 0.9:
+            assert abs(float(expected) - omega0) <= lam_e * omega0 * (1 + 1e-12)
+
+
+def test_the_log_s_wave_direction_is_used_and_recorded(basin):
+    """A simulated log records its waves' direction (metadata wave_heading_deg): the swell
+    variants take it into their config (and config.yaml), a given one wins, the others ignore it."""
+    assert basin.metadata["wave_heading_deg"] == 180.0
+    cfg = LocalizerConfig(variant="proposed")
+    assert with_log_heading(cfg, basin).wave_heading_deg == 180.0
+    given = cfg.model_copy(update={"wave_heading_deg": 90.0})
+    assert with_log_heading(given, basin).wave_heading_deg == 90.0
+    assert with_log_heading(LocalizerConfig(variant="be"), basin).wave_heading_deg is None
+    assert with_log_heading(cfg, basin.replace(metadata={})).wave_heading_deg is None
+
+
+def test_the_calibrated_barometer_noise_goes_to_the_variants_that_carry_the_swell():
+    cal = Calibration(depth_std_m=0.002, estimated=("dvl_scale_factor", "depth_std_m"))
+    assert calibration_fields(cal, LocalizerConfig(variant="proposed"))["depth_std_m"] == 0.002
+    assert calibration_fields(cal, LocalizerConfig(variant="an"))["depth_std_m"] == 0.002
+    for other in (LocalizerConfig(variant="be"), LocalizerConfig(variant="baseline"),
+                  LocalizerConfig(variant="proposed", pressure_wave_noise=False)):  # fmt: skip
+        assert "depth_std_m" not in calibration_fields(cal, other)
+
+
 def test_each_kind_of_wave_noise_says_its_wave_over_time():
     profile = NoiseProfile.paper()
     t = np.array([0.0, 5.0, 10.0, 20.0])
@@ -149,9 +223,11 @@ def test_localize_says_so_and_config_yaml_records_it(simulated_run, tmp_path):
     args = ["localize", str(run_dir / "log"), "--wave", "wave-a0.10-f1.00", "--out"]
     r = runner.invoke(app, [*args, str(tmp_path / "on")])
     assert r.exit_code == 0, r.output
-    assert "the barometer's swell is tracked by two wave-model states" in r.output
+    assert ("the barometer's swell is tracked by two wave-model states at the encounter "
+            "frequency of waves toward 180 deg") in " ".join(r.output.split())  # fmt: skip
     config = yaml.safe_load((tmp_path / "on" / "config.yaml").read_text())
     assert config["config"]["pressure_wave_noise"] is True
+    assert config["config"]["wave_heading_deg"] == 180.0  # the simulated log records it
     r = runner.invoke(app, [*args, str(tmp_path / "be"), "--variant", "be"])
     assert r.exit_code == 0, r.output
     assert "wave-model states" not in r.output

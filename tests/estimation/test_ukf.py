@@ -97,11 +97,14 @@ BARO_ARM = np.array([0.0, 0.1, -0.05])
 Q_ACC, Q_B, MU = np.full(6, 0.02), np.full(6, 1e-6), np.array([0, 0, 1e-3, 0, 0, 0])
 
 
-@pytest.mark.parametrize("swell", [None, (2 * np.pi * 0.8, 0.03**2, 0.1)])
+@pytest.mark.parametrize(
+    "swell", [None, (2 * np.pi * 0.8, 0.03**2, 0.1, None), (2 * np.pi * 0.8, 0.03**2, 0.1, 2.0)]
+)
 def test_full_model_agrees_with_filterpy(swell):
     """All four measurement kinds through their mounting, angles near +-pi, equal times
     (updates without predict), one gap longer than dt_max (capped), with and without a swell
-    (its transition and noise in the reference by expm and Van Loan's method): every recorded
+    (its transition and noise in the reference by expm and Van Loan's method, at the encounter
+    frequency of waves from a known direction or widened for an unknown one): every recorded
     mean and covariance equal to FilterPy's on the numpy model of tests/filterpy_reference.py."""
     rng = np.random.default_rng(7)
     n, N = model.N_STATE, 80
@@ -129,8 +132,10 @@ def test_full_model_agrees_with_filterpy(swell):
     process = model.ProcessModel(wm, wc, lam, Q_ACC, Q_B, MU, dt_max, False, swell_damping=damping)
     sensors = model.SensorModel(np.ascontiguousarray(R_IMU.T), np.ascontiguousarray(R_DVL.T),
                                 R_DVL_ARM, BARO_ARM, np.full(4, np.inf))  # fmt: skip
-    sw = None if swell is None else np.tile(swell[:2], (N, 1))
-    meas = filter_loop.pack_measurements(t, kinds, z, Rm, sw)
+    if swell is not None:
+        beta = np.nan if swell[3] is None else swell[3]
+        sw = np.tile([swell[0], swell[1], np.cos(beta), np.sin(beta)], (N, 1))
+    meas = filter_loop.pack_measurements(t, kinds, z, Rm, None if swell is None else sw)
     out_t, out_x, out_P, counts, _ = filter_loop.run_filter(
         meas, 0.0, x0, P0, process, sensors, None
     )

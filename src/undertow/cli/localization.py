@@ -175,10 +175,15 @@ def _wave_source(result, by_name: str | None) -> str:
         how = f"from {result.wave_source}; --wave overrides"
     if not result.wave_noise_added:
         how += f"; the {result.variant} variant adds no wave noise"
-    elif result.wave != "calm" and (result.trajectory.metadata.get("config") or {}).get(
-        "pressure_wave_noise"
-    ):
-        how += "; the barometer's swell is tracked by two wave-model states (pressure_wave_noise)"
+    else:
+        config = result.trajectory.metadata.get("config") or {}
+        if result.wave != "calm" and config.get("pressure_wave_noise"):
+            heading = config.get("wave_heading_deg")
+            how += "; the barometer's swell is tracked by two wave-model states " + (
+                f"at the encounter frequency of waves toward {heading:g} deg (wave_heading_deg)"
+                if heading is not None
+                else "over the Doppler range (the waves' direction unknown: wave_heading_deg)"
+            )
     return how
 
 

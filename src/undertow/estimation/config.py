@@ -94,6 +94,10 @@ class LocalizerConfig(BaseModel):
     # +-lambda f wide (a single regular wave is lambda -> 0; Fossen's MSS toolbox, exLinspec.m,
     # fits lambda to the PM and JONSWAP spectra from 0.1)
     swell_damping: float = Field(0.1, gt=0.0, lt=1.0, allow_inf_nan=False)
+    # the waves' propagation direction beta (deg, world x-y, toward which they travel): the
+    # swell band sits at the vehicle's encounter frequency (model.encounter); None: the log's
+    # (metadata wave_heading_deg: a simulated log records it), else unknown (the band widened)
+    wave_heading_deg: float | None = Field(None, allow_inf_nan=False)
     std_floor: Positive = 1e-6  # every measurement std is at least this
     dr_orientation_frame: Literal["body", "dvl"] = "body"
     # initial state (None: zeros, orientation from the first DR report, z from the first depth)

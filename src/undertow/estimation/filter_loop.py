@@ -9,9 +9,11 @@ and the unscented weights as one record (:class:`~undertow.estimation.model.Proc
 sensors' mounting and gates as another (:class:`~undertow.estimation.model.SensorModel`), the
 start (t0, x0, P0) and the output times. The loop predicts to each measurement's time (no
 prediction when dt <= 0, dt capped at dt_max) and updates; counters are indexed by the names in
-:data:`COUNT_NAMES`. A row's ``swell`` (omega_0 rad/s, sigma^2 m^2; sigma^2 NaN: none) sets the
-swell states' model from its time on (:mod:`~undertow.estimation.model`'s module doc): sigma^2 > 0
-starts them at their stationary covariance when they were held, 0 holds them at 0 again. The
+:data:`COUNT_NAMES`. A row's ``swell`` (omega_0 rad/s, sigma^2 m^2, cos beta, sin beta; sigma^2
+NaN: none; beta NaN: unknown) sets the swell states' model from its time on
+(:mod:`~undertow.estimation.model`'s module doc): sigma^2 > 0 starts them at their stationary
+covariance when they were held, 0 holds them at 0 again; each prediction centres the band at the
+encounter frequency of the mean state (:func:`~undertow.estimation.model.encounter`). The
 states recorded are the trajectory's :data:`~undertow.estimation.model.N_POSE`; the loop's own
 state has the swell pair too. The records are built from a
 :class:`~undertow.estimation.config.LocalizerConfig` by its ``process_model`` and
@@ -41,6 +43,7 @@ from .model import (
     Z_ANGLES,
     Z_LINEAR,
     adapt_r,
+    encounter,
     freeze_states,
     h,
     held_range,
@@ -52,10 +55,11 @@ from .ukf import all_finite, cholesky_repair, sigma_points, update, update_linea
 
 # one merged measurement: time (s), kind (IMU, DVL, DR, BARO), z (the first KIND_DIM[kind]
 # entries used), its noise covariance R (the leading KIND_DIM[kind] square block used) and the
-# swell from its time on (omega_0 rad/s, sigma^2 m^2; sigma^2 NaN: the row sets none)
+# swell from its time on (omega_0 rad/s, sigma^2 m^2, cos beta, sin beta of the waves'
+# direction; sigma^2 NaN: the row sets none; beta NaN: unknown)
 MEASUREMENT = np.dtype(
     [("t", np.float64), ("kind", np.int64), ("z", np.float64, (3,)), ("R", np.float64, (3, 3)),
-     ("swell", np.float64, (2,))]
+     ("swell", np.float64, (4,))]
 )  # fmt: skip
 #: the ``out_times`` of a loop that records at each distinct row time
 NO_TIMES = np.empty(0)
@@ -87,7 +91,8 @@ class FilterState(NamedTuple):
     (t_cur: the time (x, P) are predicted to, t_last: the last row's time, factored, emit_due:
     the state at t_last is not yet recorded), adaptive-r's running R per kind (``Ra``) and
     whether it started (``adapted``), the counters (COUNT_NAMES), NIS sums (NIS_FIELDS) and the
-    swell model in force (``swell`` = (omega_0, sigma^2); sigma^2 = 0: held)."""
+    swell model in force (``swell`` = (omega_0, sigma^2, cos beta, sin beta); sigma^2 = 0:
+    held)."""
 
     x: np.ndarray
     P: np.ndarray
@@ -120,7 +125,8 @@ def start_state(t0, x0, P0, process, Ra):
     clock = np.array([t0, np.nan, 0.0, 0.0])
     return FilterState(x, P, np.zeros((N_STATE, N_STATE)), clock, Ra,
                        np.zeros(4, dtype=np.bool_), np.zeros(len(COUNT_NAMES), dtype=np.int64),
-                       np.zeros((4, len(NIS_FIELDS))), np.array([np.nan, 0.0]))  # fmt: skip
+                       np.zeros((4, len(NIS_FIELDS))),
+                       np.array([np.nan, 0.0, np.nan, np.nan]))  # fmt: skip
 
 
 def resume_filter(meas, state: FilterState, process, sensors, flush: bool, innovations=None):
@@ -140,7 +146,7 @@ def resume_filter(meas, state: FilterState, process, sensors, flush: bool, innov
 
 def pack_measurements(t, kind, z, R, swell=None) -> np.ndarray:
     """The structured :data:`MEASUREMENT` array of (t (N,), kind (N,), z (N, 3), R (N, 3, 3),
-    swell (N, 2); None: no row sets a swell)."""
+    swell (N, 4); None: no row sets a swell)."""
     meas = np.empty(len(t), MEASUREMENT)
     meas["t"], meas["kind"], meas["z"], meas["R"] = t, kind, z, R
     meas["swell"] = np.nan if swell is None else swell
@@ -228,7 +234,7 @@ def _columns(meas):
     """The fields of the :data:`MEASUREMENT` array as contiguous arrays (t, kind, z, R, swell)."""
     N = meas.size
     t, kind = np.empty(N), np.empty(N, np.int64)
-    z, R, sw = np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 2))
+    z, R, sw = np.empty((N, 3)), np.empty((N, 3, 3)), np.empty((N, 4))
     for k in range(N):
         t[k] = meas[k].t
         kind[k] = meas[k].kind
@@ -282,7 +288,7 @@ def _filter(t, kind, z, R, sw, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu
         if at_times:
             k_out = _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
                                   mu, dt_max, ws, xb, Pb, out_t, out_x, out_P, counts,
-                                  (swell[0], swell[1], damping))  # fmt: skip
+                                  swell, damping)  # fmt: skip
         if k == N:
             break
         if emit_due and tk != t_last:
@@ -304,15 +310,16 @@ def _filter(t, kind, z, R, sw, x, P, L_in, clock, wm, wc, lam, q_acc, q_bias, mu
         if not (all_finite(zk) and all_finite(Rk)):
             counts[NONFINITE_REJECTED] += 1
         else:
-            if np.isfinite(sw[k, 1]) and _set_swell(sw[k, 0], sw[k, 1], swell, x, P):
+            if np.isfinite(sw[k, 1]) and _set_swell(sw[k], swell, x, P):
                 factored = False
             dt = tk - t_cur
             if dt > 0:
                 if dt > dt_max:
                     dt = dt_max
                     counts[DT_CAPPED] += 1
+                band = _band(x, swell, damping, ws[6])  # (predict's T: a scratch until then)
                 _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, first, last, ws,
-                              factored, xb, Pb, counts, (swell[0], swell[1], damping))  # fmt: skip
+                              factored, xb, Pb, counts, band)  # fmt: skip
                 t_cur = tk
             else:
                 counts[NO_PREDICT] += 1
@@ -354,15 +361,27 @@ def _emit(t_last, x, P, L, out_t, out_x, out_P, k_out, counts):
 
 
 @njit(cache=True)
-def _set_swell(omega, var, swell, x, P):
-    """A row's swell (omega_0, sigma^2) into ``swell`` (the model in force): held states start at
-    their stationary covariance diag(sigma^2 / omega_0^2, sigma^2) (module doc of
-    :mod:`~undertow.estimation.model`); sigma^2 = 0 (or no frequency) holds them at 0. Returns
-    whether P changed."""
+def _band(x, swell, damping, R):
+    """(omega_e, sigma^2, lambda_e) of the swell model in force at the mean x
+    (:func:`~undertow.estimation.model.encounter`), (NaN, 0, lambda) without a swell."""
+    if not swell[1] > 0.0:
+        return np.nan, 0.0, damping
+    omega, lam_e = encounter(x, swell[0], swell[2], swell[3], damping, R)
+    return omega, swell[1], lam_e
+
+
+@njit(cache=True)
+def _set_swell(row, swell, x, P):
+    """A row's swell (omega_0, sigma^2, cos beta, sin beta) into ``swell`` (the model in
+    force): held states start at their stationary covariance diag(sigma^2 / omega_0^2, sigma^2)
+    (module doc of :mod:`~undertow.estimation.model`); sigma^2 = 0 (or no frequency) holds them
+    at 0. Returns whether P changed."""
+    omega, var = row[0], row[1]
     on = var > 0.0 and omega > 0.0 and np.isfinite(omega)
     was_on = swell[1] > 0.0
     swell[0] = omega if on else np.nan
     swell[1] = var if on else 0.0
+    swell[2], swell[3] = row[2], row[3]
     if on and not was_on:
         freeze_states(x, P, SWELL, N_STATE)
         P[SWELL, SWELL] = var / (omega * omega)
@@ -376,7 +395,7 @@ def _set_swell(omega, var, swell, x, P):
 
 @njit(cache=True)
 def _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias, mu, dt_max, ws,
-                  xb, Pb, out_t, out_x, out_P, counts, swell):  # fmt: skip
+                  xb, Pb, out_t, out_x, out_P, counts, swell, damping):  # fmt: skip
     """Record every output time before tk: (x, P) predicted on a copy from t_cur (dt capped at
     dt_max), its covariance repaired to SPD. Returns the next output index."""
     while k_out < out_times.size and out_times[k_out] < tk:
@@ -384,7 +403,8 @@ def _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
         Pb[:, :] = P
         dt = min(out_times[k_out] - t_cur, dt_max)
         if dt > 0:
-            status = predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws, False, swell)
+            band = _band(xb, swell, damping, ws[6])
+            status = predict(xb, Pb, dt, wm, wc, lam, q_acc, q_bias, mu, ws, False, band)
             counts[REPAIRS] += max(status, 0)
         counts[REPAIRS] += max(cholesky_repair(Pb, ws[3]), 0)  # emit only a PD covariance
         out_t[k_out] = out_times[k_out]
@@ -397,7 +417,7 @@ def _record_until(tk, out_times, k_out, x, P, t_cur, wm, wc, lam, q_acc, q_bias,
 @njit(cache=True)
 def _predict_step(x, P, dt, wm, wc, lam, q_acc, q_bias, mu, freeze, first, last, ws, factored, xb,
                   Pb, counts, swell):  # fmt: skip
-    """Predict (x, P) over dt with the swell model ``swell`` (omega_0, sigma^2, lambda); a
+    """Predict (x, P) over dt with the swell band ``swell`` (omega_e, sigma^2, lambda_e); a
     prediction that leaves them non-finite is undone (counted)."""
     xb[:] = x
     Pb[:, :] = P

@@ -137,7 +137,7 @@ class Localizer:
         the states go to it every ``store_rows`` measurements (:func:`filter_to_store`) and a
         :class:`~undertow.trajectory_chunks.StoredTrajectory` is returned: the same states, on
         disk."""
-        cfg = self.config
+        cfg = with_log_heading(self.config, log)
         if store is not None and cfg.output_rate_hz is not None:
             raise ConfigError("Localizer: a trajectory store takes every state (output_rate_hz "
                               "None); a decimated trajectory fits in memory")  # fmt: skip
@@ -330,11 +330,29 @@ def check_options(smooth: bool, params: dict) -> LocalizerConfig:
     return config
 
 
+def with_log_heading(cfg: LocalizerConfig, log: Log) -> LocalizerConfig:
+    """``cfg`` with the waves' direction ``wave_heading_deg`` the log records (metadata
+    ``wave_heading_deg``, a simulated log's) when the config leaves it None and the variant
+    models the swell; as it is otherwise."""
+    if cfg.wave_heading_deg is not None or not cfg.adds_pressure_wave_noise:
+        return cfg
+    try:
+        value = float(log.metadata.get("wave_heading_deg"))
+    except (TypeError, ValueError):
+        return cfg
+    return cfg.model_copy(update={"wave_heading_deg": value}) if np.isfinite(value) else cfg
+
+
 def calibration_fields(calibration: Calibration, config: LocalizerConfig) -> dict:
     """The config fields ``calibration`` supplies to ``config``'s variant: those it estimated
     (all of them in a file that does not say). One warning names those the variant would use
-    but that were left at their default, so a run is never quietly 'calibrated' with defaults."""
-    names = ["dvl_scale_factor", "depth_std_m"]
+    but that were left at their default, so a run is never quietly 'calibrated' with defaults.
+    The barometer's noise ``depth_std_m`` goes to the variants that carry the swell apart (its
+    states, ``pressure_wave_noise``): for the others the barometer's R must hold the swell too,
+    so they keep the configured value."""
+    names = ["dvl_scale_factor"]
+    if config.adds_pressure_wave_noise:
+        names.append("depth_std_m")
     if config.estimates_bias:  # mu_b and the gyro bias belong to the bias model
         names.append("dr_bias_drift_rad_s")
         if config.initial_state is None:

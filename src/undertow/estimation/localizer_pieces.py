@@ -51,6 +51,7 @@ from .localizer import (
     resolved_localizer,
     run_metadata,
     sensor_coverage,
+    with_log_heading,
 )
 from .noise_physics import sensor_site
 from .rows import (
@@ -112,7 +113,8 @@ def _filter(localizer: Localizer, first: tuple, rest: Iterator, store: Trajector
             options: tuple) -> StoredTrajectory:  # fmt: skip
     """Filter the pieces (``first`` and ``rest``: :func:`_ahead`'s triples) into ``store``
     (``options``: the rows per append and ``site_pieces``)."""
-    cfg, log = localizer.config, first[1]
+    log = first[1]
+    cfg = with_log_heading(localizer.config, log)
     rows, site_pieces = options
     unobserved, held = sensor_coverage(log, cfg)
     check_mounting(log.mounting)

@@ -69,11 +69,20 @@ The pair moves by the exact transition Phi(dt) = exp(A dt), A = [[0, 1], [-omega
 -2 lambda omega_0]] (:func:`swell_transition`), with the noise that keeps the stationary
 covariance P_inf = diag(sigma^2 / omega_0^2, sigma^2) (for this model var(y') = omega_0^2
 var(y) and cov(y, y') = 0): Q_s = P_inf - Phi P_inf Phi^T, exact for any dt. sigma^2 = a^2
-K_p^2 / 2 is the swell's pressure head variance at the barometer's depth and omega_0 = 2 pi f
-(:func:`~undertow.estimation.noise_physics.pressure_head_variance`); the rows carry them
-(:mod:`undertow.estimation.rows`). Without a swell (calm, or a variant without it) the pair is
-held at 0 like the bias states. The trajectory holds the 18 states of the paper
-(:data:`N_POSE`); the swell states are the filter's own.
+K_p^2 / 2 is the swell's pressure head variance at the barometer's depth
+(:func:`~undertow.estimation.noise_physics.pressure_head_variance`); the rows carry it with the
+wave's frequency omega_0 = 2 pi f and its direction beta (:mod:`undertow.estimation.rows`). A
+vehicle moving at v over ground meets the waves at the encounter frequency (:func:`encounter`,
+at each step's mean; linear wave theory, e.g. Fossen 2011 ch. 8 and the simulator's
+``undertow.sim.waves.encounter_frequency``):
+
+    omega_e = | omega_0 - k_0 (v_x cos beta + v_y sin beta) |,   k_0 = omega_0^2 / g,
+
+at which the band is centred when beta is known; when it is not, the band stays at omega_0 and
+widens to the Doppler range any direction allows, lambda_e = max(lambda, k_0 |v_h| / omega_0)
+(the band's half-power half-width is lambda omega_0). Without a swell (calm, or a variant
+without it) the pair is held at 0 like the bias states. The trajectory holds the 18 states of
+the paper (:data:`N_POSE`); the swell states are the filter's own.
 
 The filter loop that walks the measurements with these models is
 :mod:`undertow.estimation.filter_loop`.
@@ -86,6 +95,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..log import G0
 from .ukf import predict_moments, sigma_points, spread, wrap
 
 N_POSE = 18  # the paper's states, what a trajectory holds
@@ -190,6 +200,22 @@ def swell_transition(dt, omega, lam, Phi):
     Phi[0, 1] = e * s / wd
     Phi[1, 0] = -e * omega * omega / wd * s
     Phi[1, 1] = e * (c - r * s)
+
+
+@njit(cache=True)
+def encounter(x, omega0, cos_beta, sin_beta, damping, R):
+    """(omega_e, lambda_e) of the swell band at the state x (module doc): the encounter frequency
+    of the vehicle's velocity over ground v = R_B^W nu (its horizontal part) with waves of
+    frequency omega_0 travelling toward beta (cos beta NaN: unknown, the band at omega_0 widened
+    to the Doppler range); omega_e at least 0.1 omega_0 (a vehicle riding at the waves' phase
+    speed), lambda_e at most 0.9. ``R`` a (3, 3) scratch."""
+    rotation(x[3], x[4], x[5], R)
+    vx = R[0, 0] * x[6] + R[0, 1] * x[7] + R[0, 2] * x[8]
+    vy = R[1, 0] * x[6] + R[1, 1] * x[7] + R[1, 2] * x[8]
+    k0 = omega0 * omega0 / G0
+    if np.isfinite(cos_beta):
+        return max(abs(omega0 - k0 * (vx * cos_beta + vy * sin_beta)), 0.1 * omega0), damping
+    return omega0, min(max(damping, k0 * np.sqrt(vx * vx + vy * vy) / omega0), 0.9)
 
 
 @njit(cache=True)

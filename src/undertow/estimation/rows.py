@@ -183,16 +183,20 @@ def filter_pressure_rows(log: Log, cfg: LocalizerConfig, noise, rejected: dict, 
 
 
 def swell_columns(t: np.ndarray, depth: np.ndarray, cfg: LocalizerConfig, noise) -> np.ndarray:
-    """(omega_0 = 2 pi f rad/s, sigma^2 = a^2 K_p(d)^2 / 2 m^2) per barometer row at its time and
-    depth (:func:`~undertow.estimation.noise_physics.pressure_head_variance`), the swell model
-    of the UKF's swell states (:mod:`~undertow.estimation.model`); sigma^2 = 0 where calm or
-    for a variant without it (``pressure_wave_noise`` off or no wave noise)."""
-    out = np.zeros((np.size(t), 2))
-    out[:, 0] = np.nan
+    """(omega_0 = 2 pi f rad/s, sigma^2 = a^2 K_p(d)^2 / 2 m^2, cos beta, sin beta) per barometer
+    row at its time and depth (:func:`~undertow.estimation.noise_physics.pressure_head_variance`),
+    beta the waves' direction ``wave_heading_deg`` (NaN: unknown), the swell model of the UKF's
+    swell states (:mod:`~undertow.estimation.model`); sigma^2 = 0 where calm or for a variant
+    without it (``pressure_wave_noise`` off or no wave noise)."""
+    out = np.full((np.size(t), 4), np.nan)
+    out[:, 1] = 0.0
     if cfg.adds_pressure_wave_noise:
         a, f = noise.wave_at(t)
         out[:, 1] = pressure_head_variance(a, f, depth)
         out[:, 0] = np.where(out[:, 1] > 0, 2.0 * np.pi * f, np.nan)
+        if cfg.wave_heading_deg is not None:
+            beta = np.deg2rad(cfg.wave_heading_deg)
+            out[:, 2], out[:, 3] = np.cos(beta), np.sin(beta)
     return out
 
 
