@@ -181,3 +181,7 @@ def test_the_barometer_noise_is_not_calibrated_in_waves():
     assert "depth_std_m" not in cal.estimated and cal.depth_std_m == 0.01
     calm = log.replace(metadata={"wave": {"amplitude_m": 0.0, "frequency_hz": None}})
     assert "depth_std_m" in calibrate(calm).estimated
+    track = {"t": [0.0, 30.0], "amplitude_m": [0.0, 0.05], "frequency_hz": [0.8, 0.8]}
+    for wave in (track, "wave-a0.10-f1.00"):  # a sea that changes, a condition by name
+        with pytest.warns(RuntimeWarning, match="depth_std_m left at the default"):
+            assert "depth_std_m" not in calibrate(log.replace(metadata={"wave": wave})).estimated

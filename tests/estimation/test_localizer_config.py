@@ -38,6 +38,9 @@ NAN = float("nan")
         ("initial_std", [0.1] * 17, "18 values"),
         ("initial_state", [0.0] * 17 + [NAN], "finite"),
         ("gate_probability", NAN, "finite"),
+        ("swell_damping", 1.0, "less than 1"),  # the band's transition needs 0 < lambda < 1
+        ("swell_damping", 0.0, "greater than 0"),
+        ("wave_heading_deg", NAN, "finite"),
     ],
 )
 def test_invalid_parameters_are_refused_by_name(field, value, message):

@@ -39,6 +39,8 @@ from ..errors import ConfigError, DataError
 from ..io.units import depth_reference
 from ..log import Log
 from ..rotations import rpy_to_matrix, world_to_body, wrap_angle
+from ..wavetrack import WaveTrack
+from .noise import parse_wave
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Parameter = Literal["dr_bias_drift_rad_s", "gyro_bias_rad_s", "dvl_scale_factor", "depth_std_m"]
@@ -315,12 +317,16 @@ def _fit_depth_std(log: Log, truth: _Truth) -> _Fit:
 
 
 def _has_waves(wave) -> bool:
-    """Whether a log's recorded wave condition (a dict: ``amplitude_m``, or a track's lists) has
-    any amplitude above 0."""
-    if not isinstance(wave, dict):
+    """Whether a log's recorded wave condition (a track or a condition,
+    :meth:`~undertow.wavetrack.WaveTrack.from_dict`, or a condition's name,
+    :func:`~undertow.estimation.noise.parse_wave`) has an amplitude above 0 anywhere; False for
+    none or one that is neither."""
+    try:
+        if isinstance(wave, dict):
+            return bool(np.any(WaveTrack.from_dict(wave).amplitude_m > 0))
+        return wave is not None and parse_wave(wave)[1] > 0
+    except ConfigError:
         return False
-    a = np.asarray(wave.get("amplitude_m", 0.0), float)
-    return bool(np.any(np.isfinite(a) & (a > 0)))
 
 
 def _plain_value(value) -> str:

@@ -4,20 +4,19 @@ kernels on plain arrays.
 
 The filter's boundary (:func:`run_filter`) is a few named things: the merged, time-sorted
 measurements as one structured array (:data:`MEASUREMENT`: t, kind, z, R, swell), the process
-model
-and the unscented weights as one record (:class:`~undertow.estimation.model.ProcessModel`), the
-sensors' mounting and gates as another (:class:`~undertow.estimation.model.SensorModel`), the
-start (t0, x0, P0) and the output times. The loop predicts to each measurement's time (no
-prediction when dt <= 0, dt capped at dt_max) and updates; counters are indexed by the names in
-:data:`COUNT_NAMES`. A row's ``swell`` (omega_0 rad/s, sigma^2 m^2, cos beta, sin beta; sigma^2
-NaN: none; beta NaN: unknown) sets the swell states' model from its time on
-(:mod:`~undertow.estimation.model`'s module doc): sigma^2 > 0 starts them at their stationary
-covariance when they were held, 0 holds them at 0 again; each prediction centres the band at the
-encounter frequency of the mean state (:func:`~undertow.estimation.model.encounter`). The
-states recorded are the trajectory's :data:`~undertow.estimation.model.N_POSE`; the loop's own
-state has the swell pair too. The records are built from a
-:class:`~undertow.estimation.config.LocalizerConfig` by its ``process_model`` and
-``sensor_model``; :mod:`undertow.estimation.localizer` is the Python side.
+model and the unscented weights as one record
+(:class:`~undertow.estimation.model.ProcessModel`), the sensors' mounting and gates as another
+(:class:`~undertow.estimation.model.SensorModel`), the start (t0, x0, P0) and the output times.
+The loop predicts to each measurement's time (no prediction when dt <= 0, dt capped at dt_max)
+and updates; counters are indexed by the names in :data:`COUNT_NAMES`. A row's ``swell``
+(omega_0 rad/s, sigma^2 m^2, cos beta, sin beta; sigma^2 NaN: none; beta NaN: unknown) sets the
+swell states' model from its time on (:mod:`~undertow.estimation.model`'s module doc): sigma^2 >
+0 starts them at their stationary covariance when they were held, 0 holds them at 0 again; each
+prediction centres the band at the encounter frequency of the mean state
+(:func:`~undertow.estimation.model.encounter`). The states recorded are the trajectory's
+:data:`~undertow.estimation.model.N_POSE`; the loop's own state has the swell pair too. The
+records are built from a :class:`~undertow.estimation.config.LocalizerConfig` by its
+``process_model`` and ``sensor_model``; :mod:`undertow.estimation.localizer` is the Python side.
 
 The loop carries its whole state in a :class:`FilterState` (:func:`start_state`), so the online
 filter feeds the rows in pieces (:func:`resume_filter`) with the same arithmetic in the same

@@ -188,7 +188,8 @@ def swell_transition(dt, omega, lam, Phi):
         Phi = e [[c + (lambda omega / omega_d) s, s / omega_d],
                  [-(omega^2 / omega_d) s,         c - (lambda omega / omega_d) s]]
 
-    (the damped oscillator's free response). The identity when omega is not finite or 0."""
+    (the damped oscillator's free response). The identity when omega is not finite or 0 (no
+    swell: the pair held)."""
     if not (omega > 0.0) or not np.isfinite(omega):
         Phi[0, 0], Phi[0, 1], Phi[1, 0], Phi[1, 1] = 1.0, 0.0, 0.0, 1.0
         return
@@ -222,18 +223,18 @@ def encounter(x, omega0, cos_beta, sin_beta, damping, R):
 def swell_noise(Phi, omega, var, Q):
     """Q_s = P_inf - Phi P_inf Phi^T into Q[18:20, 18:20], P_inf = diag(var / omega^2, var)
     (module doc): the noise that keeps the swell's stationary covariance over the step."""
-    s1 = var / (omega * omega)
+    p_inf = (var / (omega * omega), var)
     for a in range(2):
         for b in range(2):
-            v = Phi[a, 0] * s1 * Phi[b, 0] + Phi[a, 1] * var * Phi[b, 1]
-            Q[SWELL + a, SWELL + b] = (s1 if a == 0 else var) * (a == b) - v
+            v = Phi[a, 0] * p_inf[0] * Phi[b, 0] + Phi[a, 1] * p_inf[1] * Phi[b, 1]
+            Q[SWELL + a, SWELL + b] = (p_inf[a] if a == b else 0.0) - v
 
 
 @njit(cache=True)
 def f(x, dt, mu_bias, out, R, T, Phi):
     """Mean of eq:dynamics_model for one state x (noise-free part), given R = R_B^W(eta) and
-    T = T(phi, theta) already evaluated at x's angles; the swell states (when x has them) move
-    by ``Phi`` (:func:`swell_transition`)."""
+    T = T(phi, theta) already evaluated at x's angles; the swell states move by ``Phi``
+    (:func:`swell_transition`)."""
     for i in range(3):
         out[i] = x[i] + dt * (R[i, 0] * x[6] + R[i, 1] * x[7] + R[i, 2] * x[8])
         out[3 + i] = wrap(x[3 + i] + dt * (T[i, 0] * x[9] + T[i, 1] * x[10] + T[i, 2] * x[11]))
@@ -241,16 +242,15 @@ def f(x, dt, mu_bias, out, R, T, Phi):
         out[i] = x[i]
     for i in range(6):
         out[12 + i] = x[12 + i] + mu_bias[i] * dt
-    if x.size > N_POSE:
-        y, xi = x[SWELL], x[SWELL + 1]
-        out[SWELL] = Phi[0, 0] * y + Phi[0, 1] * xi
-        out[SWELL + 1] = Phi[1, 0] * y + Phi[1, 1] * xi
+    y, xi = x[SWELL], x[SWELL + 1]
+    out[SWELL] = Phi[0, 0] * y + Phi[0, 1] * xi
+    out[SWELL + 1] = Phi[1, 0] * y + Phi[1, 1] * xi
 
 
 @njit(cache=True)
 def process_noise(x, dt, q_acc, q_bias, Q, R, T):
     """Q = G diag(q_acc)/dt G^T (G = [J dt^2/2; I dt]) plus diag(q_bias) dt, J at the mean
-    (the swell's block, when x has it, is :func:`swell_noise`'s)."""
+    (the swell's block is :func:`swell_noise`'s)."""
     Q[:, :] = 0.0
     rotation(x[3], x[4], x[5], R)
     euler_rate(x[3], x[4], T)
@@ -341,10 +341,10 @@ def held_range(freeze_bias, hold_dr, hold_gyro):
 
 
 @njit(cache=True)
-def predict_workspace(n=N_STATE):
-    """Scratch arrays of :func:`predict` for n states: chi, f(chi), residuals, L, Q, R, T, a
-    state, the swell's Phi."""
-    npts = 2 * n + 1
+def predict_workspace():
+    """Scratch arrays of :func:`predict`: chi, f(chi), residuals, L, Q, R, T, a state, the
+    swell's Phi."""
+    n, npts = N_STATE, N_SIGMA
     return (
         np.empty((npts, n)), np.empty((npts, n)), np.empty((n, npts)), np.zeros((n, n)),
         np.empty((n, n)), np.empty((3, 3)), np.empty((3, 3)), np.empty(n), np.eye(2),
@@ -356,19 +356,15 @@ def predict(x, P, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws, factored=False,
             swell=(np.nan, 0.0, 0.1)):  # fmt: skip
     """Unscented prediction of (x, P) over dt through eq:dynamics_model, in place:
     x = mean_i f(chi_i, dt), P = sum_i W^c_i (f(chi_i) - x)(f(chi_i) - x)^T + Q(x, dt), with
-    the fields of :class:`ProcessModel` as arguments; x of :data:`N_STATE` states or the
-    trajectory's :data:`N_POSE` (the workspace sized alike, :func:`predict_workspace`).
-    ``swell`` = (omega_0 rad/s, sigma^2 m^2, lambda) of the swell states (module doc); with
-    sigma^2 = 0 they keep Phi = I and no noise (the caller holds them).
+    the fields of :class:`ProcessModel` as arguments. ``swell`` = (omega rad/s, sigma^2 m^2,
+    lambda) of the swell states' band (module doc); with sigma^2 = 0 they keep Phi = I and no
+    noise (the caller holds them).
 
     ``factored``: the workspace's L already holds the Cholesky factor of P (skip factorizing)."""
     chi, chi_f, D, L, Q, R, T, xi, Phi = ws
     omega, var, damping = swell
-    active = x.size > N_POSE and var > 0.0 and omega > 0.0
-    if active:
-        swell_transition(dt, omega, damping, Phi)
-    else:
-        Phi[0, 0], Phi[0, 1], Phi[1, 0], Phi[1, 1] = 1.0, 0.0, 0.0, 1.0
+    active = var > 0.0 and omega > 0.0
+    swell_transition(dt, omega if active else np.nan, damping, Phi)
     if factored:
         status = 0
         spread(x, L, lam, STATE_ANGLES, chi)

@@ -121,16 +121,12 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
     N = t.size
     first, last = model.held_range(freeze_bias, hold_dr, hold_gyro)
     freeze = last > first
-    xa = np.zeros((N, n))
-    Pa = np.zeros((N, n, n))
+    xs = np.empty((N, n))
+    Ps = np.empty((N, n, n))
     for k in range(N):
-        xa[k, :m18] = xf[k]
-        Pa[k, :m18, :m18] = Pf[k]
-        model.freeze_states(xa[k], Pa[k], s0, n)
-    xs = xa.copy()
-    Ps = Pa.copy()
+        _padded(xf[k], Pf[k], xs[k], Ps[k])
     counts = np.zeros(len(SMOOTHER_COUNT_NAMES), dtype=np.int64)
-    ws = model.predict_workspace(n)
+    ws = model.predict_workspace()
     ws_rts = _rts_workspace(n)
     m = np.empty(n)
     Pm = np.empty((n, n))
@@ -138,14 +134,12 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
     P = np.empty((n, n))
     for k in range(N - 2, -1, -1):
         dt = min(t[k + 1] - t[k], dt_max)
-        m[:] = xa[k]
-        Pm[:, :] = Pa[k]
+        _padded(xf[k], Pf[k], m, Pm)
         status = model.predict(m, Pm, dt, wm, wc, lam, q_acc, q_bias, mu_bias, ws)
         if freeze:
             model.freeze_states(m, Pm, first, last)
         model.freeze_states(m, Pm, s0, n)
-        x[:] = xa[k]
-        P[:, :] = Pa[k]
+        _padded(xf[k], Pf[k], x, P)
         flag = _rts_step(x, P, ws[0], ws[2], m, Pm, xs[k + 1], Ps[k + 1], wc,
                          model.STATE_ANGLES, ws_rts)  # fmt: skip
         if status < 0 or flag < 0 or not (all_finite(x) and all_finite(P)):
@@ -158,6 +152,17 @@ def _run_smoother(t, xf, Pf, wm, wc, lam, q_acc, q_bias, mu_bias, dt_max, freeze
         xs[k] = x
         Ps[k] = P
     return xs[:, :m18].copy(), Ps[:, :m18, :m18].copy(), counts
+
+
+@njit(cache=True)
+def _padded(x18, P18, x, P):
+    """(x, P) of the filter's N_STATE states from a trajectory's (x18, P18): the swell pair held
+    at 0 (variance 1e-12, no correlation), as the filter holds it without a swell."""
+    m18 = model.N_POSE
+    x[:m18] = x18
+    P[:, :] = 0.0
+    P[:m18, :m18] = P18
+    model.freeze_states(x, P, model.SWELL, model.N_STATE)
 
 
 def smooth(trajectory: Trajectory, config: LocalizerConfig | None = None) -> Trajectory:

@@ -102,7 +102,7 @@ class MappingConfig(BaseModel):
     depth_noise: Annotated[tuple[Positive, Positive] | None, BeforeValidator(_as_sequence)] = (
         Field(None, description="tpu: (std m, sample interval s) of the depth measurements the "
               "trajectory's filter fused; None: the trajectory's (its depth_std_m and pressure "
-              "updates), none when its filter's depth noise carried the swell "
+              "updates), none when its filter carried the swell "
               "(pressure_wave_noise)")
     )  # fmt: skip
     alpha0: float = Field(1e-10, gt=0, allow_inf_nan=False)

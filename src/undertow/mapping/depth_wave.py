@@ -6,9 +6,9 @@ the wave's dynamic pressure too: p = rho g d + rho g a K_p(d) cos(theta), K_p = 
 d)) / cosh(k h) (Dean and Dalrymple, "Water Wave Mechanics for Engineers and Scientists",
 1991, ch. 4; k from omega^2 = g k tanh(k h), h the water depth), a depth error of RMS
 a K_p / sqrt(2) that the paper's barometer model (``eq:bar_meas_model``) does not carry, so
-the filter's depth covariance leaves it out (undertow's filters with wave noise add it to the
-barometer's noise, ``pressure_wave_noise``: their covariance holds it, and nothing is added
-here).
+the filter's depth covariance leaves it out (undertow's filters with wave noise carry it as
+swell states, ``pressure_wave_noise``: their covariance holds what of it they could not separate
+from the depth, and nothing is added here).
 
 The filter's depth follows it as its depth update weighs the barometer: in steady state a
 scalar Kalman filter's estimate is the first-order recursion x_n = (1 - K) x_{n-1}' + K z_n
@@ -43,7 +43,7 @@ def trajectory_depth_noise(trajectory) -> tuple[float, float] | None:
     """(std m, interval s) of the depth measurements the trajectory's filter fused: its
     config's ``depth_std_m`` and its time span over the pressure updates it used (metadata
     ``sensors.pressure.used``); None when the trajectory does not say (another estimator's,
-    or no barometer) or when its filter's depth noise already carried the swell (a variant
+    or no barometer) or when its filter already carried the swell (a variant
     with wave noise and ``pressure_wave_noise``: metadata ``wave_noise`` set and the config's
     ``pressure_wave_noise`` true), so its depth covariance holds it."""
     meta = getattr(trajectory, "metadata", None) or {}
