@@ -95,6 +95,50 @@ def test_the_kernel_lengths_follow_the_pose_std_within_their_bounds():
     assert config.base_length <= 0.3 / KERNEL_STD <= config.max_length
 
 
+def _slant_hit(r, theta, phi, var=(0.0, 0.0, 0.0), origin=(1.2, -0.7, 0.4)):
+    """One DVL hit at range r along a beam theta from the vertical (z down), at azimuth phi."""
+    v = np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
+                  math.cos(theta)])  # fmt: skip
+    o = np.array(origin)
+    return Samples(
+        (o + r * v)[None],
+        np.ones(1),
+        np.array([0.9]),
+        np.array([var]),
+        np.zeros(1, np.int64),
+        np.array([SENSOR_DVL], np.int8),
+        o[None],
+    ), v
+
+
+@pytest.mark.parametrize(
+    ("theta", "phi"),
+    [
+        (math.radians(22.5), math.radians(45.0)),
+        (math.radians(60.0), math.radians(-90.0)),
+        (math.radians(35.0), math.radians(170.0)),
+    ],
+)
+def test_a_slant_beams_range_noise_lies_along_the_beam(theta, phi):
+    """A range error n ~ N(0, s_r^2) moves the hit o + (r + n) v along v: s_r^2 v_x^2 and
+    s_r^2 v_y^2 join the horizontal variances, s_r^2 v_z^2 = s_r^2 cos^2 theta the vertical one
+    (checked against the spread of hits drawn with that range noise)."""
+    s0, var = 0.005, (0.01, 0.02, 1e-4)
+    samples, v = _slant_hit(2.6, theta, phi, var)
+    sx, sy, sv, s_r, _ = hit_sigmas(samples, (s0, 0.01, 0.01), 0.005)
+    draws = samples.points[0] + np.random.default_rng(3).normal(0.0, s0, (200000, 1)) * v
+    spread = draws.var(axis=0)
+    assert sx[0] ** 2 - var[0] == pytest.approx(spread[0], rel=0.02, abs=1e-9)
+    assert sy[0] ** 2 - var[1] == pytest.approx(spread[1], rel=0.02, abs=1e-9)
+    assert sv[0] ** 2 - var[2] == pytest.approx(spread[2], rel=0.02)
+    assert s_r[0] == pytest.approx(s0 * math.cos(theta), rel=1e-12)
+    mapper = make_mapper("tpu")  # the surface of that one hit: its depth and vertical std
+    mapper.integrate(_slant_hit(2.6, theta, phi, (0.0, 0.0, var[2]))[0])
+    surface = evidence_surface(mapper.occupancy())
+    j, i = np.nonzero(surface.coverage)
+    assert np.allclose(surface.std[j, i], math.sqrt(var[2] + (s0 * math.cos(theta)) ** 2))
+
+
 def test_a_wide_beams_footprint_adds_to_the_horizontal_std():
     """A first return in a cone of full angle b at range r: a disk of radius r tan(b / 2),
     per-axis std R / 2; the sonar's range noise is s_0 + f r."""

@@ -13,7 +13,8 @@ the hit's cells: :mod:`undertow.mapping.tpu`), the hits' evidence and its uncert
 
 sigma_v,i the hit's vertical standard deviation (pose, range, waves, a wide beam's
 shortfall), sigma_x,i and sigma_y,i its horizontal ones (the pose's and a wide beam's
-footprint), s_r,i its range's own noise, r_s,i its range when a sonar's (else 0), dx_i and
+footprint and the range noise's horizontal share), s_r,i its range's own noise in depth
+(s_rz of :mod:`undertow.mapping.tpu`), r_s,i its range when a sonar's (else 0), dx_i and
 dy_i the column centre's offset from it and c_i the variance of the three cells it was put on
 (:data:`~undertow.mapping.tpuscatter.HIT_PARTS`). The surface reads them as the column
 depth's standard deviation (:mod:`undertow.mapping.depth_std`). The sums are kept in a second
@@ -174,8 +175,8 @@ def _kernel(d, l):
 def add_column_sums(start, x, y, l, weight, var_v, parts, res, table_keys, table_vals,
                     chunk_keys, n_chunks, alpha, beta):  # fmt: skip
     """From hit ``start``: add (w, w sigma_v^2, w sigma_x^2, w sigma_y^2) k to the alpha mass
-    of cells (i, j, 0 .. 3) and (w s_r'^2 k, (w k)^2 s_r'^2, w r_s^2 k, w dx^2 k, w dy^2 k,
-    w c k) to the beta mass of cells (i, j, 0 .. 5) (``parts``: sigma_x^2, sigma_y^2, s_r'^2,
+    of cells (i, j, 0 .. 3) and (w s_rz^2 k, (w k)^2 s_rz^2, w r_s^2 k, w dx^2 k, w dy^2 k,
+    w c k) to the beta mass of cells (i, j, 0 .. 5) (``parts``: sigma_x^2, sigma_y^2, s_rz^2,
     r_s^2 and c per hit, :data:`~undertow.mapping.tpuscatter.HIT_PARTS`; dx, dy the column
     centre's offset from the hit), k = k(|dx|; l_x) k(|dy|; l_y), of every column (i, j)
     whose centre ((i + 1/2) res,

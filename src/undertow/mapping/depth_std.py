@@ -19,12 +19,12 @@ and independent errors):
 
     V' = V - Q e_b^2 + Q e(beta)^2                  the hits' own variance at this slope.
 
-- **Shared.** sigma_v,i^2 = s_z^2 + s_r'^2 + s_d^2 (:mod:`undertow.mapping.tpu`): the pose's
+- **Shared.** sigma_v,i^2 = s_z^2 + s_rz^2 + s_d^2 (:mod:`undertow.mapping.tpu`): the pose's
   depth variance s_z^2 is one error for the hits of a pass, so it is not averaged (the
   weighted mean of variances it shares).
-- **Averaged.** s_r'^2, the range's own noise in these waves (the echo sounder's and the
-  waves' acoustic term: independent from ping to ping, as a sensor's noise is), falls as
-  sum w^2 / W^2 = 1 / n_eff with the effective number of hits n_eff.
+- **Averaged.** s_rz^2, the depth share of the range's own noise in these waves (the echo
+  sounder's and the waves' acoustic term: independent from ping to ping, as a sensor's noise
+  is), falls as sum w^2 / W^2 = 1 / n_eff with the effective number of hits n_eff.
 - **Shortfall.** A wide beam's first return is the nearest floor in its cone, above the floor
   on its axis by r (sec beta - 1) on a plane of slope beta (X. Lurton, "An Introduction to
   Underwater Acoustics", 2nd ed. 2010, sec. 8.2). The mapper weighs each sonar hit by the

@@ -5,28 +5,35 @@ high-rate, high-density multibeam echosounder data", G3 4(6) 2003, CUBE) carried
 A hit m_i = (x_i, y_i, z_i) placed with a pose of position variance (s_x^2, s_y^2, s_z^2)
 and a range r_i of standard deviation s_r = s_0 + f r_i (s_0 per sensor: ``range_std_dvl``,
 ``range_std_sonar``, ``range_std_multibeam``; f = ``range_std_fraction`` for the sonar and the
-multibeam, 0 for the DVL) has the per-axis uncertainty
+multibeam, 0 for the DVL) along the beam's unit direction v = (v_x, v_y, v_z) (world, z down)
+has the per-axis uncertainty
 
-    sigma_x^2 = s_x^2 + s_b^2,   sigma_y^2 = s_y^2 + s_b^2,
-    sigma_v^2 = s_z^2 + s_r^2 + s_w^2 + s_d^2
+    sigma_x^2 = s_x^2 + s_b^2 + s_r'^2 v_x^2,   sigma_y^2 = s_y^2 + s_b^2 + s_r'^2 v_y^2,
+    sigma_v^2 = s_z^2 + s_r'^2 v_z^2 + s_d^2,     s_r'^2 = s_r^2 + s_w^2.
 
-(z down; beams near vertical). s_b is a wide beam's footprint: a first return may come from
-anywhere in a cone of full angle b (``sonar_beam_width_deg``, the sonar's; the DVL's and the
-multibeam's beams are narrow, s_b = s_d = 0), a disk of radius R = r tan(b / 2) whose per-axis
-standard deviation is R / 2. s_d is the same beam's shortfall in depth: the first return is the
-nearest floor in the cone, not the floor on the axis, so the hit placed on the axis at range r
-lies above that floor, by r (sec s - 1) on a plane of slope s < b / 2 (the slope error of a
-wide-beam echo sounder: X. Lurton, "An Introduction to Underwater Acoustics", 2nd ed. 2010,
-sec. 8.2; IHO C-13 Manual on Hydrography, ch. 3). s_d = r (sec(b / 2) - 1), the largest
-shortfall on a plane, is taken as one standard deviation: relief steeper than the cone (a step,
-a rock) falls short by more. It lowers the hit's weight (below), so where the narrow beams
-reach a column they decide its depth. s_w is the waves' share (the paper's point: waves corrupt the
-acoustic measurements): the RMS vertical orbital displacement between the sensor at depth d
-and the floor at depth h of the linear wave of amplitude a and frequency f the trajectory's
-filter used, s_w = a K_s(d) / sqrt(2), K_s = sinh(k (h - d)) / sinh(k h), k from
-omega^2 = g k tanh(k h) (Dean and Dalrymple, "Water Wave Mechanics for Engineers and
-Scientists", 1991, ch. 4), h the hit's depth (rounded to the grid for k). The wave is the
-settings' ``wave``, else the one the trajectory's filter used (:func:`with_wave`).
+A range error n moves the hit o + (r + n) v along the beam, by n v: a DVL beam 22.5 deg off
+the vertical puts cos^2(22.5 deg) = 85 % of its range variance in depth, a multibeam's outer
+beam at 60 deg a quarter (the range's share of a sounding's depth error in the TPU of
+multibeam echo sounders: R. Hare, "Depth and position error budgets for multibeam
+echosounding", International Hydrographic Review 72(2), 1995).
+
+s_b is a wide beam's footprint: a first return may come from anywhere in a cone of full angle b
+(``sonar_beam_width_deg``, the sonar's; the DVL's and the multibeam's beams are narrow, s_b =
+s_d = 0), a disk of radius R = r tan(b / 2) whose per-axis standard deviation is R / 2. s_d is
+the same beam's shortfall in depth: the first return is the nearest floor in the cone, not the
+floor on the axis, so the hit placed on the axis at range r lies above that floor, by r (sec s -
+1) on a plane of slope s < b / 2 (the slope error of a wide-beam echo sounder: X. Lurton, "An
+Introduction to Underwater Acoustics", 2nd ed. 2010, sec. 8.2; IHO C-13 Manual on Hydrography,
+ch. 3). s_d = r (sec(b / 2) - 1), the largest shortfall on a plane, is taken as one standard
+deviation: relief steeper than the cone (a step, a rock) falls short by more. It lowers the
+hit's weight (below), so where the narrow beams reach a column they decide its depth. s_w is the
+waves' share of the range noise (the paper's point: waves corrupt the acoustic measurements):
+the RMS vertical orbital displacement between the sensor at depth d and the floor at depth h of
+the linear wave of amplitude a and frequency f the trajectory's filter used, s_w = a K_s(d) /
+sqrt(2), K_s = sinh(k (h - d)) / sinh(k h), k from omega^2 = g k tanh(k h) (Dean and Dalrymple,
+"Water Wave Mechanics for Engineers and Scientists", 1991, ch. 4), h the hit's depth (rounded to
+the grid for k). The wave is the settings' ``wave``, else the one the trajectory's filter used
+(:func:`with_wave`).
 
 **Across the floor** (x, y) the hit's kernel is the sparse kernel of ``eq:kernel`` at the
 length scale whose standard deviation is the hit's: the kernel k(d; l) has standard
@@ -43,8 +50,9 @@ where it may lie (the convolution of the base kernel with the pose's density kee
 mass), not more evidence: the paper's adaptive kernel widens without lowering its peak,
 which adds mass where the pose is worst. Each hit is also weighted by its vertical
 precision relative to a perfectly placed one, s_r^2 / sigma_v^2 (inverse-variance
-weighting, as CUBE weights soundings), s_r'^2 / sigma_v^2 with s_r'^2 = s_r^2 + s_w^2 (the
-sensor's noise in these waves): what lowers it is the pose's vertical uncertainty.
+weighting, as CUBE weights soundings), s_rz^2 / sigma_v^2 with s_rz = s_r' |v_z| the depth
+share of the sensor's noise in these waves: what lowers it is the pose's vertical
+uncertainty.
 
 **Along the vertical** the hit's mass goes to the three cells around it with weights that
 keep its depth and its vertical variance exactly: with z_c the nearest cell centre, u =
@@ -224,10 +232,12 @@ def wavenumbers(omega, depths):
 def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
                sonar_beam_width_deg: float = 0.0, wave=None, resolution: float = 0.1,
                depth_wave=None):  # fmt: skip
-    """(sigma_x, sigma_y, sigma_v, s_r', r_s^2) of every hit of ``samples`` (label 1, in order;
-    the free samples need none; module doc): the horizontal standard deviations (pose and
-    footprint), the vertical one, the range noise in these waves, and the squared range of
-    a sonar's hit (0 for the others). ``range_std``: s_0 of
+    """(sigma_x, sigma_y, sigma_v, s_rz, r_s^2) of every hit of ``samples`` (label 1, in order;
+    the free samples need none; module doc): the horizontal standard deviations (pose,
+    footprint and the range noise's horizontal share), the vertical one, the depth share
+    s_rz = s_r' |v_z| of the range noise in these waves (v the beam's direction, o to the hit;
+    vertical for a hit of unknown ray), and the squared range of a sonar's hit (0 for the
+    others). ``range_std``: s_0 of
     the DVL, the sonar and the multibeam (by ``Samples.sensor``; a sample of unknown sensor
     takes the largest); ``wave``: (amplitude, frequency) or None; ``depth_wave``: (a, f, std,
     interval) of the swell in the pose's depth (:mod:`undertow.mapping.depth_wave`) or None."""
@@ -235,23 +245,31 @@ def hit_sigmas(samples: Samples, range_std, range_std_fraction: float,
     var = samples.pose_variance[rows]
     ray = samples.ray[rows]
     rng = np.zeros(len(rows))
-    known = ray >= 0
-    if known.any() and len(samples.origins):
-        rng[known] = np.linalg.norm(samples.points[rows[known]] - samples.origins[ray[known]],
-                                    axis=1)  # fmt: skip
+    known = (ray >= 0) & (len(samples.origins) > 0)
+    along = np.zeros((len(rows), 3))  # (v_x^2, v_y^2, v_z^2) of the beam; v_z^2 = 1 unknown
+    along[:, 2] = 1.0
+    if known.any():
+        d = samples.points[rows[known]] - samples.origins[ray[known]]
+        rng[known] = np.linalg.norm(d, axis=1)
+        r2 = rng[known] * rng[known]
+        beam = r2 > 0
+        along[np.flatnonzero(known)[beam]] = d[beam] * d[beam] / r2[beam, None]
     s0 = np.asarray(range_std, float)
     fraction = np.array([0.0, range_std_fraction, range_std_fraction])
     sensor = samples.sensor[rows].astype(np.int64)
     sensor = np.where((sensor >= 0) & (sensor < 3), sensor, int(np.argmax(s0)))
     s_w = wave_range_std(samples, rows, wave, resolution)
-    s_r = np.hypot(s0[sensor] + fraction[sensor] * rng, s_w)
+    s_range = np.hypot(s0[sensor] + fraction[sensor] * rng, s_w)
+    s_r = s_range * np.sqrt(along[:, 2])
     half = np.deg2rad(sonar_beam_width_deg) / 2.0
     tan_half = np.tan(half)
     sonar = sensor == SENSOR_SONAR
     s_b2 = np.where(sonar, (rng * tan_half / 2.0) ** 2, 0.0)
     s_d2 = np.where(sonar, shortfall(rng, tan_half) ** 2, 0.0)
     var_z = var[:, 2] + swell_depth_variance(samples, rows, var[:, 2], depth_wave, resolution)
-    return (np.sqrt(var[:, 0] + s_b2), np.sqrt(var[:, 1] + s_b2),
+    s_range2 = s_range * s_range
+    return (np.sqrt(var[:, 0] + s_b2 + s_range2 * along[:, 0]),
+            np.sqrt(var[:, 1] + s_b2 + s_range2 * along[:, 1]),
             np.sqrt(var_z + s_r**2 + s_d2), s_r, np.where(sonar, rng * rng, 0.0))  # fmt: skip
 
 
@@ -290,8 +308,8 @@ def tpu_hit_weights(samples: Samples, *, resolution: float, base_length: float,
                     max_length: float, range_std, range_std_fraction: float,
                     sonar_beam_width_deg: float = 0.0, wave=None, depth_wave=None):  # fmt: skip
     """Per hit of ``samples`` (label 1, in order; module doc): (x, y, l_x, l_y, weight
-    sigma_0 (l_0 / l_x) (l_0 / l_y) s_r'^2 / sigma_v^2, sigma_v^2, parts (n, 5): sigma_x^2,
-    sigma_y^2, s_r'^2, r_s^2 and the lattice's v r^2, as
+    sigma_0 (l_0 / l_x) (l_0 / l_y) s_rz^2 / sigma_v^2, sigma_v^2, parts (n, 5): sigma_x^2,
+    sigma_y^2, s_rz^2, r_s^2 and the lattice's v r^2, as
     :data:`~undertow.mapping.tpuscatter.HIT_PARTS`)."""
     sx, sy, sv, s_r, r2 = hit_sigmas(samples, range_std, range_std_fraction, sonar_beam_width_deg,
                                      wave, resolution, depth_wave)  # fmt: skip

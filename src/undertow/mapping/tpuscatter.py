@@ -5,7 +5,7 @@ samples.RaySamples`: ray i's hit o + r v, its free samples o + (k f) v) into the
 product kernel scatters: the free samples first, ray by ray (length scales l_0, l_0, r_g / 2,
 weight sigma_0), then each hit's three vertical cells z_c - r_g, z_c, z_c + r_g (r_g the
 resolution) with the hit's own across-floor lengths l_x, l_y and weights sigma_0 (l_0 / l_x)
-(l_0 / l_y) (s_r'^2 / sigma_v^2) w_c, the cells of weight 0 left out (the equations are
+(l_0 / l_y) (s_rz^2 / sigma_v^2) w_c, the cells of weight 0 left out (the equations are
 :mod:`undertow.mapping.tpu`'s). Here:
 
 - :func:`hit_lattice` computes, per hit, its sigmas (pose, footprint, range noise, and the
@@ -51,9 +51,9 @@ from .tpu import KERNEL_STD, wavenumbers
 
 _TWO_PI = 2.0 * np.pi
 #: what :attr:`TpuHits.parts` holds per hit: its horizontal variances sigma_x^2 and sigma_y^2,
-#: its range's own noise s_r'^2, its range squared when it is a sonar's (0 for the others:
-#: the shortfall s_d = r (sec(b / 2) - 1) scales with it) and the variance v r^2 of its
-#: three cells about its depth (:func:`~undertow.mapping.tpu.lattice_weights`)
+#: its range's own noise in depth s_rz^2 = s_r'^2 v_z^2, its range squared when it is a
+#: sonar's (0 for the others: the shortfall s_d = r (sec(b / 2) - 1) scales with it) and the
+#: variance v r^2 of its three cells about its depth (:func:`~undertow.mapping.tpu.lattice_weights`)
 HIT_PARTS = ("var_x", "var_y", "var_r", "sonar_r2", "var_lattice")
 _NO_WAVE = (np.zeros((2, 0)), np.zeros(0))  # hit_lattice's exponentials without a wave
 
@@ -175,9 +175,10 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, swell, 
     (:func:`~undertow.mapping.depth_wave.swell_variance` of K_p = (e_1 + e_2) / (2 + m) and
     ``swell``, the a, cos(omega Delta), R of
     :func:`~undertow.mapping.depth_wave.depth_wave_terms`); its range ||m - o||,
-    s_r' = hypot(s_0 + f ||m - o||, s_w), the footprint s_b (the sonar:
+    s_r' = hypot(s_0 + f ||m - o||, s_w) along the beam v = (m - o) / ||m - o|| (vertical at
+    range 0), its depth share s_rz = s_r' |v_z|, the footprint s_b (the sonar:
     ||m - o|| tan(b / 2) / 2) and shortfall s_d (the sonar: ||m - o|| (sec(b / 2) - 1)),
-    sigma_x,y = sqrt(s_x,y^2 + s_b^2), sigma_v = sqrt(s_z^2 + s_r'^2 + s_d^2),
+    sigma_x,y = sqrt(s_x,y^2 + s_b^2 + s_r'^2 v_x,y^2), sigma_v = sqrt(s_z^2 + s_rz^2 + s_d^2),
     l_x,y = clip(sigma / c, l_0, l_cap), the weight and the lattice of
     :mod:`undertow.mapping.tpu` (``unknown``: the sensor taken for a code outside 0 .. 2),
     the parts of :data:`HIT_PARTS`; and the largest finite l as the scatter takes it
@@ -201,7 +202,13 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, swell, 
             s_w = _wave_std(e[0, i], e[1, i], m[i], amplitude)
             k_p = (e[0, i] + e[1, i]) / (2.0 + m[i])
             var_z = var_z + swell_variance(var_z, k_p, swell[0], swell[1], swell[2])
-        s_r = np.hypot(s0[s] + fraction[s] * rng, s_w)
+        s_range = np.hypot(s0[s] + fraction[s] * rng, s_w)
+        a0, a1, a2 = 0.0, 0.0, 1.0  # the beam's v_x^2, v_y^2, v_z^2
+        r2 = rng * rng
+        if r2 > 0:
+            a0, a1, a2 = d0 * d0 / r2, d1 * d1 / r2, d2 * d2 / r2
+        s_r = s_range * np.sqrt(a2)
+        s_range2 = s_range * s_range
         s_b2, s_d2 = 0.0, 0.0
         if s == SENSOR_SONAR:
             s_b = rng * tan_half / 2.0
@@ -209,7 +216,8 @@ def hit_lattice(origin, direction, r, var, sig, sensor, e, m, amplitude, swell, 
             s_d = rng * shortfall
             s_d2 = s_d * s_d
             h_parts[i, 3] = rng * rng
-        sx, sy = np.sqrt(var[i, 0] + s_b2), np.sqrt(var[i, 1] + s_b2)
+        sx = np.sqrt(var[i, 0] + s_b2 + s_range2 * a0)
+        sy = np.sqrt(var[i, 1] + s_b2 + s_range2 * a1)
         sv = np.sqrt(var_z + s_r * s_r + s_d2)
         lx = min(max(sx / KERNEL_STD, base), max_length)
         ly = min(max(sy / KERNEL_STD, base), max_length)
